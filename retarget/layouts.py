@@ -1,0 +1,531 @@
+"""Feature-point layouts: which facial points a landmark set holds, and what they are.
+
+A `Layout` names N feature points and, for each, its facial region, its side, its
+left/right mirror partner, its index in the 68-point iBUG / Multi-PIE order and the
+MediaPipe face-mesh vertex that best matches it. The retargeting itself (Dutreve et al.
+2008, §4: an RBF space transform trained on N source/target point pairs) only needs the
+pairs; the layout is what lets a source of a different kind (a 68-point 2D tracker, a
+468-point MediaPipe mesh, an animated 3D face) be read into the same N points, and what
+partial retargeting (§4, last paragraph and Figure 3: "transfer only eyes or mouth
+motions") selects by region.
+
+Layouts (`LAYOUTS`)
+-------------------
+``"ibug68"`` (68 points)
+    The Multi-PIE / iBUG 300-W order: jaw contour 0-16, brows 17-26, nose 27-35, eyes
+    36-47, outer lip 48-59, inner lip 60-67 (table in ``shared/data/ict_face/README.md``).
+``"ibug51"`` (51 points)
+    ``ibug68`` without the jaw contour 0-16, whose points are image-silhouette points
+    rather than fixed anatomical ones (they slide over the face as the head turns).
+``"dutreve21"`` (21 points)
+    The set of Dutreve et al. 2008, §5: 3 per brow, 2 per eye, 3 on the nose, 8 around
+    the mouth. The paper gives the counts, not the exact spots; the iBUG points chosen:
+
+    - brows: outer, middle, inner = 17, 19, 21 (right) and 22, 24, 26 (left);
+    - eyes: the upper and lower lids stand for the lid centres. Of the two iBUG points on
+      each lid, 38/43 (upper) and 40/47 (lower), the inner ones, are taken: on the ICT
+      face model's ``eyeBlink`` they move 8.0 mm and 2.7 mm against 7.9 mm and 1.0 mm for
+      the outer ones 37/44 and 41/46;
+    - nose: right ala 31, tip 30, left ala 35;
+    - mouth, outer lip contour: corners 48, 54, upper lip 49, 51, 53, lower lip 55, 57,
+      59, i.e. eight points about 45 degrees apart round the lip ellipse (the cupid's-bow
+      peaks 50/52 would bunch the upper points near the midline).
+``"mediapipe68"`` (68 points)
+    The same 68 points as ``ibug68``, named for reading MediaPipe face-mesh output:
+    ``from_mediapipe468(mesh, get_layout("mediapipe68"))`` gives 68 iBUG-ordered points.
+
+Every point of every layout has the same name, region and side as the ``ibug68`` point at
+its ``ibug68`` index, so names mean one thing across layouts.
+
+Sides
+-----
+"right" and "left" are the **subject's** right and left. With the ICT face model's and
+MediaPipe's canonical axes (+y up, +z out of the face, +x toward the subject's left) a
+"right" point has x < 0 and a "left" point x > 0; "center" points lie on the midline and
+are their own mirror partner. `Layout.mirrored` mirrors a placement about x = 0.
+
+The MediaPipe table
+-------------------
+`IBUG68_TO_MEDIAPIPE468` gives, for each iBUG point, one vertex of MediaPipe's 468-vertex
+face mesh (``mediapipe/modules/face_geometry/data/canonical_face_model.obj``, Apache-2.0;
+the 478-point "refined" output appends 10 iris points, which are not used). It is written
+for this module after the correspondences in common use (e.g. PeizhiYan/
+Mediapipe_2_Dlib_Landmarks, ros4hri/hri_face_detect's table), one vertex per point, and
+checked three ways (see ``tests/test_layouts.py``):
+
+1. Left/right: the table maps every iBUG mirror pair to a mirror pair of the canonical
+   model (equal y, z and opposite x) and every midline point to a midline vertex
+   (x = 0); the anchors 33/263 (outer eye corners), 61/291 (mouth corners), 13/14
+   (inner-lip centres) and 152 (chin) sit where MediaPipe documents them.
+2. Geometry: fitting the canonical vertices of points 17-67 to the ICT face model's
+   landmarks by a similarity transform (scale 1.01: both are in cm) leaves every one
+   within 5 mm (RMS 2.7 mm). Where published tables disagree, that fit chose; where
+   the fit's nearest vertex breaks with the point's meaning, the meaning won:
+
+   - eye lids 37/38/40/41: the lid-margin ring 160, 158, 153, 144 (what a tracker's lid
+     points follow in a blink), though ICT's upper-lid landmarks sit about 1 mm nearer
+     the next ring out (29, 28);
+   - nose tip 30 -> 4, the most anterior midline vertex: MediaPipe's vertex 1, often
+     called the nose tip, is 7 mm lower, toward the columella, and fits ICT's tip worse
+     (5.4 mm against 2.7 mm); nose bridge 29 -> 195 (4.5 mm; 5 is 6.3 mm), alar bases
+     31/35 -> 98/327 (3.7 mm; 75/305 are 8.1 mm);
+   - inner lip 61/63/65/67 -> 81/311/402/178, the inner-lip-line vertices about midway
+     between corner and centre (ICT fit 2.4-3.2 mm; the 82/312/317/87 of some tables,
+     nearer the centre, 4.9-6.0 mm).
+3. The jaw contour 0-16 follows MediaPipe's face-oval ring (127 ... 152 ... 356), the
+   silhouette of a frontal face, as iBUG's jaw points do: 0.6-1.3 cm from the ICT jaw
+   landmarks in a frontal (x, y) projection. In 3D the oval lies further back than
+   ICT's jawline vertices (up to 2.3 cm); treat jaw points from either source as 2D
+   silhouette points, or leave them out (``ibug51``).
+
+Every layout's ``mediapipe468`` is this table read at its ``ibug68`` indices, so the table
+is the one source of truth.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from retarget.errors import RetargetError
+
+__all__ = [
+    "REGIONS",
+    "GROUPS",
+    "SIDES",
+    "IBUG68_TO_MEDIAPIPE468",
+    "Layout",
+    "LAYOUTS",
+    "get_layout",
+    "from_ibug68",
+    "from_mediapipe468",
+]
+
+REGIONS: tuple[str, ...] = (
+    "brows",
+    "eyes",
+    "nose",
+    "upper_lip",
+    "lower_lip",
+    "mouth_corners",
+    "jaw",
+)
+"""The fixed region vocabulary; every point belongs to exactly one region."""
+
+GROUPS: dict[str, tuple[str, ...]] = {
+    "mouth": ("upper_lip", "lower_lip", "mouth_corners"),
+    "upper_face": ("brows", "eyes"),
+    "lower_face": ("upper_lip", "lower_lip", "mouth_corners", "jaw"),
+    "all": REGIONS,
+}
+"""Named unions of regions, for partial retargeting (Dutreve 2008, Figure 3)."""
+
+SIDES: tuple[str, ...] = ("right", "center", "left")
+"""Subject's right (x < 0), midline, subject's left (x > 0)."""
+
+_MEDIAPIPE_MESH_SIZES = (468, 478)  # face mesh; face mesh + 10 iris points ("refined")
+
+# The 68 iBUG points: (name, region, MediaPipe face-mesh vertex). Sides and mirror
+# partners follow from the names ("right" <-> "left"); see the module docstring for how
+# the MediaPipe column was chosen and checked.
+_IBUG68_ROWS: tuple[tuple[str, str, int], ...] = (
+    # 0-16 jaw contour, subject's right ear -> chin -> left ear (MediaPipe face oval)
+    ("jaw_right_1", "jaw", 127),
+    ("jaw_right_2", "jaw", 234),
+    ("jaw_right_3", "jaw", 93),
+    ("jaw_right_4", "jaw", 132),
+    ("jaw_right_5", "jaw", 58),
+    ("jaw_right_6", "jaw", 136),
+    ("jaw_right_7", "jaw", 149),
+    ("jaw_right_8", "jaw", 176),
+    ("chin", "jaw", 152),
+    ("jaw_left_8", "jaw", 400),
+    ("jaw_left_7", "jaw", 378),
+    ("jaw_left_6", "jaw", 365),
+    ("jaw_left_5", "jaw", 288),
+    ("jaw_left_4", "jaw", 361),
+    ("jaw_left_3", "jaw", 323),
+    ("jaw_left_2", "jaw", 454),
+    ("jaw_left_1", "jaw", 356),
+    # 17-21 right brow, outer -> inner; 22-26 left brow, inner -> outer
+    ("brow_right_outer", "brows", 70),
+    ("brow_right_outer_mid", "brows", 63),
+    ("brow_right_middle", "brows", 105),
+    ("brow_right_inner_mid", "brows", 66),
+    ("brow_right_inner", "brows", 107),
+    ("brow_left_inner", "brows", 336),
+    ("brow_left_inner_mid", "brows", 296),
+    ("brow_left_middle", "brows", 334),
+    ("brow_left_outer_mid", "brows", 293),
+    ("brow_left_outer", "brows", 300),
+    # 27-30 nose bridge, top -> tip; 31-35 nose base, right ala -> left ala
+    ("nose_root", "nose", 168),
+    ("nose_bridge_upper", "nose", 197),
+    ("nose_bridge_lower", "nose", 195),
+    ("nose_tip", "nose", 4),
+    ("nose_ala_right", "nose", 98),
+    ("nostril_right", "nose", 97),
+    ("nose_base_center", "nose", 2),
+    ("nostril_left", "nose", 326),
+    ("nose_ala_left", "nose", 327),
+    # 36-41 right eye: outer corner, upper lid (outer, inner), inner corner, lower lid
+    ("eye_right_outer", "eyes", 33),
+    ("eye_right_upper_outer", "eyes", 160),
+    ("eye_right_upper_inner", "eyes", 158),
+    ("eye_right_inner", "eyes", 133),
+    ("eye_right_lower_inner", "eyes", 153),
+    ("eye_right_lower_outer", "eyes", 144),
+    # 42-47 left eye: inner corner, upper lid (inner, outer), outer corner, lower lid
+    ("eye_left_inner", "eyes", 362),
+    ("eye_left_upper_inner", "eyes", 385),
+    ("eye_left_upper_outer", "eyes", 387),
+    ("eye_left_outer", "eyes", 263),
+    ("eye_left_lower_outer", "eyes", 373),
+    ("eye_left_lower_inner", "eyes", 380),
+    # 48-59 outer lip: right corner, upper lip right -> left, left corner, lower left -> right
+    ("mouth_corner_right", "mouth_corners", 61),
+    ("lip_upper_right", "upper_lip", 39),
+    ("lip_upper_right_peak", "upper_lip", 37),
+    ("lip_upper_center", "upper_lip", 0),
+    ("lip_upper_left_peak", "upper_lip", 267),
+    ("lip_upper_left", "upper_lip", 269),
+    ("mouth_corner_left", "mouth_corners", 291),
+    ("lip_lower_left", "lower_lip", 321),
+    ("lip_lower_left_mid", "lower_lip", 314),
+    ("lip_lower_center", "lower_lip", 17),
+    ("lip_lower_right_mid", "lower_lip", 84),
+    ("lip_lower_right", "lower_lip", 91),
+    # 60-67 inner lip: right corner, upper right -> left, left corner, lower left -> right
+    ("mouth_inner_corner_right", "mouth_corners", 78),
+    ("lip_upper_inner_right", "upper_lip", 81),
+    ("lip_upper_inner_center", "upper_lip", 13),
+    ("lip_upper_inner_left", "upper_lip", 311),
+    ("mouth_inner_corner_left", "mouth_corners", 308),
+    ("lip_lower_inner_left", "lower_lip", 402),
+    ("lip_lower_inner_center", "lower_lip", 14),
+    ("lip_lower_inner_right", "lower_lip", 178),
+)
+
+IBUG68_TO_MEDIAPIPE468: tuple[int, ...] = tuple(row[2] for row in _IBUG68_ROWS)
+"""(68,) for iBUG point i, the MediaPipe face-mesh vertex that stands for it."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """N named feature points with their region, side, mirror partner and source indices.
+
+    name : layout name (a key of `LAYOUTS` for the built-in ones).
+    description : one line on what the points are.
+    point_names : (N,) unique snake_case names.
+    regions : (N,) each point's region, from `REGIONS`.
+    sides : (N,) each point's side, from `SIDES` (subject's right = -x).
+    mirror : (N,) index of each point's left/right partner; its own index on the midline.
+    ibug68 : (N,) index of each point in the 68-point iBUG / Multi-PIE order.
+    mediapipe468 : (N,) index of the matching vertex of MediaPipe's 468-vertex face mesh.
+
+    Construction checks the structure (lengths, vocabularies, index ranges, that
+    `mirror` is an involution) and raises `RetargetError` naming the offending field.
+    """
+
+    name: str
+    description: str
+    point_names: tuple[str, ...]
+    regions: tuple[str, ...]
+    sides: tuple[str, ...]
+    mirror: tuple[int, ...]
+    ibug68: tuple[int, ...]
+    mediapipe468: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        for field in ("point_names", "regions", "sides", "mirror", "ibug68", "mediapipe468"):
+            value = getattr(self, field)
+            if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+                raise RetargetError(
+                    f"Layout {self.name!r}: {field} must be a sequence, got {value!r}"
+                )
+            if field in ("mirror", "ibug68", "mediapipe468"):
+                value = tuple(int(v) for v in value)
+            else:
+                value = tuple(str(v) for v in value)
+            object.__setattr__(self, field, value)
+        n = len(self.point_names)
+        if n == 0:
+            raise RetargetError(f"Layout {self.name!r}: point_names is empty")
+        for field in ("regions", "sides", "mirror", "ibug68", "mediapipe468"):
+            if len(getattr(self, field)) != n:
+                raise RetargetError(
+                    f"Layout {self.name!r}: {field} has {len(getattr(self, field))} entries, "
+                    f"point_names has {n}"
+                )
+        seen: set[str] = set()
+        for point in self.point_names:
+            if point in seen:
+                raise RetargetError(f"Layout {self.name!r}: point name {point!r} is repeated")
+            seen.add(point)
+        for field, vocabulary in (("regions", REGIONS), ("sides", SIDES)):
+            for value in getattr(self, field):
+                if value not in vocabulary:
+                    raise RetargetError(
+                        f"Layout {self.name!r}: {field} value {value!r} is not one of {vocabulary}"
+                    )
+        for field, size in (("mirror", n), ("ibug68", 68), ("mediapipe468", 468)):
+            for value in getattr(self, field):
+                if not 0 <= value < size:
+                    raise RetargetError(
+                        f"Layout {self.name!r}: {field} index {value} is outside [0, {size})"
+                    )
+        for i, j in enumerate(self.mirror):
+            if self.mirror[j] != i:
+                raise RetargetError(
+                    f"Layout {self.name!r}: mirror is not an involution: "
+                    f"{i} -> {j} -> {self.mirror[j]}"
+                )
+
+    @property
+    def n_points(self) -> int:
+        """N, the number of points."""
+        return len(self.point_names)
+
+    def index(self, name: str) -> int:
+        """Position of the point called `name` in this layout."""
+        try:
+            return self.point_names.index(name)
+        except ValueError:
+            close = difflib.get_close_matches(str(name), self.point_names, n=4)
+            hint = f"; close matches: {', '.join(close)}" if close else ""
+            raise RetargetError(
+                f"Layout {self.name!r} has no point named {name!r}{hint}"
+            ) from None
+
+    def region_mask(self, names: str | Iterable[str]) -> np.ndarray:
+        """(N,) bool: the points in any of `names`.
+
+        names : one name or several; each a region (`REGIONS`), a group (`GROUPS`) or a
+        point name of this layout. An unknown name raises `RetargetError` naming it.
+        """
+        if isinstance(names, str):
+            names = (names,)
+        mask = np.zeros(self.n_points, dtype=bool)
+        regions = np.asarray(self.regions)
+        for name in names:
+            if not isinstance(name, str):
+                raise RetargetError(f"Layout {self.name!r}: region_mask takes names, got {name!r}")
+            if name in GROUPS:
+                mask |= np.isin(regions, GROUPS[name])
+            elif name in REGIONS:
+                mask |= regions == name
+            elif name in self.point_names:
+                mask[self.point_names.index(name)] = True
+            else:
+                vocabulary = list(REGIONS) + list(GROUPS) + list(self.point_names)
+                close = difflib.get_close_matches(name, vocabulary, n=4)
+                hint = f"; close matches: {', '.join(close)}" if close else ""
+                raise RetargetError(
+                    f"Layout {self.name!r}: {name!r} is not a region {REGIONS}, a group "
+                    f"{tuple(GROUPS)} or a point name{hint}"
+                )
+        return mask
+
+    def mirrored(self, points: np.ndarray) -> np.ndarray:
+        """Mirror a placement of this layout's points about the plane x = 0.
+
+        points : (..., N, D) float, D >= 1, x in column 0 (any units).
+        Returns (..., N, D) float: row i is row ``mirror[i]`` with x negated, so a
+        symmetric face maps (nearly) onto itself.
+        """
+        p = _as_float_array(points, "points")
+        if p.ndim < 2 or p.shape[-2] != self.n_points or p.shape[-1] < 1:
+            raise RetargetError(
+                f"Layout {self.name!r}: points must have shape (..., {self.n_points}, D), "
+                f"got {p.shape}"
+            )
+        out = p[..., list(self.mirror), :]  # fancy indexing copies
+        out[..., 0] *= -1.0
+        return out
+
+    def select(
+        self,
+        names_or_indices: str | int | Iterable[str | int] | np.ndarray,
+        name: str | None = None,
+    ) -> Layout:
+        """A sub-layout holding some of this layout's points, in this layout's order.
+
+        names_or_indices : point names, region or group names (as in `region_mask`) and/or
+            point indices into this layout, repeats harmless; or an (N,) bool mask such
+            as `region_mask` returns.
+        name : the new layout's name; default ``"<this name>_subset"``.
+        The mirror indices are remapped into the sub-layout; a point whose partner is not
+        selected becomes its own partner. Rows of this layout's arrays that the
+        sub-layout keeps: ``[self.index(p) for p in sub.point_names]``.
+        """
+        if isinstance(names_or_indices, (str, int, np.integer)):
+            names_or_indices = (names_or_indices,)
+        keep = np.zeros(self.n_points, dtype=bool)
+        if isinstance(names_or_indices, np.ndarray) and names_or_indices.dtype == bool:
+            if names_or_indices.shape != (self.n_points,):
+                raise RetargetError(
+                    f"Layout {self.name!r}: a select mask must have shape ({self.n_points},), "
+                    f"got {names_or_indices.shape}"
+                )
+            keep[:] = names_or_indices
+            names_or_indices = ()
+        for item in names_or_indices:
+            if isinstance(item, (bool, np.bool_)):
+                raise RetargetError(
+                    f"Layout {self.name!r}: select takes names or indices, got {item!r}"
+                )
+            if isinstance(item, (int, np.integer)):
+                if not -self.n_points <= item < self.n_points:
+                    raise RetargetError(
+                        f"Layout {self.name!r}: point index {item} is outside [0, {self.n_points})"
+                    )
+                keep[item] = True
+            else:
+                keep |= self.region_mask(item)
+        rows = np.flatnonzero(keep)
+        if rows.size == 0:
+            raise RetargetError(
+                f"Layout {self.name!r}: select({names_or_indices!r}) selects no points"
+            )
+        new_index = {int(old): new for new, old in enumerate(rows)}
+        mirror = tuple(new_index.get(self.mirror[old], new) for new, old in enumerate(rows))
+        return Layout(
+            name=name if name is not None else f"{self.name}_subset",
+            description=f"{len(rows)} of the {self.n_points} points of {self.name!r}",
+            point_names=tuple(self.point_names[i] for i in rows),
+            regions=tuple(self.regions[i] for i in rows),
+            sides=tuple(self.sides[i] for i in rows),
+            mirror=mirror,
+            ibug68=tuple(self.ibug68[i] for i in rows),
+            mediapipe468=tuple(self.mediapipe468[i] for i in rows),
+        )
+
+
+def _as_float_array(value, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise RetargetError(f"{what} is not an array: {exc}") from None
+    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise RetargetError(f"{what} must be numeric, got dtype {a.dtype}")
+    if not np.issubdtype(a.dtype, np.floating):
+        a = a.astype(np.float64)
+    return a
+
+
+def _side(name: str) -> str:
+    tokens = name.split("_")
+    return "right" if "right" in tokens else "left" if "left" in tokens else "center"
+
+
+def _partner_name(name: str) -> str:
+    swap = {"right": "left", "left": "right"}
+    return "_".join(swap.get(token, token) for token in name.split("_"))
+
+
+def _partner_index(names: tuple[str, ...], point: str, layout_name: str) -> int:
+    partner = _partner_name(point)
+    if partner not in names:
+        raise RetargetError(f"Layout {layout_name!r}: {point!r} has no mirror partner {partner!r}")
+    return names.index(partner)
+
+
+def _ibug_layout(name: str, description: str, ibug_indices: Iterable[int]) -> Layout:
+    """A layout of some iBUG points, everything but the choice read from `_IBUG68_ROWS`."""
+    idx = tuple(int(i) for i in ibug_indices)
+    names = tuple(_IBUG68_ROWS[i][0] for i in idx)
+    return Layout(
+        name=name,
+        description=description,
+        point_names=names,
+        regions=tuple(_IBUG68_ROWS[i][1] for i in idx),
+        sides=tuple(_side(n) for n in names),
+        mirror=tuple(_partner_index(names, n, name) for n in names),
+        ibug68=idx,
+        mediapipe468=tuple(IBUG68_TO_MEDIAPIPE468[i] for i in idx),
+    )
+
+
+_DUTREVE21_IBUG = (
+    17, 19, 21, 22, 24, 26,  # brows: right outer, middle, inner; left inner, middle, outer
+    38, 40, 43, 47,  # eyes: right upper/lower lid, left upper/lower lid
+    31, 30, 35,  # nose: right ala, tip, left ala
+    48, 49, 51, 53, 54, 55, 57, 59,  # outer lip: corners, 3 upper, 3 lower
+)
+
+LAYOUTS: dict[str, Layout] = {
+    layout.name: layout
+    for layout in (
+        _ibug_layout(
+            "dutreve21",
+            "Dutreve et al. 2008 §5: 3 per brow, 2 per eye, 3 on the nose, 8 around the mouth",
+            _DUTREVE21_IBUG,
+        ),
+        _ibug_layout(
+            "ibug68",
+            "The 68 iBUG / Multi-PIE points: jaw contour, brows, nose, eyes, outer and inner lips",
+            range(68),
+        ),
+        _ibug_layout(
+            "ibug51",
+            "The 68 iBUG points without the jaw contour 0-16 (brows, nose, eyes, lips)",
+            range(17, 68),
+        ),
+        _ibug_layout(
+            "mediapipe68",
+            "The 68 iBUG points read from MediaPipe's 468-vertex face mesh",
+            range(68),
+        ),
+    )
+}
+"""The built-in layouts by name."""
+
+
+def get_layout(name: str) -> Layout:
+    """The built-in layout called `name` (a key of `LAYOUTS`)."""
+    try:
+        return LAYOUTS[name]
+    except (KeyError, TypeError):
+        raise RetargetError(
+            f"unknown layout {name!r}; available: {', '.join(sorted(LAYOUTS))}"
+        ) from None
+
+
+def _resolve(layout: Layout | str) -> Layout:
+    if isinstance(layout, Layout):
+        return layout
+    if isinstance(layout, str):
+        return get_layout(layout)
+    raise RetargetError(f"layout must be a Layout or a layout name, got {layout!r}")
+
+
+def from_ibug68(points68: np.ndarray, layout: Layout | str) -> np.ndarray:
+    """A layout's points picked out of 68 iBUG-ordered points.
+
+    points68 : (..., 68, D) float, any units (2D tracker output, 3D landmarks).
+    layout : a `Layout` or a name from `LAYOUTS`.
+    Returns (..., N, D), a copy (integer input becomes float64).
+    """
+    layout = _resolve(layout)
+    p = _as_float_array(points68, "points68")
+    if p.ndim < 2 or p.shape[-2] != 68:
+        raise RetargetError(f"points68 must have shape (..., 68, D), got {p.shape}")
+    return p[..., list(layout.ibug68), :]
+
+
+def from_mediapipe468(points468: np.ndarray, layout: Layout | str) -> np.ndarray:
+    """A layout's points picked out of a MediaPipe face mesh.
+
+    points468 : (..., 468, D) or (..., 478, D) float, MediaPipe face-mesh landmarks (478
+        with the iris points of the refined model, which are not used).
+    layout : a `Layout` or a name from `LAYOUTS`.
+    Returns (..., N, D), a copy (integer input becomes float64).
+    """
+    layout = _resolve(layout)
+    p = _as_float_array(points468, "points468")
+    if p.ndim < 2 or p.shape[-2] not in _MEDIAPIPE_MESH_SIZES:
+        raise RetargetError(f"points468 must have shape (..., 468 or 478, D), got {p.shape}")
+    return p[..., list(layout.mediapipe468), :]
