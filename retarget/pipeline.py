@@ -1,0 +1,102 @@
+"""The retargeting pipeline, Dutreve et al. 2008 §4.
+
+Setup: an RBF space transform ``F = RBF(S0, T0)`` trained on the neutral source and
+target feature points, and skin weights W for the target mesh. Every frame:
+
+    T_f = F(S_f),   d_f = (T_f - F(S0)) · mask,   v_f = v_0 + W d_f
+
+``F(S0)`` rather than T0 is subtracted so a smoothed (non-interpolating) transform still
+gives zero displacement at the neutral pose. The mask is Dutreve's partial retargeting
+(§4, Fig. 3): disabled feature points keep their neutral position. A source point that is
+lost (NaN, a tracker dropout) also keeps its neutral position for that frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.rbf import RBFTransform, as_points
+from retarget.skin import SkinWeights, skin_displacements
+
+DEFAULT_KERNEL = "linear"
+# Relative smoothing of the transform (see `retarget.rbf.RBFInterpolant`): large enough that
+# the transform is nearly the linear polynomial's affine map, which carries displacements
+# between faces of different shape with the least distortion (bench/accuracy.py).
+DEFAULT_SMOOTHING = 100.0
+
+
+class Retargeter:
+    """Source feature frames -> target feature displacements -> target vertices.
+
+    Parameters
+    ----------
+    kernel, degree, smoothing : the RBF space transform's (see `retarget.rbf`).
+    mask : (N,) bool of active feature points, or None for all (partial retargeting).
+    """
+
+    def __init__(self, kernel: str = DEFAULT_KERNEL, *, degree: int | None = None,
+                 smoothing: float = DEFAULT_SMOOTHING, mask=None):
+        self.kernel = kernel
+        self.degree = degree
+        self.smoothing = smoothing
+        self.mask = mask
+
+    def fit(self, source_neutral, target_neutral) -> "Retargeter":
+        """Train on (N, 2|3) neutral source points S0 and (N, 3) neutral target points T0."""
+        s0 = as_points(source_neutral, "source neutral")
+        t0 = as_points(target_neutral, "target neutral", dims=(3,))
+        self.transform_ = RBFTransform(self.kernel, degree=self.degree,
+                                       smoothing=self.smoothing).fit(s0, t0)
+        self.source_dims_ = np.asarray(source_neutral).shape[1]
+        self.target_rest_ = self.transform_.transform(s0)
+        self.mask_ = _as_mask(self.mask, len(s0))
+        return self
+
+    def displacements(self, source_frames) -> np.ndarray:
+        """(N, D) or (F, N, D) source points -> (N, 3) or (F, N, 3) float32 target feature
+        displacements d_f (zero for masked-out and lost points)."""
+        if not hasattr(self, "transform_"):
+            raise RetargetError("Retargeter is not fitted; call fit() first")
+        s = np.asarray(source_frames, dtype=np.float64)
+        n = len(self.mask_)
+        if s.ndim not in (2, 3) or s.shape[-2:] != (n, self.source_dims_):
+            raise RetargetError(
+                f"source frames must have shape (F, {n}, {self.source_dims_}) like the source "
+                f"neutral; got {s.shape}")
+        d = self.transform_.transform(s) - self.target_rest_
+        d[..., ~self.mask_, :] = 0.0
+        return np.nan_to_num(d, nan=0.0).astype(np.float32)
+
+
+def transfer(vertices, weights: SkinWeights, retargeter: Retargeter, source_frames,
+             progress=None, chunk: int = 64) -> np.ndarray:
+    """(F, V, 3) float32 deformed target vertices for (F, N, D) source frames.
+
+    progress : optional callable taking the fraction done in [0, 1].
+    """
+    v0 = np.asarray(vertices, dtype=np.float64)
+    frames = np.asarray(source_frames, dtype=np.float64)
+    if frames.ndim != 3:
+        raise RetargetError(f"source frames must have shape (F, N, 2|3); got {frames.shape}")
+    if weights.n_vertices != len(v0) or weights.n_joints != frames.shape[1]:
+        raise RetargetError(
+            f"the rig has {weights.n_joints} joints for {weights.n_vertices} vertices; the mesh "
+            f"has {len(v0)} vertices and the source {frames.shape[1]} points")
+    w = weights.matrix()
+    out = np.empty((len(frames), len(v0), 3), dtype=np.float32)
+    for i in range(0, len(frames), chunk):
+        d = retargeter.displacements(frames[i:i + chunk])
+        out[i:i + chunk] = v0 + skin_displacements(w, d)
+        if progress is not None:
+            progress(min(1.0, (i + chunk) / max(len(frames), 1)))
+    return out
+
+
+def _as_mask(mask, n: int) -> np.ndarray:
+    if mask is None:
+        return np.ones(n, dtype=bool)
+    m = np.asarray(mask)
+    if m.shape != (n,) or m.dtype != bool:
+        raise RetargetError(f"mask must be a boolean array of shape ({n},); got {m.dtype} {m.shape}")
+    return m.copy()

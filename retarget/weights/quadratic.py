@@ -1,0 +1,72 @@
+"""Weights of deformers that minimise a quadratic surface energy under feature constraints.
+
+Zhang et al. §2.2 (eq. 7, after Sorkine et al. 2004) and the biharmonic deformer solve
+
+    min_d  dᵀ Q d + w² Σ_j |C_j d - c_j|²
+
+for vertex displacements d given feature displacements c, where Q (V, V) is a positive
+semi-definite energy and C (N, V) evaluates the mesh at each feature's surface point. The
+minimiser is linear in c:
+
+    d = (Q + w² CᵀC)⁻¹ w² Cᵀ c = W c,
+
+so the system is factorised once per rig (`*_precompute`) and W (V, N) is the deformer;
+each frame then costs one skinning product. With w large the constraints are near-hard.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from retarget.errors import RetargetError
+
+
+def constraint_matrix(points, n_vertices: int) -> sp.csr_matrix:
+    """(N, V) sparse: row j holds feature j's barycentric weights on its triangle."""
+    n = points.n_points
+    return sp.csr_matrix(
+        (points.barycentric.ravel(), (np.repeat(np.arange(n), 3), points.vertex_indices.ravel())),
+        shape=(n, n_vertices))
+
+
+def constrained_weights(energy: sp.spmatrix, points, constraint_weight: float,
+                        progress=None, supports=()) -> np.ndarray:
+    """(V, N) float64 W of the module docstring for energy Q and `SurfacePoints`.
+
+    constraint_weight : w² relative to the median diagonal of Q (scale-free).
+    supports : pairs (features (N,) bool, outside (V,) bool): those features' weights are
+        also held at zero on the `outside` vertices (one more factorisation per pair).
+        Features in no pair have no such limit.
+    """
+    q = sp.csc_matrix(energy)
+    c = constraint_matrix(points, q.shape[0])
+    scale = float(np.median(np.abs(q.diagonal()))) or 1.0
+    w2 = constraint_weight * scale
+    # A tiny ridge keeps pieces of the mesh that carry no feature point (a separate
+    # eyeball, say) solvable: they stay still instead of making the system singular.
+    a = (q + w2 * (c.T @ c) + sp.identity(q.shape[0]) * (1e-10 * scale)).tocsc()
+    n = points.n_points
+    free = np.ones(n, dtype=bool)
+    groups = []
+    for features, outside in supports:
+        groups.append((np.flatnonzero(features & free), outside))
+        free &= ~features
+    groups.append((np.flatnonzero(free), None))
+    rhs = (w2 * c.T).toarray()
+    out = np.zeros_like(rhs)
+    for g, (cols, outside) in enumerate(groups):
+        if len(cols) == 0:
+            continue
+        ag = a if outside is None else (a + sp.diags(w2 * outside.astype(np.float64))).tocsc()
+        try:
+            lu = splu(ag, permc_spec="MMD_AT_PLUS_A")
+        except RuntimeError as exc:
+            raise RetargetError(f"the deformation system could not be factorised ({exc})") from exc
+        out[:, cols] = lu.solve(rhs[:, cols])
+        if progress is not None:
+            progress((g + 1) / len(groups))
+    if not np.isfinite(out).all():
+        raise RetargetError("the deformation system gave non-finite weights (degenerate mesh triangles?)")
+    return out
