@@ -1,0 +1,137 @@
+"""Accuracy of cross-identity retargeting on the ICT face model, for every deformer.
+
+    python bench/accuracy.py [--seed 0] [--random 24] [--methods ...] [--kernel linear]
+
+Source identity A and target identity B are random ICT identities; expressions are the six
+universal ones plus random sparse ARKit combinations; the truth is B with the same
+expression weights. Source conditions: "same" (A's 3D points in the target's frame),
+"foreign" (A under another scale, rotation and translation), "2d" (A's points as pixels
+of a frontal camera, z = 0). The first row, "paper", is Dutreve 2008 as written: adaptive
+multiquadric transfer and ellipsoid LBS. "true" rows feed the deformer the true target
+feature motion, to separate deformer error from transfer error.
+
+Figures: relative error = sum of per-vertex error norms / sum of true displacement norms
+over the face area (ICT vertices [0, 9409)) and all expressions; mean and 95th-percentile
+per-vertex error in mm; mean error per region in mm; lip leakage = share of upper-lip
+vertices taking more than 5% weight from lower-lip or jaw points (and the reverse).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.ict import (DATA, REPORT_REGIONS, benchmark_layout, expression_weights,  # noqa: E402
+                       foreign_frame, image_points, load_model, vertex_regions)
+from retarget.landmarks import from_vertex_indices  # noqa: E402
+from retarget.pipeline import DEFAULT_KERNEL, Retargeter  # noqa: E402
+from retarget.skin import skin_displacements  # noqa: E402
+from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights  # noqa: E402
+
+CONDITIONS = ("same", "foreign", "2d")
+
+
+def lip_leakage(dense: np.ndarray, layout_region: np.ndarray, regions: np.ndarray) -> tuple[float, float]:
+    """Shares of upper-lip vertices with > 5% weight on lower-lip or jaw features, and of
+    lower-lip vertices with > 5% on upper-lip features."""
+    w = np.abs(dense[: len(layout_region)])
+    upper_v, lower_v = layout_region == "upper_lip", layout_region == "lower_lip"
+    from_lower = w[:, np.isin(regions, ("lower_lip", "jaw"))].sum(1)
+    from_upper = w[:, regions == "upper_lip"].sum(1)
+    return float((from_lower[upper_v] > 0.05).mean()), float((from_upper[lower_v] > 0.05).mean())
+
+
+def error_figures(pred: np.ndarray, truth: np.ndarray, rest: np.ndarray, report: np.ndarray) -> dict:
+    """Figures over the face area for (X, V, 3) predicted and true vertices, in mm."""
+    n = len(report)
+    err = np.linalg.norm(pred[:, :n] - truth[:, :n], axis=2) * 10.0
+    true = np.linalg.norm(truth[:, :n] - rest[:n], axis=2) * 10.0
+    out = {"rel": err.sum() / true.sum(), "mean": err.mean(), "p95": np.percentile(err, 95)}
+    for r in REPORT_REGIONS:
+        m = report == r
+        out[r] = err[:, m].mean() if m.any() else float("nan")
+    return out
+
+
+def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: float,
+        true_motion: bool) -> list[dict]:
+    model = load_model()
+    rng = np.random.default_rng(seed)
+    a, b = rng.standard_normal(100), rng.standard_normal(100)
+    src0, tgt0 = model.identity_face(a), model.identity_face(b)
+    weights_x, _ = expression_weights(model.names, n_random, rng)
+    offsets = model.expression_offsets(weights_x)
+    feats = model.feature_vertices()
+    layout = benchmark_layout()
+    points = from_vertex_indices(feats, len(tgt0), layout.name)
+    report, layout_region = vertex_regions(tgt0, model.faces, feats, layout, model.face_count)
+    truth = tgt0 + offsets
+    s0, s = src0[feats], (src0 + offsets)[:, feats]
+    sources = {
+        "same": (s0, s),
+        "foreign": (foreign_frame(s0), foreign_frame(s)),
+        "2d": (image_points(s0), image_points(s)),
+    }
+    rows = []
+    setups = [("paper", "ellipsoid", "adaptive_multiquadric")] + [(m, m, kernel) for m in methods]
+    for label, method, kern in setups:
+        t = time.perf_counter()
+        sk = compute_weights(method, tgt0, model.faces, points, layout)
+        rig_s = time.perf_counter() - t
+        dense = sk.dense()
+        matrix = sk.matrix()
+        leak = lip_leakage(dense, layout_region, np.asarray(layout.regions))
+        conds = list(CONDITIONS) + (["true"] if true_motion else [])
+        for cond in conds:
+            if cond == "true":
+                d = offsets[:, feats]
+            else:
+                src_neutral, src_frames = sources[cond]
+                rt = Retargeter(kern, smoothing=smoothing).fit(src_neutral, tgt0[feats])
+                d = rt.displacements(src_frames)
+            pred = tgt0 + skin_displacements(matrix, d)
+            fig = error_figures(pred, truth, tgt0, report)
+            rows.append({"setup": label, "kernel": kern if cond != "true" else "-", "condition": cond,
+                         "rig_s": rig_s, "leak_upper": leak[0], "leak_lower": leak[1], **fig})
+    return rows
+
+
+def print_rows(rows: list[dict]) -> None:
+    head = (f"{'setup':<12}{'kernel':<22}{'cond':<8}{'rel%':>6}{'mean':>7}{'p95':>7}"
+            + "".join(f"{r:>7}" for r in REPORT_REGIONS) + f"{'leakU%':>8}{'leakL%':>8}{'rig s':>7}")
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        print(f"{r['setup']:<12}{r['kernel']:<22}{r['condition']:<8}{100 * r['rel']:>6.1f}"
+              f"{r['mean']:>7.2f}{r['p95']:>7.2f}" + "".join(f"{r[g]:>7.2f}" for g in REPORT_REGIONS)
+              + f"{100 * r['leak_upper']:>8.1f}{100 * r['leak_lower']:>8.1f}{r['rig_s']:>7.2f}")
+    print("errors in mm over the ICT face area; rel% = sum |error| / sum |true displacement|")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--random", type=int, default=24, help="random sparse expressions besides the six universal ones")
+    p.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    p.add_argument("--kernel", default=DEFAULT_KERNEL)
+    p.add_argument("--smoothing", type=float, default=0.0)
+    p.add_argument("--no-true", action="store_true", help="skip the true-feature-motion rows")
+    args = p.parse_args(argv)
+    if not DATA.exists():
+        print(f"ICT data not found at {DATA}", file=sys.stderr)
+        return 2
+    rows = run(args.seed, args.random, args.methods, args.kernel, args.smoothing, not args.no_true)
+    print(f"ICT cross-identity retargeting, seed {args.seed}, {6 + args.random} expressions, "
+          f"58 feature points, default deformer {DEFAULT_METHOD!r}, default kernel {DEFAULT_KERNEL!r}")
+    print_rows(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
