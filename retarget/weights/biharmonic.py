@@ -3,14 +3,17 @@
 A second-order surface energy (Jacobson et al. 2011; Botsch & Sorkine 2008, "On linear
 variational surface deformation methods") on the cotangent Laplacian ``L`` and mass ``M``:
 
-    E(d) = dᵀ Lᵀ M⁻¹ L d + α / ℓ⁴ · dᵀ M d
+    E(d) = dᵀ Lᵀ M⁻¹ L d + β / ℓ² · dᵀ (-L) d + α / ℓ⁴ · dᵀ M d
 
 under near-hard feature constraints (`quadratic.constrained_weights`). The first term
 (the discrete biharmonic energy) spreads each feature's motion smoothly along the surface,
 so the two sides of the mouth slit, an open boundary, do not drag each other. The second
-term damps motion far from every feature, so the skull and neck stay put instead of
-floating with the nearest feature; ℓ is the landmark layout's size (RMS distance of the
-features from their centroid), so α is unit-free.
+(membrane, Dirichlet) term makes motion fall off faster between features than the
+bending term alone would, as skin under tension does. The third term damps motion far
+from every feature, so the skull and neck stay put instead of floating with the nearest
+feature. ℓ is the landmark layout's size (RMS distance of the features from their
+centroid), so α and β are unit-free; their defaults are the best pair on the ICT
+benchmark (bench/accuracy.py, true feature motion).
 
 Lip separation: the energy alone still lets a lower-lip feature pull upper-lip vertices
 near the mouth corners (the surface path round a corner is short). With a layout, each
@@ -25,34 +28,29 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from retarget.operators import boundary_vertices, cotmatrix, massmatrix
+from retarget.operators import cotmatrix, massmatrix
 from retarget.skin import SkinWeights
 from retarget.weights.geodesic import nearest_features
 from retarget.weights.quadratic import constrained_weights
 
 
 def biharmonic_weights(vertices, faces, points, layout=None, *, k: int | None = None,
-                       damping: float = 100.0, natural_boundary: bool = False,
+                       damping: float = 100.0, membrane: float = 30.0,
                        separate_lips: bool = True, constraint_weight: float = 1e4,
                        progress=None) -> SkinWeights:
     """(V, N) biharmonic weights; ``k`` keeps the k largest per vertex (all if None).
 
     damping : α of the module docstring.
-    natural_boundary : drop the Laplacian rows of boundary vertices, so linear fields
-        cost nothing at open boundaries (closer to the Hessian energy's natural boundary
-        conditions than the cotangent bilaplacian's implicit zero-Neumann ones).
+    membrane : β of the module docstring.
     """
     v = np.asarray(vertices, dtype=np.float64)
     lap = cotmatrix(v, faces)
     mass = massmatrix(v, faces)
     m = mass.diagonal()
-    if natural_boundary:
-        keep = ~boundary_vertices(faces, len(v))
-        lap = sp.diags(keep.astype(np.float64)) @ lap
     q = lap.T @ sp.diags(1.0 / m) @ lap
     t0 = points.positions(v)
     ell = float(np.sqrt(((t0 - t0.mean(0)) ** 2).sum(1).mean()))
-    q = q + (damping / ell**4) * mass
+    q = q + (membrane / ell**2) * (-lap) + (damping / ell**4) * mass
     supports = lip_supports(v, faces, points, layout) if separate_lips and layout is not None else ()
     w = constrained_weights(q, points, constraint_weight, progress, supports)
     return SkinWeights.from_dense(w, k, "biharmonic")
