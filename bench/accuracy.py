@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.ict import (DATA, REPORT_REGIONS, benchmark_layout, expression_weights,  # noqa: E402
                        foreign_frame, image_points, load_model, vertex_regions)
 from retarget.landmarks import from_vertex_indices  # noqa: E402
-from retarget.pipeline import DEFAULT_KERNEL, Retargeter  # noqa: E402
+from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter  # noqa: E402
 from retarget.skin import skin_displacements  # noqa: E402
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights  # noqa: E402
 
@@ -79,8 +79,8 @@ def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: fl
         "2d": (image_points(s0), image_points(s)),
     }
     rows = []
-    setups = [("paper", "ellipsoid", "adaptive_multiquadric")] + [(m, m, kernel) for m in methods]
-    for label, method, kern in setups:
+    setups = [("paper", "ellipsoid", "adaptive_multiquadric", 0.0)] + [(m, m, kernel, smoothing) for m in methods]
+    for label, method, kern, smooth in setups:
         t = time.perf_counter()
         sk = compute_weights(method, tgt0, model.faces, points, layout)
         rig_s = time.perf_counter() - t
@@ -93,7 +93,7 @@ def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: fl
                 d = offsets[:, feats]
             else:
                 src_neutral, src_frames = sources[cond]
-                rt = Retargeter(kern, smoothing=smoothing).fit(src_neutral, tgt0[feats])
+                rt = Retargeter(kern, smoothing=smooth).fit(src_neutral, tgt0[feats])
                 d = rt.displacements(src_frames)
             pred = tgt0 + skin_displacements(matrix, d)
             fig = error_figures(pred, truth, tgt0, report)
@@ -120,7 +120,7 @@ def main(argv=None) -> int:
     p.add_argument("--random", type=int, default=24, help="random sparse expressions besides the six universal ones")
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     p.add_argument("--kernel", default=DEFAULT_KERNEL)
-    p.add_argument("--smoothing", type=float, default=0.0)
+    p.add_argument("--smoothing", type=float, default=DEFAULT_SMOOTHING)
     p.add_argument("--no-true", action="store_true", help="skip the true-feature-motion rows")
     args = p.parse_args(argv)
     if not DATA.exists():
@@ -128,7 +128,8 @@ def main(argv=None) -> int:
         return 2
     rows = run(args.seed, args.random, args.methods, args.kernel, args.smoothing, not args.no_true)
     print(f"ICT cross-identity retargeting, seed {args.seed}, {6 + args.random} expressions, "
-          f"58 feature points, default deformer {DEFAULT_METHOD!r}, default kernel {DEFAULT_KERNEL!r}")
+          f"58 feature points; transfer: kernel {args.kernel!r}, smoothing {args.smoothing:g} "
+          f"(paper row: adaptive_multiquadric, 0); default deformer {DEFAULT_METHOD!r}")
     print_rows(rows)
     return 0
 

@@ -53,17 +53,21 @@ class SkinWeights:
             return cls(idx, w.astype(np.float32), n, method)
         return cls(*_top_k(w, k), n, method)
 
-    def matrix(self) -> sp.csr_matrix:
-        """(V, N) sparse weight matrix."""
+    def matrix(self) -> sp.csr_matrix | np.ndarray:
+        """(V, N) float32 weight matrix for the per-frame product: sparse CSR for sparse
+        rigs, a dense column-major array when every vertex has every joint (BLAS reads it
+        as the transposed C array, the fastest layout for ``W @ d``). Float32 as on the
+        GPU: a frame costs its memory traffic."""
         v, k = self.indices.shape
         rows = np.repeat(np.arange(v), k)
-        return sp.csr_matrix(
-            (self.weights.ravel().astype(np.float64), (rows, self.indices.ravel())),
-            shape=(v, self.n_joints))
+        m = sp.csr_matrix((self.weights.ravel(), (rows, self.indices.ravel())),
+                          shape=(v, self.n_joints), dtype=np.float32)
+        return np.asfortranarray(m.toarray()) if k == self.n_joints else m
 
     def dense(self) -> np.ndarray:
         """(V, N) float64 weight matrix."""
-        return self.matrix().toarray()
+        m = self.matrix()
+        return np.asarray(m.toarray() if sp.issparse(m) else m, dtype=np.float64)
 
     def top_k(self, k: int) -> "SkinWeights":
         """At most k influences per vertex, largest first, rescaled to keep each row's sum."""
@@ -92,15 +96,15 @@ class SkinWeights:
         return cls(idx.astype(np.int32), w.astype(np.float32), n, method)
 
 
-def skin_displacements(weights: SkinWeights | sp.spmatrix, displacements: np.ndarray) -> np.ndarray:
+def skin_displacements(weights, displacements: np.ndarray) -> np.ndarray:
     """Vertex displacements from feature displacements (Dutreve §3.1).
 
     weights : SkinWeights, or its precomputed `SkinWeights.matrix()` for a hot loop.
     displacements : (N, 3) or (F, N, 3) feature displacements, target units.
-    Returns (V, 3) or (F, V, 3) float64.
+    Returns (V, 3) or (F, V, 3) float32.
     """
     w = weights.matrix() if isinstance(weights, SkinWeights) else weights
-    d = np.asarray(displacements, dtype=np.float64)
+    d = np.asarray(displacements, dtype=np.float32)
     if d.shape[-2] != w.shape[1] or d.shape[-1] != 3:
         raise RetargetError(f"displacements must have shape (..., {w.shape[1]}, 3); got {d.shape}")
     if d.ndim == 2:

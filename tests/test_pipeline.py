@@ -1,0 +1,87 @@
+"""The retargeting pipeline (Dutreve §4): transfer, partial retargeting, lost points, 2D."""
+
+import numpy as np
+import pytest
+
+from retarget.errors import RetargetError
+from retarget.pipeline import Retargeter, transfer
+from retarget.skin import SkinWeights
+
+
+@pytest.fixture
+def points():
+    rng = np.random.default_rng(5)
+    s0 = rng.normal(size=(20, 3))
+    t0 = 3.0 * s0 + [1.0, 2.0, 3.0] + 0.05 * rng.normal(size=(20, 3))
+    frames = s0 + 0.1 * rng.normal(size=(4, 20, 3))
+    return s0, t0, frames
+
+
+def test_neutral_source_gives_zero_displacement_even_when_smoothed(points):
+    s0, t0, _ = points
+    for smoothing in (0.0, 100.0):
+        d = Retargeter(smoothing=smoothing).fit(s0, t0).displacements(s0)
+        assert d.dtype == np.float32 and d.shape == (20, 3)
+        np.testing.assert_allclose(d, 0.0, atol=1e-5)
+
+
+def test_displacements_follow_the_fitted_space_transform(points):
+    s0, t0, frames = points
+    rt = Retargeter("linear", smoothing=0.0).fit(s0, t0)
+    expected = rt.transform_.transform(frames) - t0
+    np.testing.assert_allclose(rt.displacements(frames), expected, atol=1e-5)
+    # A source three times smaller than the target: motion is scaled up by the transform.
+    assert np.linalg.norm(rt.displacements(frames)) > 2.0 * np.linalg.norm(frames - s0)
+
+
+def test_partial_retargeting_holds_masked_points_at_neutral(points):
+    s0, t0, frames = points
+    mask = np.zeros(20, dtype=bool)
+    mask[:5] = True
+    d = Retargeter(mask=mask).fit(s0, t0).displacements(frames)
+    assert np.all(d[:, 5:] == 0.0) and np.abs(d[:, :5]).max() > 0.01
+
+
+def test_a_lost_point_keeps_its_neutral_position_for_that_frame(points):
+    s0, t0, frames = points
+    frames = frames.copy()
+    frames[2, 7] = np.nan
+    d = Retargeter().fit(s0, t0).displacements(frames)
+    assert np.all(d[2, 7] == 0.0) and np.isfinite(d).all() and np.abs(d[1, 7]).max() > 0
+
+
+def test_2d_source_drives_3d_target(points):
+    s0, t0, frames = points
+    rt = Retargeter().fit(s0[:, :2], t0)
+    d = rt.displacements(frames[:, :, :2])
+    assert d.shape == (4, 20, 3) and np.isfinite(d).all()
+    with pytest.raises(RetargetError, match=r"shape \(F, 20, 2\)"):
+        rt.displacements(frames)
+
+
+def test_transfer_deforms_the_mesh_by_skinning(points):
+    s0, t0, frames = points
+    rng = np.random.default_rng(6)
+    vertices = rng.normal(size=(50, 3))
+    dense = rng.random((50, 20))
+    dense /= dense.sum(1, keepdims=True)
+    sk = SkinWeights.from_dense(dense)
+    rt = Retargeter().fit(s0, t0)
+    seen = []
+    out = transfer(vertices, sk, rt, frames, progress=seen.append, chunk=3)
+    assert out.shape == (4, 50, 3) and out.dtype == np.float32
+    np.testing.assert_allclose(out[1], vertices + dense @ rt.displacements(frames[1]), atol=1e-5)
+    assert seen[-1] == 1.0 and len(seen) == 2
+
+
+@pytest.mark.parametrize("call,message", [
+    (lambda s0, t0, f: Retargeter().displacements(f), "not fitted"),
+    (lambda s0, t0, f: Retargeter().fit(s0[:19], t0), "same number of feature points; got 19 and 20"),
+    (lambda s0, t0, f: Retargeter(mask=np.ones(3, bool)).fit(s0, t0), r"mask must be a boolean array of shape \(20,\)"),
+    (lambda s0, t0, f: Retargeter().fit(s0, t0[:, :2]), "target neutral"),
+    (lambda s0, t0, f: transfer(np.zeros((7, 3)), SkinWeights.from_dense(np.ones((5, 20)) / 20),
+                                Retargeter().fit(s0, t0), f), "the rig has 20 joints for 5 vertices; the mesh has 7"),
+])
+def test_misuse_is_refused_with_a_reason(points, call, message):
+    with pytest.raises(RetargetError, match=message):
+        call(*points)
