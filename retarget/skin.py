@@ -5,9 +5,11 @@ feature point i at frame f. Every deformer of this library compiles to such weig
 (ellipsoid, geodesic, dense RBF, Laplacian, biharmonic), so this one function is the CPU
 twin of the GPU skinning shader and of the glTF export for all of them.
 
-Rows of the weight matrix sum to at most 1; the remainder ``1 - sum`` belongs to an
-implicit static root joint (the skull), which is how a vertex far from every feature
-stays still and how the glTF export keeps its weights summing to 1.
+The remainder ``1 - sum`` of a row belongs to an implicit static root joint (the skull),
+which is how a vertex far from every feature stays still. Sparse rigs (ellipsoid,
+geodesic) have non-negative rows summing to 1 or less; interpolating deformers (RBF,
+Laplacian, biharmonic) may have small negative weights and rows that overshoot 1 a little
+between features.
 """
 
 from __future__ import annotations

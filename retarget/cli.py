@@ -1,0 +1,604 @@
+"""The ``retarget`` command line: retarget feature-point animation onto a mesh from files.
+
+Subcommands (``retarget <command> --help`` for the details):
+
+``transfer``
+    Dutreve et al. 2008 §4 end to end: a target mesh and its landmarks T0, a source's
+    neutral points S0 and frames S, skin weights computed (or read with ``--rig``), and
+    the deformed target written as an (F, V, 3) float32 ``.npy``.
+``rig``
+    Only the skin weights (Dutreve §3), written as an ``.npz`` that ``transfer --rig``
+    reuses, so a slow solve (biharmonic, Laplacian) runs once per mesh.
+``demo``
+    The built-in example: the sample face driven by another identity's landmarks, with
+    the error against the known answer. Needs no files.
+``layouts``
+    The landmark layouts and the names ``--mask`` accepts.
+
+The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
+a missing or unreadable file, arrays that do not agree) is one line
+``retarget: error: <message>`` on stderr and exit status 2; success is status 0.
+Progress bars (tqdm) go to stderr, the results to stdout; ``--quiet`` hides the bars.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from retarget import __version__
+from retarget.errors import RetargetError
+from retarget.landmarks import SurfacePoints, load_landmarks
+from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
+from retarget.mesh import Mesh, load_mesh, mesh_from_arrays, save_mesh
+from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter, transfer
+from retarget.rbf import KERNELS
+from retarget.skin import SkinWeights
+from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
+
+__all__ = ["main", "build_parser", "transfer_files", "TransferResult"]
+
+PROG = "retarget"
+DEMO_FRAMES = 90
+DEMO_DIR = "retarget-demo"
+# The demo's performer: the sample face's shape parameters (face width, nose length, jaw
+# width, lip thickness, eye spacing, in standard units), far enough from the target's
+# zeros that the transform has a real change of proportions to carry.
+DEMO_SOURCE_IDENTITY = (1.5, -1.2, 1.0, 1.2, -1.0)
+
+
+class _UsageError(Exception):
+    """An argparse refusal, carried to `main` instead of argparse's own exit."""
+
+    def __init__(self, message: str, usage: str):
+        super().__init__(message)
+        self.usage = usage
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's hook; the default prints and exits
+        raise _UsageError(message, self.format_usage())
+
+
+# ---------------------------------------------------------------------------------------
+# transfer
+
+
+@dataclass(frozen=True)
+class TransferResult:
+    """What `transfer_files` did.
+
+    vertices : (F, V, 3) float32, the deformed target, mesh units (also written to `out`).
+    rest : (V, 3) float64, the target mesh's neutral vertices as read.
+    n_points : N, the number of feature points.
+    method : the deformer (the rig's method when the weights were read from a file).
+    weights_seconds, transfer_seconds : wall time of the weight solve (or rig read) and of
+        the per-frame transfer.
+    out : the path written.
+    """
+
+    vertices: np.ndarray
+    rest: np.ndarray
+    n_points: int
+    method: str
+    weights_seconds: float
+    transfer_seconds: float
+    out: Path
+
+    def summary(self) -> str:
+        """The one-line report `transfer` prints."""
+        f, v, _ = self.vertices.shape
+        total = self.weights_seconds + self.transfer_seconds
+        rate = f / self.transfer_seconds if self.transfer_seconds > 0 else float("inf")
+        return (
+            f"transferred {f} frames onto {v} vertices from {self.n_points} points "
+            f"with {self.method}: {total:.2f} s (weights {self.weights_seconds:.2f} s, "
+            f"frames {self.transfer_seconds:.2f} s, {rate:.0f} frames/s) -> {self.out}"
+        )
+
+
+def transfer_files(
+    target_mesh,
+    target_landmarks,
+    source_neutral,
+    source_frames,
+    out,
+    *,
+    deformer: str = DEFAULT_METHOD,
+    kernel: str = DEFAULT_KERNEL,
+    smoothing: float = DEFAULT_SMOOTHING,
+    mask: list[str] | None = None,
+    layout: str | None = None,
+    rig=None,
+    quiet: bool = False,
+) -> TransferResult:
+    """Retarget source frames in files onto a target mesh in a file; write (F, V, 3).
+
+    target_mesh : mesh file (see `retarget.mesh.load_mesh`).
+    target_landmarks : landmarks JSON (see `retarget.landmarks`), N points.
+    source_neutral : ``.npy`` (N, 2|3) float, the source's neutral points S0.
+    source_frames : ``.npy`` (F, N, 2|3) float, the source's points per frame S, in the
+        order and dimension of S0; NaN marks a lost point (it keeps its neutral place).
+    out : ``.npy`` written with the (F, V, 3) float32 deformed target vertices, in the
+        mesh's units and vertex order; the path is used exactly as given.
+    deformer : a name of `retarget.weights.METHODS`; ignored when `rig` is given.
+    kernel, smoothing : the RBF space transform's (`retarget.pipeline.Retargeter`).
+    mask : names (regions, groups, points of the layout) and/or feature indices (as
+        strings or ints) of the active points, their union; None for all.
+    layout : layout name; default the landmarks JSON's ``"layout"``, if any.
+    rig : ``.npz`` from `SkinWeights.save` to use instead of computing weights.
+
+    Raises `RetargetError` for every refusal, naming the file or option.
+    """
+    out = Path(out)
+    _require_parent(out)
+    mesh = _read_mesh(target_mesh)
+    points = _read_landmarks(target_landmarks, mesh)
+    n = points.n_points
+    s0 = _read_npy(source_neutral, "source neutral")
+    frames = _read_npy(source_frames, "source frames")
+    _check_source(s0, frames, n)
+    the_layout = _layout_for(layout, points)
+    active = _mask_for(mask, the_layout, n)
+
+    start = time.perf_counter()
+    if rig is not None:
+        weights = _read_rig(rig, mesh, n)
+        method = weights.method or "rig"
+    else:
+        weights = _weights(deformer, mesh, points, the_layout, quiet=quiet)
+        method = deformer
+    weights_seconds = time.perf_counter() - start
+
+    start = time.perf_counter()
+    retargeter = Retargeter(kernel, smoothing=smoothing, mask=active)
+    retargeter.fit(s0, points.positions(mesh.vertices))
+    with _bar(len(frames), "transfer", "frame", quiet) as advance:
+        result = transfer(mesh.vertices, weights, retargeter, frames, progress=advance)
+    transfer_seconds = time.perf_counter() - start
+
+    _write_npy(out, result)
+    return TransferResult(
+        result, mesh.vertices, n, method, weights_seconds, transfer_seconds, out
+    )
+
+
+def _check_source(s0: np.ndarray, frames: np.ndarray, n_target: int) -> None:
+    """Shapes and values of S0 (N, D) and S (F, N, D) against the target's N points."""
+    if s0.ndim != 2 or s0.shape[1] not in (2, 3):
+        raise RetargetError(f"source neutral must have shape (N, 2) or (N, 3); got {s0.shape}")
+    if frames.ndim != 3 or frames.shape[2] not in (2, 3):
+        raise RetargetError(
+            f"source frames must have shape (F, N, 2) or (F, N, 3); got {frames.shape}"
+        )
+    if len(frames) == 0:
+        raise RetargetError(f"source frames hold no frames (shape {frames.shape})")
+    if len(s0) != n_target:
+        raise RetargetError(
+            f"source neutral has {len(s0)} points but target landmarks have {n_target}"
+        )
+    if frames.shape[1] != len(s0):
+        raise RetargetError(
+            f"source frames have {frames.shape[1]} points but source neutral has {len(s0)}"
+        )
+    if frames.shape[2] != s0.shape[1]:
+        raise RetargetError(
+            f"source frames are {frames.shape[2]}D but source neutral is {s0.shape[1]}D; "
+            "give both in the same dimension"
+        )
+    bad = ~np.isfinite(s0).all(axis=1)
+    if bad.any():
+        raise RetargetError(
+            f"source neutral has {int(bad.sum())} point(s) with NaN or inf coordinates "
+            f"(first: point {int(np.flatnonzero(bad)[0])}); the neutral must be complete"
+        )
+    if np.isinf(frames).any():
+        f, i = np.argwhere(np.isinf(frames))[0][:2]
+        raise RetargetError(
+            f"source frames hold infinite coordinates (first: frame {f}, point {i}); "
+            "mark a lost point with NaN instead"
+        )
+
+
+def _layout_for(name: str | None, points: SurfacePoints) -> Layout | None:
+    """The layout named by --layout, else by the landmarks JSON, checked against N."""
+    if name is None:
+        name = points.layout or None
+        where = "the landmarks JSON's 'layout'"
+    else:
+        where = "--layout"
+    if name is None:
+        return None
+    layout = get_layout(name)
+    if layout.n_points != points.n_points:
+        raise RetargetError(
+            f"layout {name!r} (from {where}) has {layout.n_points} points but target "
+            f"landmarks have {points.n_points}"
+        )
+    return layout
+
+
+def _mask_for(values, layout: Layout | None, n: int) -> np.ndarray | None:
+    """(N,) bool union of --mask values (names of `layout`, or feature indices), or None."""
+    if not values:
+        return None
+    mask = np.zeros(n, dtype=bool)
+    for value in values:
+        text = str(value).strip()
+        try:
+            index = int(text)
+        except ValueError:
+            if layout is None:
+                raise RetargetError(
+                    f"--mask {text!r} is a name, which needs a layout: give --layout or a "
+                    "\"layout\" in the landmarks JSON, or use feature indices"
+                ) from None
+            mask |= layout.region_mask(text)
+            continue
+        if not 0 <= index < n:
+            raise RetargetError(f"--mask index {index} is outside the {n} feature points [0, {n})")
+        mask[index] = True
+    return mask
+
+
+def _weights(method: str, mesh: Mesh, points: SurfacePoints, layout: Layout | None, *,
+             quiet: bool, **options) -> SkinWeights:
+    """`compute_weights` with a progress bar where the method reports progress."""
+    if method not in METHODS:
+        raise RetargetError(f"unknown deformer {method!r}; choose one of {', '.join(METHODS)}")
+    if "progress" not in inspect.signature(METHODS[method]).parameters:
+        return compute_weights(method, mesh.vertices, mesh.faces, points, layout, **options)
+    with _bar(100, f"{method} weights", "%", quiet) as advance:
+        return compute_weights(
+            method, mesh.vertices, mesh.faces, points, layout, progress=advance, **options
+        )
+
+
+class _bar:
+    """A tqdm bar on stderr as a context manager yielding ``advance(fraction)``."""
+
+    def __init__(self, total: int, desc: str, unit: str, quiet: bool):
+        self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr,
+                         disable=quiet, leave=False, dynamic_ncols=True)
+
+    def __enter__(self):
+        def advance(fraction: float) -> None:
+            done = round(min(max(float(fraction), 0.0), 1.0) * self._bar.total)
+            self._bar.update(done - self._bar.n)
+
+        return advance
+
+    def __exit__(self, *exc):
+        self._bar.close()
+        return False
+
+
+# ---------------------------------------------------------------------------------------
+# file reading and writing: every failure becomes a RetargetError naming the file
+
+
+def _read_mesh(path) -> Mesh:
+    _require_file(path, "target mesh")
+    return load_mesh(path)
+
+
+def _read_landmarks(path, mesh: Mesh) -> SurfacePoints:
+    _require_file(path, "target landmarks")
+    return load_landmarks(path, mesh.vertices, mesh.faces)
+
+
+def _read_npy(path, what: str) -> np.ndarray:
+    """A numeric ``.npy`` as float64; `what` names it in messages."""
+    _require_file(path, what)
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        raise RetargetError(f"could not read {what} {str(path)!r} as .npy: {exc}") from exc
+    if not isinstance(array, np.ndarray):  # an .npz archive
+        array.close()
+        raise RetargetError(f"{what} {str(path)!r} is an .npz archive; give one .npy array")
+    if array.dtype.kind not in "iuf":
+        raise RetargetError(
+            f"{what} {str(path)!r} must hold numbers, got dtype {array.dtype}"
+        )
+    return array.astype(np.float64)
+
+
+def _read_rig(path, mesh: Mesh, n_points: int) -> SkinWeights:
+    _require_file(path, "rig")
+    weights = SkinWeights.load(path)
+    if weights.n_joints != n_points:
+        raise RetargetError(
+            f"rig {str(path)!r} has {weights.n_joints} joints but target landmarks have "
+            f"{n_points} points"
+        )
+    if weights.n_vertices != mesh.n_vertices:
+        raise RetargetError(
+            f"rig {str(path)!r} has weights for {weights.n_vertices} vertices but the "
+            f"target mesh has {mesh.n_vertices}"
+        )
+    return weights
+
+
+def _require_file(path, what: str) -> None:
+    p = Path(path)
+    if not p.is_file():
+        state = "is not a file" if p.exists() else "does not exist"
+        raise RetargetError(f"{what} {str(p)!r} {state}")
+
+
+def _require_parent(path: Path) -> None:
+    """Refuse an output path whose directory is missing, before any work is done."""
+    if not path.parent.is_dir():
+        raise RetargetError(f"cannot write {str(path)!r}: directory {str(path.parent)!r} does not exist")
+
+
+def _write_npy(path: Path, array: np.ndarray) -> None:
+    """Write exactly `path` (np.save would append .npy to another suffix)."""
+    try:
+        with open(path, "wb") as f:
+            np.save(f, array)
+    except OSError as exc:
+        raise RetargetError(f"could not write {str(path)!r}: {exc}") from exc
+
+
+def _write_json(path: Path, data: dict) -> None:
+    try:
+        path.write_text(json.dumps(data) + "\n")
+    except OSError as exc:
+        raise RetargetError(f"could not write {str(path)!r}: {exc}") from exc
+
+
+# ---------------------------------------------------------------------------------------
+# subcommands
+
+
+def _cmd_transfer(args) -> int:
+    result = transfer_files(
+        args.target_mesh,
+        args.target_landmarks,
+        args.source_neutral,
+        args.source_frames,
+        args.out,
+        deformer=args.deformer or DEFAULT_METHOD,
+        kernel=args.kernel,
+        smoothing=args.smoothing,
+        mask=args.mask,
+        layout=args.layout,
+        rig=args.rig,
+        quiet=args.quiet,
+    )
+    print(result.summary())
+    return 0
+
+
+def _cmd_rig(args) -> int:
+    out = Path(args.out)
+    _require_parent(out)
+    mesh = _read_mesh(args.mesh)
+    points = _read_landmarks(args.landmarks, mesh)
+    layout = _layout_for(args.layout, points)
+    options = {} if args.k is None else {"k": args.k}
+    start = time.perf_counter()
+    weights = _weights(args.method, mesh, points, layout, quiet=args.quiet, **options)
+    seconds = time.perf_counter() - start
+    try:
+        with open(out, "wb") as f:
+            weights.save(f)
+    except OSError as exc:
+        raise RetargetError(f"could not write {str(out)!r}: {exc}") from exc
+    print(
+        f"rig {args.method}: {weights.n_vertices} vertices, {weights.n_joints} joints, "
+        f"{weights.n_influences} influences per vertex, {seconds:.2f} s -> {out}"
+    )
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from retarget.sample_face import demo_weights, posed_vertices, sample_face
+
+    out_dir = Path(args.out)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RetargetError(f"could not create --out directory {str(out_dir)!r}: {exc}") from exc
+    target = sample_face()
+    source = sample_face(identity=np.asarray(DEMO_SOURCE_IDENTITY))
+    expression = demo_weights(args.frames)
+    landmarks = np.asarray(source.landmarks68)
+    s0 = source.vertices[landmarks]
+    s = posed_vertices(source, expression)[:, landmarks]
+
+    paths = {name: out_dir / name for name in (
+        "target.obj", "target_landmarks.json", "source_neutral.npy",
+        "source_frames.npy", "out.npy")}
+    save_mesh(mesh_from_arrays(target.vertices, target.faces, uv=target.uv, name="target"),
+              paths["target.obj"])
+    _write_json(paths["target_landmarks.json"],
+                {"vertex_indices": np.asarray(target.landmarks68).tolist(), "layout": "ibug68"})
+    _write_npy(paths["source_neutral.npy"], s0)
+    _write_npy(paths["source_frames.npy"], s)
+
+    result = transfer_files(
+        paths["target.obj"], paths["target_landmarks.json"], paths["source_neutral.npy"],
+        paths["source_frames.npy"], paths["out.npy"], deformer=args.deformer,
+        quiet=args.quiet,
+    )
+    truth = posed_vertices(target, expression)
+    error = np.linalg.norm(result.vertices - truth, axis=-1)          # (F, V) cm
+    motion = np.linalg.norm(truth - target.vertices, axis=-1)         # (F, V) cm
+    relative = error.sum() / motion.sum() if motion.sum() > 0 else float("nan")
+
+    f, v, _ = result.vertices.shape
+    rate = f / result.transfer_seconds if result.transfer_seconds > 0 else float("inf")
+    print(
+        f"retarget demo: the sample face ({v} vertices, in cm) animated by a performer of "
+        f"another identity through {len(landmarks)} iBUG landmarks, {f} frames\n"
+        f"  wrote {out_dir}/: target.obj, target_landmarks.json, "
+        f"source_neutral.npy {s0.shape}, source_frames.npy {s.shape}\n"
+        f"  retargeted with {result.method} in "
+        f"{result.weights_seconds + result.transfer_seconds:.2f} s (weights "
+        f"{result.weights_seconds:.2f} s, then {rate:.0f} frames/s) -> {result.out} "
+        f"{result.vertices.shape} float32\n"
+        f"  error against the ground truth (the target posed with the same expression "
+        f"weights):\n"
+        f"    mean {error.mean():.3f} cm, max {error.max():.3f} cm per vertex; relative "
+        f"{100 * relative:.1f} % (sum of error lengths / sum of true displacement lengths)\n"
+        f"  the same from the files: {PROG} transfer --target-mesh {paths['target.obj']} "
+        f"--target-landmarks {paths['target_landmarks.json']} "
+        f"--source-neutral {paths['source_neutral.npy']} "
+        f"--source-frames {paths['source_frames.npy']} --out {paths['out.npy']}"
+    )
+    return 0
+
+
+def _cmd_layouts(args) -> int:
+    for name, layout in LAYOUTS.items():
+        counts = {r: layout.regions.count(r) for r in REGIONS if r in layout.regions}
+        regions = ", ".join(f"{r} {c}" for r, c in counts.items())
+        print(f"{name:<12} {layout.n_points:>3} points  {regions}")
+    print(
+        f"--mask takes regions ({', '.join(REGIONS)}), groups ({', '.join(GROUPS)}), "
+        "point names or feature indices"
+    )
+    return 0
+
+
+# ---------------------------------------------------------------------------------------
+# parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not np.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``retarget`` argument parser (refusals raise `_UsageError`, see `main`)."""
+    quiet = _Parser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true",
+                       help="hide the progress bars on stderr")
+    methods, kernels = ", ".join(METHODS), ", ".join(KERNELS)
+
+    parser = _Parser(
+        prog=PROG,
+        description="Facial animation retargeting from feature points (Dutreve et al. 2008).",
+        epilog=f"'{PROG} demo' runs a complete example that needs no files.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
+                                     parser_class=_Parser)
+
+    p = commands.add_parser(
+        "transfer", parents=[quiet], help="retarget source frames onto a target mesh",
+        description="Retarget source feature-point frames onto a target mesh and write the "
+        "deformed vertices, (F, V, 3) float32, as .npy.")
+    p.add_argument("--target-mesh", required=True, metavar="MESH",
+                   help="target mesh (obj, ply, stl, off, gltf, glb)")
+    p.add_argument("--target-landmarks", required=True, metavar="T0.json",
+                   help='its N landmarks: {"vertex_indices": [...]} or {"positions": '
+                   '[[x, y, z], ...]}, optionally with "layout"')
+    p.add_argument("--source-neutral", required=True, metavar="S0.npy",
+                   help="(N, 2|3) neutral source points")
+    p.add_argument("--source-frames", required=True, metavar="S.npy",
+                   help="(F, N, 2|3) source points per frame, in S0's order; NaN = lost point")
+    p.add_argument("--out", required=True, metavar="OUT.npy",
+                   help="(F, V, 3) float32 deformed target vertices, written here")
+    weights = p.add_mutually_exclusive_group()
+    weights.add_argument("--deformer", choices=list(METHODS), default=None, metavar="NAME",
+                         help=f"one of {methods} (default: {DEFAULT_METHOD})")
+    weights.add_argument("--rig", metavar="RIG.npz",
+                         help="skin weights from 'retarget rig', instead of computing them")
+    p.add_argument("--kernel", choices=list(KERNELS), default=DEFAULT_KERNEL, metavar="NAME",
+                   help=f"RBF space-transform kernel: one of {kernels} (default: {DEFAULT_KERNEL})")
+    p.add_argument("--smoothing", type=_non_negative_float, default=DEFAULT_SMOOTHING,
+                   metavar="X", help=f"space-transform smoothing (default: {DEFAULT_SMOOTHING:g})")
+    p.add_argument("--mask", nargs="+", action="extend", metavar="NAME",
+                   help="partial retargeting: move only these regions, groups, point names "
+                   "or feature indices (their union); names need a layout")
+    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
+                   help=f"landmark layout ({', '.join(LAYOUTS)}); default: the landmarks "
+                   "JSON's \"layout\"")
+    p.set_defaults(run=_cmd_transfer)
+
+    p = commands.add_parser(
+        "rig", parents=[quiet], help="compute skin weights for a mesh and its landmarks",
+        description="Compute the skin weights of a target mesh and write them as .npz "
+        "(joint_indices and weights, (V, K)) for 'retarget transfer --rig'.")
+    p.add_argument("mesh", metavar="MESH", help="target mesh")
+    p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
+    p.add_argument("--out", required=True, metavar="RIG.npz", help="the rig, written here")
+    p.add_argument("--method", choices=list(METHODS), default=DEFAULT_METHOD, metavar="NAME",
+                   help=f"one of {methods} (default: {DEFAULT_METHOD})")
+    p.add_argument("--k", type=_positive_int, metavar="K",
+                   help="influences kept per vertex (default: the method's own, 4 for "
+                   "ellipsoid and geodesic, all for the others)")
+    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
+                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    p.set_defaults(run=_cmd_rig)
+
+    p = commands.add_parser(
+        "demo", parents=[quiet], help="run the built-in example (no files needed)",
+        description="Retarget the built-in sample face from a performer of another identity, "
+        "write the inputs and the result, and report the error against the ground truth.")
+    p.add_argument("--out", default=DEMO_DIR, metavar="DIR",
+                   help=f"directory for the files (default: ./{DEMO_DIR})")
+    p.add_argument("--frames", type=_positive_int, default=DEMO_FRAMES, metavar="F",
+                   help=f"number of frames (default: {DEMO_FRAMES})")
+    p.add_argument("--deformer", choices=list(METHODS), default=DEFAULT_METHOD, metavar="NAME",
+                   help=f"one of {methods} (default: {DEFAULT_METHOD})")
+    p.set_defaults(run=_cmd_demo)
+
+    p = commands.add_parser("layouts", help="list the landmark layouts and their regions",
+                            description="List the landmark layouts, their point counts and "
+                            "regions.")
+    p.set_defaults(run=_cmd_layouts, quiet=True)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ``retarget`` command line; returns the exit status (0, or 2 on error)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return args.run(args)
+    except _UsageError as exc:
+        sys.stderr.write(exc.usage)
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help and --version
+        return exc.code if isinstance(exc.code, int) else 0
+    except BrokenPipeError:  # stdout closed early (`retarget layouts | head -1`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except (RetargetError, OSError) as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
