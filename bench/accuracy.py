@@ -59,7 +59,7 @@ def error_figures(pred: np.ndarray, truth: np.ndarray, rest: np.ndarray, report:
     return out
 
 
-def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: float,
+def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: float | None,
         true_motion: bool) -> list[dict]:
     model = load_model()
     rng = np.random.default_rng(seed)
@@ -120,7 +120,7 @@ def main(argv=None) -> int:
     p.add_argument("--random", type=int, default=24, help="random sparse expressions besides the six universal ones")
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     p.add_argument("--kernel", default=DEFAULT_KERNEL)
-    p.add_argument("--smoothing", type=float, default=DEFAULT_SMOOTHING)
+    p.add_argument("--smoothing", type=float, default=None, help="default: the pipeline's per-dimension default")
     p.add_argument("--no-true", action="store_true", help="skip the true-feature-motion rows")
     args = p.parse_args(argv)
     if not DATA.exists():
@@ -128,7 +128,8 @@ def main(argv=None) -> int:
         return 2
     rows = run(args.seed, args.random, args.methods, args.kernel, args.smoothing, not args.no_true)
     print(f"ICT cross-identity retargeting, seed {args.seed}, {6 + args.random} expressions, "
-          f"58 feature points; transfer: kernel {args.kernel!r}, smoothing {args.smoothing:g} "
+          f"58 feature points; transfer: kernel {args.kernel!r}, smoothing "
+          f"{args.smoothing if args.smoothing is not None else DEFAULT_SMOOTHING} "
           f"(paper row: adaptive_multiquadric, 0); default deformer {DEFAULT_METHOD!r}")
     print_rows(rows)
     return 0

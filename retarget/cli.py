@@ -115,7 +115,7 @@ def transfer_files(
     *,
     deformer: str = DEFAULT_METHOD,
     kernel: str = DEFAULT_KERNEL,
-    smoothing: float = DEFAULT_SMOOTHING,
+    smoothing: float | None = None,
     mask: list[str] | None = None,
     layout: str | None = None,
     rig=None,
@@ -535,8 +535,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="skin weights from 'retarget rig', instead of computing them")
     p.add_argument("--kernel", choices=list(KERNELS), default=DEFAULT_KERNEL, metavar="NAME",
                    help=f"RBF space-transform kernel: one of {kernels} (default: {DEFAULT_KERNEL})")
-    p.add_argument("--smoothing", type=_non_negative_float, default=DEFAULT_SMOOTHING,
-                   metavar="X", help=f"space-transform smoothing (default: {DEFAULT_SMOOTHING:g})")
+    p.add_argument("--smoothing", type=_non_negative_float, default=None, metavar="X",
+                   help="space-transform smoothing, relative (default: "
+                   + ", ".join(f"{v:g} for {d}D sources" for d, v in DEFAULT_SMOOTHING.items()) + ")")
     p.add_argument("--mask", nargs="+", action="extend", metavar="NAME",
                    help="partial retargeting: move only these regions, groups, point names "
                    "or feature indices (their union); names need a layout")

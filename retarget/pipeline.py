@@ -20,10 +20,13 @@ from retarget.rbf import RBFTransform, as_points
 from retarget.skin import SkinWeights, skin_displacements
 
 DEFAULT_KERNEL = "linear"
-# Relative smoothing of the transform (see `retarget.rbf.RBFInterpolant`): large enough that
-# the transform is nearly the linear polynomial's affine map, which carries displacements
-# between faces of different shape with the least distortion (bench/accuracy.py).
-DEFAULT_SMOOTHING = 100.0
+# Relative smoothing of the transform (see `retarget.rbf.RBFInterpolant`) by source
+# dimension, the best on the ICT benchmark (bench/accuracy.py) over three identity pairs.
+# 3D sources: nearly the linear polynomial's affine map, which carries displacements
+# between faces of different shape with the least distortion. 2D sources: much less, so
+# the map keeps bending the image plane onto the target's curved face, which restores
+# part of the depth motion that the image lost.
+DEFAULT_SMOOTHING = {3: 100.0, 2: 3.0}
 
 
 class Retargeter:
@@ -31,12 +34,13 @@ class Retargeter:
 
     Parameters
     ----------
-    kernel, degree, smoothing : the RBF space transform's (see `retarget.rbf`).
+    kernel, degree, smoothing : the RBF space transform's (see `retarget.rbf`); smoothing
+        None takes `DEFAULT_SMOOTHING` for the source's dimension.
     mask : (N,) bool of active feature points, or None for all (partial retargeting).
     """
 
     def __init__(self, kernel: str = DEFAULT_KERNEL, *, degree: int | None = None,
-                 smoothing: float = DEFAULT_SMOOTHING, mask=None):
+                 smoothing: float | None = None, mask=None):
         self.kernel = kernel
         self.degree = degree
         self.smoothing = smoothing
@@ -46,9 +50,10 @@ class Retargeter:
         """Train on (N, 2|3) neutral source points S0 and (N, 3) neutral target points T0."""
         s0 = as_points(source_neutral, "source neutral")
         t0 = as_points(target_neutral, "target neutral", dims=(3,))
-        self.transform_ = RBFTransform(self.kernel, degree=self.degree,
-                                       smoothing=self.smoothing).fit(s0, t0)
         self.source_dims_ = np.asarray(source_neutral).shape[1]
+        smoothing = DEFAULT_SMOOTHING[self.source_dims_] if self.smoothing is None else self.smoothing
+        self.transform_ = RBFTransform(self.kernel, degree=self.degree,
+                                       smoothing=smoothing).fit(s0, t0)
         self.target_rest_ = self.transform_.transform(s0)
         self.mask_ = _as_mask(self.mask, len(s0))
         return self

@@ -16,11 +16,11 @@ pytestmark = pytest.mark.skipif(not DATA.exists(), reason="ICT data set (../shar
 @pytest.fixture(scope="module")
 def rows():
     from bench.accuracy import run
-    from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING
+    from retarget.pipeline import DEFAULT_KERNEL
     from retarget.weights import DEFAULT_METHOD
 
     out = run(seed=3, n_random=4, methods=[DEFAULT_METHOD], kernel=DEFAULT_KERNEL,
-              smoothing=DEFAULT_SMOOTHING, true_motion=True)
+              smoothing=None, true_motion=True)
     return {(r["setup"], r["condition"]): r for r in out}
 
 

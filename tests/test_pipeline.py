@@ -85,3 +85,12 @@ def test_transfer_deforms_the_mesh_by_skinning(points):
 def test_misuse_is_refused_with_a_reason(points, call, message):
     with pytest.raises(RetargetError, match=message):
         call(*points)
+
+
+def test_default_smoothing_follows_the_source_dimension(points):
+    from retarget.pipeline import DEFAULT_SMOOTHING
+
+    s0, t0, _ = points
+    assert Retargeter().fit(s0, t0).transform_.smoothing == DEFAULT_SMOOTHING[3]
+    assert Retargeter().fit(s0[:, :2], t0).transform_.smoothing == DEFAULT_SMOOTHING[2]
+    assert Retargeter(smoothing=0.5).fit(s0[:, :2], t0).transform_.smoothing == 0.5
