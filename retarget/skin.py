@@ -109,10 +109,16 @@ def skin_displacements(weights, displacements: np.ndarray) -> np.ndarray:
     d = np.asarray(displacements, dtype=np.float32)
     if d.shape[-2] != w.shape[1] or d.shape[-1] != 3:
         raise RetargetError(f"displacements must have shape (..., {w.shape[1]}, 3); got {d.shape}")
-    if d.ndim == 2:
-        return w @ d
-    f, n, _ = d.shape
-    return (w @ d.transpose(1, 0, 2).reshape(n, 3 * f)).reshape(-1, f, 3).transpose(1, 0, 2)
+    f = 1 if d.ndim == 2 else d.shape[0]
+    columns = d.reshape(f, -1, 3).transpose(1, 0, 2).reshape(d.shape[-2], 3 * f)  # (N, 3F)
+    if sp.issparse(w):
+        out = w @ columns
+    else:
+        # (3F, N) @ (N, V) with the column-major (V, N) array read as its C-ordered
+        # transpose: one plain GEMM, measurably faster than W @ d on this layout.
+        out = (columns.T @ w.T).T
+    out = out.reshape(-1, f, 3).transpose(1, 0, 2)
+    return out[0] if d.ndim == 2 else out
 
 
 def _top_k(w: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
