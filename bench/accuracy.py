@@ -47,6 +47,15 @@ def lip_leakage(dense: np.ndarray, layout_region: np.ndarray, regions: np.ndarra
     return float((from_lower[upper_v] > 0.05).mean()), float((from_upper[lower_v] > 0.05).mean())
 
 
+def median_ms(fn, repeats: int = 50) -> float:
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times))
+
+
 def error_figures(pred: np.ndarray, truth: np.ndarray, rest: np.ndarray, report: np.ndarray) -> dict:
     """Figures over the face area for (X, V, 3) predicted and true vertices, in mm."""
     n = len(report)
@@ -89,29 +98,36 @@ def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: fl
         leak = lip_leakage(dense, layout_region, np.asarray(layout.regions))
         conds = list(CONDITIONS) + (["true"] if true_motion else [])
         for cond in conds:
+            fit_ms = frame_ms = float("nan")
             if cond == "true":
                 d = offsets[:, feats]
             else:
                 src_neutral, src_frames = sources[cond]
                 rt = Retargeter(kern, smoothing=smooth).fit(src_neutral, tgt0[feats])
                 d = rt.displacements(src_frames)
+                fit_ms = median_ms(lambda: Retargeter(kern, smoothing=smooth).fit(src_neutral, tgt0[feats]))
+                frame_ms = median_ms(lambda: skin_displacements(matrix, rt.displacements(src_frames[0])))
             pred = tgt0 + skin_displacements(matrix, d)
             fig = error_figures(pred, truth, tgt0, report)
             rows.append({"setup": label, "kernel": kern if cond != "true" else "-", "condition": cond,
-                         "rig_s": rig_s, "leak_upper": leak[0], "leak_lower": leak[1], **fig})
+                         "rig_s": rig_s, "fit_ms": fit_ms, "frame_ms": frame_ms,
+                         "leak_upper": leak[0], "leak_lower": leak[1], **fig})
     return rows
 
 
 def print_rows(rows: list[dict]) -> None:
     head = (f"{'setup':<12}{'kernel':<22}{'cond':<8}{'rel%':>6}{'mean':>7}{'p95':>7}"
-            + "".join(f"{r:>7}" for r in REPORT_REGIONS) + f"{'leakU%':>8}{'leakL%':>8}{'rig s':>7}")
+            + "".join(f"{r:>7}" for r in REPORT_REGIONS) + f"{'leakU%':>8}{'leakL%':>8}{'rig s':>7}{'fit ms':>8}{'frame ms':>9}")
     print(head)
     print("-" * len(head))
     for r in rows:
         print(f"{r['setup']:<12}{r['kernel']:<22}{r['condition']:<8}{100 * r['rel']:>6.1f}"
               f"{r['mean']:>7.2f}{r['p95']:>7.2f}" + "".join(f"{r[g]:>7.2f}" for g in REPORT_REGIONS)
-              + f"{100 * r['leak_upper']:>8.1f}{100 * r['leak_lower']:>8.1f}{r['rig_s']:>7.2f}")
-    print("errors in mm over the ICT face area; rel% = sum |error| / sum |true displacement|")
+              + f"{100 * r['leak_upper']:>8.1f}{100 * r['leak_lower']:>8.1f}{r['rig_s']:>7.2f}"
+              + f"{r['fit_ms']:>8.3f}{r['frame_ms']:>9.3f}")
+    print("errors in mm over the ICT face area; rel% = sum |error| / sum |true displacement|;\n"
+          "rig s: weights for the 11k-vertex face; fit ms: the space transform; frame ms: transform\n"
+          "+ skinning of one frame (medians of 50; run bench/speed.py on an idle core for speed figures)")
 
 
 def main(argv=None) -> int:
