@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
+from scipy.spatial.distance import pdist, squareform
 
 from retarget.errors import RetargetError
 
@@ -79,8 +81,6 @@ def from_vertex_indices(indices, n_vertices: int, layout: str = "") -> SurfacePo
 
 def from_positions(positions, vertices: np.ndarray, faces: np.ndarray, layout: str = "") -> SurfacePoints:
     """SurfacePoints at the surface points closest to (K, 3) positions."""
-    import trimesh
-
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
         raise RetargetError(f"positions must have shape (K, 3); got {p.shape}")
@@ -134,7 +134,7 @@ def load_landmarks(path, vertices: np.ndarray, faces: np.ndarray) -> SurfacePoin
 
 
 def _refuse_repeats(idx: np.ndarray, name: str):
-    uniq, first, counts = np.unique(idx, return_index=True, return_counts=True)
+    uniq, counts = np.unique(idx, return_counts=True)
     if (counts > 1).any():
         v = int(uniq[counts > 1][0])
         where = np.flatnonzero(idx == v)[:2].tolist()
@@ -142,8 +142,6 @@ def _refuse_repeats(idx: np.ndarray, name: str):
 
 
 def _refuse_repeats_positions(p: np.ndarray):
-    from scipy.spatial.distance import pdist, squareform
-
     if len(p) < 2:
         return
     d = squareform(pdist(p))
