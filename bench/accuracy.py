@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.ict import (DATA, REPORT_REGIONS, benchmark_layout, expression_weights,  # noqa: E402
                        foreign_frame, image_points, load_model, vertex_regions)
+from bench.timing import median_ms  # noqa: E402
 from retarget.landmarks import from_vertex_indices  # noqa: E402
 from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter  # noqa: E402
 from retarget.skin import skin_displacements  # noqa: E402
@@ -46,14 +47,6 @@ def lip_leakage(dense: np.ndarray, layout_region: np.ndarray, regions: np.ndarra
     from_upper = w[:, regions == "upper_lip"].sum(1)
     return float((from_lower[upper_v] > 0.05).mean()), float((from_upper[lower_v] > 0.05).mean())
 
-
-def median_ms(fn, repeats: int = 50) -> float:
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return 1e3 * float(np.median(times))
 
 
 def error_figures(pred: np.ndarray, truth: np.ndarray, rest: np.ndarray, report: np.ndarray) -> dict:
@@ -105,8 +98,8 @@ def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: fl
                 src_neutral, src_frames = sources[cond]
                 rt = Retargeter(kern, smoothing=smooth).fit(src_neutral, tgt0[feats])
                 d = rt.displacements(src_frames)
-                fit_ms = median_ms(lambda: Retargeter(kern, smoothing=smooth).fit(src_neutral, tgt0[feats]))
-                frame_ms = median_ms(lambda: skin_displacements(matrix, rt.displacements(src_frames[0])))
+                fit_ms = median_ms(lambda: Retargeter(kern, smoothing=smooth).fit(src_neutral, tgt0[feats]), 50)
+                frame_ms = median_ms(lambda: skin_displacements(matrix, rt.displacements(src_frames[0])), 50)
             pred = tgt0 + skin_displacements(matrix, d)
             fig = error_figures(pred, truth, tgt0, report)
             rows.append({"setup": label, "kernel": kern if cond != "true" else "-", "condition": cond,

@@ -28,6 +28,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.timing import median_ms  # noqa: E402
 from retarget.landmarks import from_vertex_indices  # noqa: E402
 from retarget.layouts import get_layout  # noqa: E402
 from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter  # noqa: E402
@@ -35,15 +36,6 @@ from retarget.sample_face import sample_face  # noqa: E402
 from retarget.skin import skin_displacements  # noqa: E402
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights  # noqa: E402
 
-
-def median_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return 1e3 * float(np.median(times))
 
 
 def face_for_frames():
