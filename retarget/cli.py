@@ -50,6 +50,7 @@ __all__ = ["main", "build_parser", "transfer_files", "TransferResult"]
 PROG = "retarget"
 DEMO_FRAMES = 90
 DEMO_DIR = "retarget-demo"
+SERVE_DATA_DIR = "retarget-data"
 # The demo's performer: the sample face's shape parameters (face width, nose length, jaw
 # width, lip thickness, eye spacing, in standard units), far enough from the target's
 # zeros that the transform has a real change of proportions to carry.
@@ -473,8 +474,38 @@ def _cmd_layouts(args) -> int:
     return 0
 
 
+def _cmd_serve(args) -> int:
+    # the web stack is imported here only: the library stays usable without it
+    try:
+        import uvicorn
+
+        from server.app import create_app
+    except ImportError as exc:
+        raise RetargetError(
+            f"'{PROG} serve' needs the web server's packages ({exc.name} is missing): "
+            "pip install fastapi 'uvicorn[standard]' python-multipart"
+        ) from exc
+    data_dir = Path(args.data_dir)
+    app = create_app(data_dir)
+    host = f"[{args.host}]" if ":" in args.host else args.host
+    print(f"retarget server: http://{host}:{args.port}/ (API docs at /docs), "
+          f"projects in {data_dir.resolve()}", flush=True)
+    uvicorn.run(app, host=args.host, port=args.port, log_level="info")
+    return 0
+
+
 # ---------------------------------------------------------------------------------------
 # parser
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port in [0, 65535], got {value}")
+    return value
 
 
 def _positive_int(text: str) -> int:
@@ -578,6 +609,15 @@ def build_parser() -> argparse.ArgumentParser:
                             description="List the landmark layouts, their point counts and "
                             "regions.")
     p.set_defaults(run=_cmd_layouts, quiet=True)
+
+    p = commands.add_parser("serve", help="run the web server",
+                            description="Serve the web app and its REST API (docs at /docs); "
+                            "projects are kept in --data-dir across restarts.")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    p.add_argument("--port", type=_port, default=8000, help="port (default: 8000)")
+    p.add_argument("--data-dir", default=SERVE_DATA_DIR, metavar="DIR",
+                   help=f"project store folder, created if missing (default: ./{SERVE_DATA_DIR})")
+    p.set_defaults(run=_cmd_serve, quiet=True)
     return parser
 
 

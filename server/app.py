@@ -1,0 +1,64 @@
+"""The FastAPI application: `create_app(data_dir)`.
+
+Routers, one per resource, live in `server.routers`; shared dependencies in
+`server.deps`; projects on disk in `server.store`. The server holds no maths: it parses
+requests, calls the `retarget` library and serialises what it returns. Library refusals
+(`RetargetError`) become HTTP 422 with the library's message as ``detail``; unknown
+projects 404 naming the id.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import FastAPI, Request, status
+from fastapi.responses import JSONResponse
+
+from retarget import __version__
+from retarget.errors import RetargetError
+from server.deps import Limits
+from server.jobs import JobRegistry
+from server.routers import landmarks, meshes, projects, rigs
+from server.sample import ensure_sample_project
+from server.store import ProjectNotFound, ProjectStore, StaleRig
+
+__all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "create_app"]
+
+DEFAULT_MAX_UPLOAD_BYTES = 64 * 2**20
+DEFAULT_MAX_VERTICES = 500_000
+
+
+def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
+               max_vertices: int = DEFAULT_MAX_VERTICES, sample: bool = True) -> FastAPI:
+    """The app serving the projects under `data_dir` (created if missing).
+
+    max_upload_bytes : mesh uploads longer than this are refused with 413.
+    max_vertices : meshes with more vertices are refused with 422.
+    sample : create the built-in sample project when the data dir is new (see
+        `server.sample`).
+    """
+    app = FastAPI(title="retarget", version=__version__,
+                  description="Facial animation retargeting from feature points: projects, "
+                  "meshes, landmarks and rigs.")
+    app.state.store = ProjectStore(data_dir)
+    app.state.jobs = JobRegistry()
+    app.state.limits = Limits(max_upload_bytes=int(max_upload_bytes),
+                              max_vertices=int(max_vertices))
+    if sample:
+        ensure_sample_project(app.state.store)
+
+    @app.exception_handler(RetargetError)
+    async def _refused(request: Request, exc: RetargetError) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, 422)
+
+    @app.exception_handler(ProjectNotFound)
+    async def _not_found(request: Request, exc: ProjectNotFound) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status.HTTP_404_NOT_FOUND)
+
+    @app.exception_handler(StaleRig)
+    async def _stale(request: Request, exc: StaleRig) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status.HTTP_409_CONFLICT)
+
+    for module in (projects, meshes, landmarks, rigs):
+        app.include_router(module.router)
+    return app

@@ -1,0 +1,73 @@
+"""Shared FastAPI dependencies, declared once as `Annotated` aliases.
+
+Tests may point the app at another store with
+``app.dependency_overrides[get_store] = lambda: other_store``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Path, Request, status
+
+from retarget.mesh import Mesh, load_mesh
+
+from server.jobs import JobRegistry
+from server.store import ProjectStore
+
+__all__ = ["JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep",
+           "get_jobs", "get_limits", "get_store"]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Upload limits of the app: bytes per mesh upload and vertices per mesh."""
+
+    max_upload_bytes: int
+    max_vertices: int
+
+
+def get_store(request: Request) -> ProjectStore:
+    return request.app.state.store
+
+
+def get_jobs(request: Request) -> JobRegistry:
+    return request.app.state.jobs
+
+
+def get_limits(request: Request) -> Limits:
+    return request.app.state.limits
+
+
+StoreDep = Annotated[ProjectStore, Depends(get_store)]
+JobsDep = Annotated[JobRegistry, Depends(get_jobs)]
+LimitsDep = Annotated[Limits, Depends(get_limits)]
+ProjectIdDep = Annotated[str, Path(description="Project id (22 URL-safe characters)")]
+
+
+def get_project(project_id: ProjectIdDep, store: StoreDep) -> dict:
+    """The project named in the path; `ProjectNotFound` (-> 404) for an unknown or
+    malformed id, checked before the id reaches any path."""
+    return store.get(project_id)
+
+
+ProjectDep = Annotated[dict, Depends(get_project)]
+
+
+def get_mesh(project: ProjectDep, store: StoreDep) -> Mesh:
+    """The project's stored mesh, parsed by `retarget.mesh.load_mesh`; 409 when the
+    project has none yet."""
+    found = store.mesh_file(project["id"])
+    if found is None:
+        raise HTTPException(
+            status.HTTP_409_CONFLICT,
+            f"project {project['id']!r} has no mesh yet: upload one with "
+            f"PUT /api/projects/{project['id']}/mesh",
+        )
+    path, ext = found
+    # from bytes, like the upload was checked: no resolver, so nothing beside the file is read
+    return load_mesh(path.read_bytes(), ext)
+
+
+MeshDep = Annotated[Mesh, Depends(get_mesh)]

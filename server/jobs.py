@@ -1,0 +1,99 @@
+"""Background jobs: one thread per job, at most one running job per project.
+
+Jobs live in memory only (a restart forgets them; what a finished job produced is in the
+store). A job's `progress` is fed by the library's ``progress(fraction)`` callback.
+"""
+
+from __future__ import annotations
+
+import secrets
+import threading
+from dataclasses import dataclass, field
+
+from retarget.errors import RetargetError
+
+__all__ = ["Job", "JobBusy", "JobRegistry"]
+
+
+class JobBusy(RuntimeError):
+    """The project already has a running job; the message names it."""
+
+
+@dataclass
+class Job:
+    """One background task. `state` is "running", "done" or "failed"; `progress` in [0, 1];
+    `detail` says what failed (or what was made)."""
+
+    id: str
+    project_id: str
+    kind: str
+    state: str = "running"
+    progress: float = 0.0
+    detail: str = ""
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    _thread: threading.Thread | None = field(default=None, repr=False)
+
+    def report(self, fraction: float) -> None:
+        """The library's progress callback: keeps the largest fraction seen, in [0, 1]."""
+        with self._lock:
+            self.progress = max(self.progress, min(max(float(fraction), 0.0), 1.0))
+
+    def as_json(self) -> dict:
+        with self._lock:
+            return {"id": self.id, "project_id": self.project_id, "kind": self.kind,
+                    "state": self.state, "progress": self.progress, "detail": self.detail}
+
+
+class JobRegistry:
+    """Starts jobs in daemon threads and keeps their state for polling."""
+
+    def __init__(self):
+        self._jobs: dict[str, Job] = {}
+        self._running: dict[str, str] = {}  # project id -> running job id
+        self._lock = threading.Lock()
+
+    def start(self, project_id: str, kind: str, work) -> Job:
+        """Run ``work(job)`` in a thread; it returns a detail string on success.
+
+        A `RetargetError` (or `ValueError`) fails the job with its message; any other
+        exception fails it as an internal error. Raises `JobBusy` when the project has a
+        running job.
+        """
+        with self._lock:
+            if project_id in self._running:
+                raise JobBusy(
+                    f"project {project_id!r} already has a running job "
+                    f"{self._running[project_id]!r}; wait for it to finish"
+                )
+            job = Job(secrets.token_urlsafe(12), project_id, kind)
+            self._jobs[job.id] = job
+            self._running[project_id] = job.id
+        job._thread = threading.Thread(target=self._run, args=(job, work), daemon=True,
+                                       name=f"job-{kind}-{job.id}")
+        job._thread.start()
+        return job
+
+    def _run(self, job: Job, work) -> None:
+        try:
+            detail = work(job)
+            state = "done"
+        except (RetargetError, ValueError, LookupError, RuntimeError) as exc:
+            state, detail = "failed", str(exc)
+        except Exception as exc:  # noqa: BLE001 - a job must always end in a state
+            state, detail = "failed", f"internal error: {type(exc).__name__}: {exc}"
+        with job._lock:
+            job.state, job.detail = state, detail or ""
+            if state == "done":
+                job.progress = 1.0
+        with self._lock:
+            self._running.pop(job.project_id, None)
+
+    def get(self, job_id: str) -> Job | None:
+        with self._lock:
+            return self._jobs.get(job_id)
+
+    def wait(self, job_id: str, timeout: float | None = None) -> None:
+        """Block until the job's thread ends (for tests and shutdown)."""
+        job = self.get(job_id)
+        if job is not None and job._thread is not None:
+            job._thread.join(timeout)

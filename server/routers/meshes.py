@@ -1,0 +1,121 @@
+"""The project's mesh: upload, download the original, and compact arrays for the browser.
+
+``GET /api/projects/{id}/mesh/arrays`` answers ``application/octet-stream``, little-endian::
+
+    offset  size    field
+    0       4       magic b"RTMA"
+    4       4       uint32 format version (1)
+    8       4       uint32 V, vertex count
+    12      4       uint32 F, triangle count
+    16      12 V    float32 vertices, (V, 3) row-major, in the mesh's own units
+    16+12V  12 F    uint32 faces, (F, 3) row-major, indices into the vertices
+
+Both arrays start at multiples of 4 bytes, so a browser reads them in place with
+``new Float32Array(buf, 16, 3 * V)`` and ``new Uint32Array(buf, 16 + 12 * V, 3 * F)``.
+Vertex order is exactly `retarget.mesh.load_mesh`'s, which landmark indices refer to.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+
+import numpy as np
+from fastapi import APIRouter, File, HTTPException, Response, UploadFile, status
+from fastapi.responses import FileResponse
+
+from retarget.errors import RetargetError
+from retarget.mesh import load_mesh
+from server.deps import LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.store import MESH_EXTENSIONS
+
+router = APIRouter(prefix="/api/projects/{project_id}/mesh", tags=["meshes"])
+
+ARRAYS_MAGIC = b"RTMA"
+ARRAYS_VERSION = 1
+ARRAYS_HEADER = struct.Struct("<4sIII")
+
+MEDIA_TYPES = {
+    "obj": "model/obj",
+    "ply": "application/octet-stream",
+    "stl": "model/stl",
+    "off": "application/octet-stream",
+    "glb": "model/gltf-binary",
+    "gltf": "model/gltf+json",
+}
+_CHUNK = 1 << 20
+
+
+def upload_extension(filename: str | None) -> str:
+    """The allow-listed, lower-case extension of an uploaded file name (which is used
+    for nothing else); 415 when there is none or it is not allowed."""
+    base = (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
+    ext = os.path.splitext(base)[1].lower().lstrip(".")
+    if ext not in MESH_EXTENSIONS:
+        shown = f"'.{ext}'" if ext else "no extension"
+        raise HTTPException(
+            status.HTTP_415_UNSUPPORTED_MEDIA_TYPE,
+            f"file name {filename!r} has {shown}; upload one of: "
+            + ", ".join(f".{e}" for e in MESH_EXTENSIONS),
+        )
+    return ext
+
+
+def read_capped(upload: UploadFile, max_bytes: int) -> bytes:
+    """The upload's bytes; 413 as soon as it is over `max_bytes`."""
+    chunks, size = [], 0
+    while chunk := upload.file.read(_CHUNK):
+        size += len(chunk)
+        if size > max_bytes:
+            raise HTTPException(
+                413,
+                f"the uploaded file is over the limit of {max_bytes} bytes "
+                f"({max_bytes / 2**20:.3g} MiB)",
+            )
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+@router.put("")
+def put_mesh(project: ProjectDep, store: StoreDep, limits: LimitsDep,
+             file: UploadFile = File(description="obj, ply, stl, off, glb or gltf (embedded buffers)")) -> dict:
+    """Upload the project's mesh. It is parsed by `retarget.mesh.load_mesh` and stored
+    (its bytes unchanged) only if valid; the landmarks and rig of a previous mesh are
+    dropped. Answers the project."""
+    ext = upload_extension(file.filename)
+    data = read_capped(file, limits.max_upload_bytes)
+    if not data:
+        raise RetargetError(f"the uploaded file {file.filename!r} is empty")
+    try:
+        mesh = load_mesh(data, ext, max_vertices=limits.max_vertices,
+                         max_bytes=limits.max_upload_bytes)
+    except RetargetError as exc:
+        text = str(exc).replace("the given bytes", "the file")
+        raise RetargetError(f"uploaded mesh {file.filename!r} refused: {text}") from exc
+    return store.put_mesh(project["id"], data, ext, filename=file.filename or "",
+                          n_vertices=mesh.n_vertices, n_faces=mesh.n_faces)
+
+
+@router.get("", response_class=FileResponse)
+def get_mesh_file(project: ProjectDep, store: StoreDep):
+    """The mesh exactly as uploaded."""
+    found = store.mesh_file(project["id"])
+    if found is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND,
+                            f"project {project['id']!r} has no mesh yet")
+    path, ext = found
+    return FileResponse(path, media_type=MEDIA_TYPES[ext], filename=f"mesh.{ext}")
+
+
+def mesh_arrays(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """The binary form of the module docstring."""
+    v = np.ascontiguousarray(vertices, dtype="<f4")
+    f = np.ascontiguousarray(faces, dtype="<u4")
+    return ARRAYS_HEADER.pack(ARRAYS_MAGIC, ARRAYS_VERSION, len(v), len(f)) + v.tobytes() + f.tobytes()
+
+
+@router.get("/arrays", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}}}})
+def get_mesh_arrays(mesh: MeshDep) -> Response:
+    """Vertices and faces as little-endian binary (format in the module docstring)."""
+    return Response(mesh_arrays(mesh.vertices, mesh.faces), media_type="application/octet-stream")

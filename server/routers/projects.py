@@ -1,0 +1,66 @@
+"""Projects: create, list, read, rename / change settings, delete.
+
+A project is JSON::
+
+    {"id": str, "name": str, "created": ISO 8601, "updated": ISO 8601,
+     "mesh": {"filename", "format", "n_vertices", "n_faces"} | null,
+     "landmarks": {"layout", "n_points"} | null,
+     "rig": {"method"} | null,
+     "revision": int,          # bumped whenever the mesh or the landmarks change
+     "settings": {...}}        # free-form JSON object kept for the browser
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Response, status
+from pydantic import BaseModel, Field
+
+from server.deps import ProjectDep, StoreDep
+
+router = APIRouter(prefix="/api/projects", tags=["projects"])
+
+_NAME = {"min_length": 1, "max_length": 200, "pattern": r"\S"}
+
+
+class ProjectCreate(BaseModel):
+    name: str = Field(**_NAME)
+    settings: dict[str, Any] = Field(default_factory=dict)
+
+
+class ProjectPatch(BaseModel):
+    name: str | None = Field(default=None, **_NAME)
+    settings: dict[str, Any] | None = Field(
+        default=None, description="merged into the stored settings; a key set to null is removed")
+
+
+@router.post("", status_code=status.HTTP_201_CREATED)
+def create_project(body: ProjectCreate, store: StoreDep) -> dict:
+    """Create an empty project."""
+    return store.create(body.name.strip(), body.settings)
+
+
+@router.get("")
+def list_projects(store: StoreDep) -> list[dict]:
+    """Every project, oldest first."""
+    return store.list()
+
+
+@router.get("/{project_id}")
+def get_project(project: ProjectDep) -> dict:
+    return project
+
+
+@router.patch("/{project_id}")
+def patch_project(project: ProjectDep, body: ProjectPatch, store: StoreDep) -> dict:
+    """Rename the project and/or merge `settings` into its settings."""
+    name = None if body.name is None else body.name.strip()
+    return store.update(project["id"], name=name, settings=body.settings)
+
+
+@router.delete("/{project_id}", status_code=status.HTTP_204_NO_CONTENT)
+def delete_project(project: ProjectDep, store: StoreDep) -> Response:
+    """Delete the project and its files."""
+    store.delete(project["id"])
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

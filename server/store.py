@@ -1,0 +1,349 @@
+"""The project store: an SQLite index plus one folder of files per project.
+
+Layout on disk::
+
+    <data_dir>/index.sqlite            the index (WAL mode): one row per project
+    <data_dir>/projects/<id>/mesh.<ext> the upload's bytes exactly as uploaded
+    <data_dir>/projects/<id>/landmarks.json
+    <data_dir>/projects/<id>/rig.npz    `retarget.skin.SkinWeights.save`
+
+The index is the source of truth: a file counts only once its row says so. Every file
+is written atomically (a temporary file in the same folder, fsync, `os.replace`, fsync of
+the folder) and every index change is one SQLite transaction, so a crash mid-write leaves
+either the old or the new state, and a new `ProjectStore` on the same folder finds
+everything a previous one committed.
+
+Project ids come from `secrets.token_urlsafe(16)` and every id is matched against
+`ID_PATTERN` before it is joined to a path; uploaded file names never reach the
+filesystem (only an allow-listed extension does). The store holds no maths: it takes and
+gives bytes, JSON and `SkinWeights`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import shutil
+import sqlite3
+import tempfile
+import threading
+from datetime import datetime, timezone
+from pathlib import Path
+
+from retarget.skin import SkinWeights
+
+__all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig"]
+
+ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
+"""What `secrets.token_urlsafe(16)` returns: 22 URL-safe base64 characters."""
+
+MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf")
+"""File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads)."""
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS projects (
+    id            TEXT PRIMARY KEY,
+    name          TEXT NOT NULL,
+    created       TEXT NOT NULL,
+    updated       TEXT NOT NULL,
+    mesh_filename TEXT,              -- as uploaded, for display only
+    mesh_format   TEXT,              -- one of MESH_EXTENSIONS, NULL = no mesh
+    n_vertices    INTEGER,
+    n_faces       INTEGER,
+    layout        TEXT,              -- landmark layout name ('' = none given)
+    n_landmarks   INTEGER,           -- NULL = no landmarks
+    rig_method    TEXT,              -- NULL = no rig
+    revision      INTEGER NOT NULL DEFAULT 0,  -- bumped when mesh or landmarks change
+    settings      TEXT NOT NULL DEFAULT '{}'
+);
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+"""
+
+
+class ProjectNotFound(LookupError):
+    """No project with this id (or the id is malformed); the message names the id."""
+
+    def __init__(self, project_id: str):
+        super().__init__(f"no project with id {project_id!r}")
+        self.project_id = project_id
+
+
+class StaleRig(RuntimeError):
+    """A rig was computed for a mesh or landmarks that have changed since."""
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+def write_atomic(path: Path, data: bytes | None = None, *, writer=None) -> None:
+    """Write `data` (or call ``writer(file)``) to `path` atomically.
+
+    A temporary file in the same folder is written, flushed and fsynced, then renamed
+    over `path` (`os.replace` is atomic on POSIX and Windows), then the folder is
+    fsynced so the rename itself survives a power cut.
+    """
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            if writer is not None:
+                writer(f)
+            else:
+                f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    _fsync_dir(path.parent)
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # folders cannot be opened on Windows
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+class ProjectStore:
+    """Projects on disk under `data_dir`; safe to share between threads.
+
+    Projects are returned as plain dicts (see `_project`), ready to serialise.
+    """
+
+    def __init__(self, data_dir: Path | str):
+        self.data_dir = Path(data_dir)
+        self.projects_dir = self.data_dir / "projects"
+        self.projects_dir.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.RLock()
+        self._db = sqlite3.connect(
+            self.data_dir / "index.sqlite", check_same_thread=False, isolation_level=None
+        )
+        self._db.row_factory = sqlite3.Row
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=FULL")
+        with self._transaction():
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    self._db.execute(statement)
+
+    # -- plumbing -----------------------------------------------------------------------
+
+    def _transaction(self):
+        store = self
+
+        class _Tx:
+            def __enter__(self):
+                store._lock.acquire()
+                store._db.execute("BEGIN IMMEDIATE")
+                return store._db
+
+            def __exit__(self, exc_type, exc, tb):
+                try:
+                    store._db.execute("ROLLBACK" if exc_type else "COMMIT")
+                finally:
+                    store._lock.release()
+                return False
+
+        return _Tx()
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def folder(self, project_id: str) -> Path:
+        """The project's folder; raises `ProjectNotFound` for a malformed id, before
+        the id touches any path."""
+        if not isinstance(project_id, str) or not ID_PATTERN.fullmatch(project_id):
+            raise ProjectNotFound(project_id)
+        return self.projects_dir / project_id
+
+    def _row(self, project_id: str) -> sqlite3.Row:
+        self.folder(project_id)  # validates
+        row = self._db.execute("SELECT * FROM projects WHERE id = ?", (project_id,)).fetchone()
+        if row is None:
+            raise ProjectNotFound(project_id)
+        return row
+
+    @staticmethod
+    def _project(row: sqlite3.Row) -> dict:
+        mesh = None
+        if row["mesh_format"] is not None:
+            mesh = {
+                "filename": row["mesh_filename"],
+                "format": row["mesh_format"],
+                "n_vertices": row["n_vertices"],
+                "n_faces": row["n_faces"],
+            }
+        landmarks = None
+        if row["n_landmarks"] is not None:
+            landmarks = {"layout": row["layout"], "n_points": row["n_landmarks"]}
+        return {
+            "id": row["id"],
+            "name": row["name"],
+            "created": row["created"],
+            "updated": row["updated"],
+            "mesh": mesh,
+            "landmarks": landmarks,
+            "rig": None if row["rig_method"] is None else {"method": row["rig_method"]},
+            "revision": row["revision"],
+            "settings": json.loads(row["settings"]),
+        }
+
+    # -- meta ---------------------------------------------------------------------------
+
+    def meta(self, key: str) -> str | None:
+        with self._lock:
+            row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else row["value"]
+
+    def set_meta(self, key: str, value: str) -> None:
+        with self._transaction() as db:
+            db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, value))
+
+    # -- projects -----------------------------------------------------------------------
+
+    def create(self, name: str, settings: dict | None = None) -> dict:
+        project_id = secrets.token_urlsafe(16)
+        folder = self.folder(project_id)
+        folder.mkdir(parents=True, exist_ok=False)
+        now = _now()
+        with self._transaction() as db:
+            db.execute(
+                "INSERT INTO projects (id, name, created, updated, settings) "
+                "VALUES (?, ?, ?, ?, ?)",
+                (project_id, name, now, now, json.dumps(settings or {})),
+            )
+        return self.get(project_id)
+
+    def list(self) -> list[dict]:
+        with self._lock:
+            rows = self._db.execute("SELECT * FROM projects ORDER BY created, id").fetchall()
+        return [self._project(r) for r in rows]
+
+    def get(self, project_id: str) -> dict:
+        with self._lock:
+            return self._project(self._row(project_id))
+
+    def update(self, project_id: str, *, name: str | None = None,
+               settings: dict | None = None) -> dict:
+        """Rename and/or shallow-merge `settings` (a key set to None is removed)."""
+        with self._transaction() as db:
+            row = self._row(project_id)
+            merged = json.loads(row["settings"])
+            for key, value in (settings or {}).items():
+                if value is None:
+                    merged.pop(key, None)
+                else:
+                    merged[key] = value
+            db.execute(
+                "UPDATE projects SET name = ?, settings = ?, updated = ? WHERE id = ?",
+                (row["name"] if name is None else name, json.dumps(merged), _now(),
+                 project_id),
+            )
+        return self.get(project_id)
+
+    def delete(self, project_id: str) -> None:
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            self._row(project_id)
+            db.execute("DELETE FROM projects WHERE id = ?", (project_id,))
+        # after the commit: a crash here leaves an orphan folder, never a dangling row
+        shutil.rmtree(folder, ignore_errors=True)
+
+    # -- mesh ---------------------------------------------------------------------------
+
+    def put_mesh(self, project_id: str, data: bytes, extension: str, *, filename: str,
+                 n_vertices: int, n_faces: int) -> dict:
+        """Store an (already validated) mesh upload; drops the landmarks and rig, whose
+        vertex indices referred to the previous mesh."""
+        if extension not in MESH_EXTENSIONS:
+            raise ValueError(f"extension {extension!r} is not one of {MESH_EXTENSIONS}")
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            old = self._row(project_id)
+            write_atomic(folder / f"mesh.{extension}", data)
+            db.execute(
+                "UPDATE projects SET mesh_filename = ?, mesh_format = ?, n_vertices = ?, "
+                "n_faces = ?, layout = NULL, n_landmarks = NULL, rig_method = NULL, "
+                "revision = revision + 1, updated = ? WHERE id = ?",
+                (filename[:255], extension, n_vertices, n_faces, _now(), project_id),
+            )
+        if old["mesh_format"] not in (None, extension):
+            (folder / f"mesh.{old['mesh_format']}").unlink(missing_ok=True)
+        for stale in ("landmarks.json", "rig.npz"):
+            (folder / stale).unlink(missing_ok=True)
+        return self.get(project_id)
+
+    def mesh_file(self, project_id: str) -> tuple[Path, str] | None:
+        """(path, extension) of the stored mesh, or None when there is none."""
+        with self._lock:
+            row = self._row(project_id)
+            if row["mesh_format"] is None:
+                return None
+            return self.folder(project_id) / f"mesh.{row['mesh_format']}", row["mesh_format"]
+
+    # -- landmarks ----------------------------------------------------------------------
+
+    def put_landmarks(self, project_id: str, landmarks: dict, *, n_points: int,
+                      layout: str, revision: int) -> dict:
+        """Store (already validated) landmarks JSON for the mesh of `revision`; drops
+        the rig. Raises `StaleRig` if the mesh changed since `revision`."""
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["revision"] != revision:
+                raise StaleRig("the mesh changed while the landmarks were checked; send them again")
+            write_atomic(folder / "landmarks.json", json.dumps(landmarks).encode())
+            db.execute(
+                "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
+                "revision = revision + 1, updated = ? WHERE id = ?",
+                (layout, n_points, _now(), project_id),
+            )
+        (folder / "rig.npz").unlink(missing_ok=True)
+        return self.get(project_id)
+
+    def landmarks(self, project_id: str) -> dict | None:
+        with self._lock:
+            row = self._row(project_id)
+            if row["n_landmarks"] is None:
+                return None
+            return json.loads((self.folder(project_id) / "landmarks.json").read_text())
+
+    # -- rig ----------------------------------------------------------------------------
+
+    def put_rig(self, project_id: str, weights: SkinWeights, *, revision: int) -> dict:
+        """Store a rig computed from the mesh and landmarks of `revision`; raises
+        `StaleRig` if either changed since."""
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["revision"] != revision:
+                raise StaleRig(
+                    "the mesh or landmarks changed while the rig was computed; start it again"
+                )
+            write_atomic(folder / "rig.npz", writer=weights.save)
+            db.execute(
+                "UPDATE projects SET rig_method = ?, updated = ? WHERE id = ?",
+                (weights.method, _now(), project_id),
+            )
+        return self.get(project_id)
+
+    def rig(self, project_id: str) -> SkinWeights | None:
+        with self._lock:
+            row = self._row(project_id)
+            if row["rig_method"] is None:
+                return None
+            return SkinWeights.load(self.folder(project_id) / "rig.npz")
