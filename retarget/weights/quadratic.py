@@ -37,8 +37,9 @@ def constrained_weights(energy: sp.spmatrix, points, constraint_weight: float,
 
     constraint_weight : w² relative to the median diagonal of Q (scale-free).
     supports : pairs (features (N,) bool, outside (V,) bool): those features' weights are
-        also held at zero on the `outside` vertices (one more factorisation per pair).
-        Features in no pair have no such limit.
+        held at exactly zero on the `outside` vertices, which are eliminated from their
+        system (one more, smaller factorisation per pair). Features in no pair have no
+        such limit.
     """
     q = sp.csc_matrix(energy)
     c = constraint_matrix(points, q.shape[0])
@@ -59,7 +60,8 @@ def constrained_weights(energy: sp.spmatrix, points, constraint_weight: float,
     for g, (cols, outside) in enumerate(groups):
         if len(cols) == 0:
             continue
-        ag = a if outside is None else (a + sp.diags(w2 * outside.astype(np.float64))).tocsc()
+        keep = np.ones(a.shape[0], dtype=bool) if outside is None else ~outside
+        ag = a if outside is None else a[keep][:, keep].tocsc()
         try:
             # The system is symmetric positive definite: a symmetric ordering and
             # diagonal pivots make SuperLU some thirty times faster than its default.
@@ -67,7 +69,7 @@ def constrained_weights(energy: sp.spmatrix, points, constraint_weight: float,
                       options={"SymmetricMode": True})
         except RuntimeError as exc:
             raise RetargetError(f"the deformation system could not be factorised ({exc})") from exc
-        out[:, cols] = lu.solve(rhs[:, cols])
+        out[np.ix_(keep, cols)] = lu.solve(rhs[np.ix_(keep, cols)])
         if progress is not None:
             progress((g + 1) / len(groups))
     if not np.isfinite(out).all():
