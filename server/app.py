@@ -18,7 +18,8 @@ from retarget import __version__
 from retarget.errors import RetargetError
 from server.deps import Limits
 from server.jobs import JobRegistry
-from server.routers import landmarks, meshes, projects, rigs
+from server.hub import StreamHub
+from server.routers import landmarks, meshes, projects, rigs, stream
 from server.sample import ensure_sample_project
 from server.store import ProjectNotFound, ProjectStore, StaleRig
 
@@ -42,6 +43,10 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
                   "meshes, landmarks and rigs.")
     app.state.store = ProjectStore(data_dir)
     app.state.jobs = JobRegistry()
+    app.state.hub = StreamHub()
+    app.state.sources = {}       # project id -> running source
+    app.state.source_tasks = {}  # project id -> its asyncio task
+    app.state.masks = {}         # project id -> active regions (partial retargeting)
     app.state.limits = Limits(max_upload_bytes=int(max_upload_bytes),
                               max_vertices=int(max_vertices))
     if sample:
@@ -59,6 +64,6 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     async def _stale(request: Request, exc: StaleRig) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status.HTTP_409_CONFLICT)
 
-    for module in (projects, meshes, landmarks, rigs):
+    for module in (projects, meshes, landmarks, rigs, stream):
         app.include_router(module.router)
     return app

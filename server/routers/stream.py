@@ -1,0 +1,140 @@
+"""The live stream: ``WS /api/projects/{id}/stream``.
+
+On connect the server sends a JSON hello ``{"type": "hello", "project", "n_points",
+"layout", "fps"}``, then binary frames (`server.stream_codec`) whenever the project's
+source publishes. Control messages are JSON text:
+
+- ``{"type": "start", "source": "demo", "fps": 60}``: start (or restart) the built-in demo
+  performance for the project (`server.sources.DemoSource`);
+- ``{"type": "stop"}``: stop it;
+- ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
+  regions, groups or points move (empty or null: all);
+- ``{"type": "ping", "t": <client time>}``: answered ``{"type": "pong", "t", "server_time"}``.
+
+A malformed control message is answered ``{"type": "error", "detail"}`` and the stream goes
+on. An unknown project, or one without landmarks, is closed with code 1008 and a reason.
+Each viewer runs a receiver and a sender coroutine; the sender always sends the newest
+frame of the viewer's one-slot mailbox (`server.hub`), so a slow viewer drops stale
+frames instead of queueing them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocketState
+
+from retarget.errors import RetargetError
+from retarget.landmarks import landmarks_from_json
+from retarget.layouts import get_layout
+from retarget.mesh import load_mesh
+from server.hub import Mailbox
+from server.sources import DemoSource
+from server.store import ProjectNotFound
+
+router = APIRouter(tags=["stream"])
+POLICY_VIOLATION = 1008
+
+
+@router.websocket("/api/projects/{project_id}/stream")
+async def stream(websocket: WebSocket, project_id: str) -> None:
+    state = websocket.app.state
+    await websocket.accept()
+    try:
+        project = state.store.get(project_id)
+        target_points, layout = await asyncio.to_thread(_target_points, state.store, project)
+    except (ProjectNotFound, RetargetError) as exc:
+        await websocket.close(code=POLICY_VIOLATION, reason=str(exc)[:120])
+        return
+    source = state.sources.get(project_id)
+    await websocket.send_json({"type": "hello", "project": project_id, "n_points": len(target_points),
+                               "layout": layout, "fps": source.fps if source else None})
+    box = state.hub.subscribe(project_id)
+    sender = asyncio.create_task(_send_frames(websocket, box))
+    try:
+        await _receive_controls(websocket, state, project_id, target_points, layout)
+    finally:
+        sender.cancel()
+        state.hub.unsubscribe(project_id, box)
+
+
+def _target_points(store, project: dict):
+    """(N, 3) landmark positions on the project's mesh and the layout name."""
+    landmarks = store.landmarks(project["id"])
+    found = store.mesh_file(project["id"])
+    if landmarks is None or found is None:
+        raise RetargetError(f"project {project['id']!r} has no landmarks yet: place them before streaming")
+    path, ext = found
+    mesh = load_mesh(path.read_bytes(), ext)
+    points = landmarks_from_json(landmarks, mesh.vertices, mesh.faces)
+    return points.positions(mesh.vertices), landmarks.get("layout") or ""
+
+
+async def _send_frames(websocket: WebSocket, box: Mailbox) -> None:
+    try:
+        while True:
+            await websocket.send_bytes(await box.take())
+    except (WebSocketDisconnect, RuntimeError):
+        return  # the receiver sees the disconnect and cleans up
+
+
+async def _receive_controls(websocket, state, project_id, target_points, layout) -> None:
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
+        try:
+            reply = await _control(message.get("text"), state, project_id, target_points, layout)
+        except (ValueError, RetargetError) as exc:
+            reply = {"type": "error", "detail": str(exc)}
+        if reply is not None and websocket.client_state == WebSocketState.CONNECTED:
+            await websocket.send_json(reply)
+
+
+async def _control(text, state, project_id, target_points, layout) -> dict | None:
+    if text is None:
+        raise ValueError("control messages are JSON text; binary messages are not accepted")
+    try:
+        msg = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"control message is not JSON: {exc}") from exc
+    if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
+        raise ValueError('control message must be an object with a "type"')
+    kind = msg["type"]
+    if kind == "ping":
+        return {"type": "pong", "t": msg.get("t"), "server_time": time.time()}
+    if kind == "start":
+        if msg.get("source", "demo") != "demo":
+            raise ValueError(f"unknown source {msg.get('source')!r}; available: 'demo'")
+        fps = float(msg.get("fps", 60))
+        source = await asyncio.to_thread(DemoSource, target_points, layout, fps)
+        source.set_regions(state.masks.get(project_id))
+        _stop(state, project_id)
+        state.sources[project_id] = source
+        state.source_tasks[project_id] = asyncio.create_task(source.run(state.hub, project_id))
+        return {"type": "started", "source": "demo", "fps": fps}
+    if kind == "stop":
+        _stop(state, project_id)
+        return {"type": "stopped"}
+    if kind == "mask":
+        regions = msg.get("regions") or None
+        if regions is not None and not (isinstance(regions, list) and all(isinstance(r, str) for r in regions)):
+            raise ValueError('"regions" must be a list of region, group or point names')
+        if regions is not None:
+            get_layout(layout or "ibug68").region_mask(regions)  # RetargetError for unknown names
+        source = state.sources.get(project_id)
+        if source is not None:
+            source.set_regions(regions)
+        state.masks[project_id] = regions
+        return {"type": "mask", "regions": regions}
+    raise ValueError(f"unknown control message type {kind!r}")
+
+
+def _stop(state, project_id: str) -> None:
+    task = state.source_tasks.pop(project_id, None)
+    if task is not None:
+        task.cancel()
+    state.sources.pop(project_id, None)

@@ -1,0 +1,113 @@
+"""The live stream over a real WebSocket (in-process): hello, demo frames, masks, errors."""
+
+import asyncio
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from retarget.layouts import get_layout
+from server.app import create_app
+from server.hub import StreamHub
+from server.stream_codec import decode_frame
+
+
+@pytest.fixture(scope="module")
+def app(tmp_path_factory):
+    return create_app(tmp_path_factory.mktemp("data"))  # with the built-in sample project
+
+
+@pytest.fixture(scope="module")
+def sample_id(app):
+    with TestClient(app) as client:
+        return next(p["id"] for p in client.get("/api/projects").json() if p["landmarks"])
+
+
+def frames(ws, n: int):
+    """The next n binary frames, skipping JSON replies."""
+    out = []
+    while len(out) < n:
+        message = ws.receive()
+        if message.get("bytes") is not None:
+            out.append(decode_frame(message["bytes"]))
+    return out
+
+
+def test_hello_then_demo_frames_arrive_and_move(app, sample_id):
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        hello = ws.receive_json()
+        assert hello == {"type": "hello", "project": sample_id, "n_points": 68, "layout": "ibug68", "fps": None}
+        ws.send_json({"type": "start", "source": "demo", "fps": 120})
+        got = frames(ws, 12)
+        assert all(f.displacements.shape == (68, 3) and np.isfinite(f.displacements).all() for f in got)
+        indices = [f.frame_index for f in got]
+        assert indices == sorted(indices) and len(set(indices)) == len(indices)
+        assert max(np.abs(f.displacements).max() for f in got) > 1e-3
+        ws.send_json({"type": "stop"})
+
+
+def test_mask_leaves_other_regions_at_rest(app, sample_id):
+    brows = get_layout("ibug68").region_mask("brows")
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "start", "fps": 120})
+        frames(ws, 2)
+        ws.send_json({"type": "mask", "regions": ["brows"]})
+        later = frames(ws, 30)[-20:]  # a frame or two may predate the mask
+        assert all(np.all(f.displacements[~brows] == 0.0) for f in later)
+        assert max(np.abs(f.displacements[brows]).max() for f in later) > 0.0
+        ws.send_json({"type": "mask", "regions": None})
+        ws.send_json({"type": "stop"})
+
+
+def test_two_viewers_both_receive(app, sample_id):
+    with TestClient(app) as client:
+        with client.websocket_connect(f"/api/projects/{sample_id}/stream") as a, \
+                client.websocket_connect(f"/api/projects/{sample_id}/stream") as b:
+            a.receive_json()
+            b.receive_json()
+            a.send_json({"type": "start", "fps": 120})
+            assert len(frames(a, 5)) == 5 and len(frames(b, 5)) == 5
+            a.send_json({"type": "stop"})
+
+
+def test_bad_control_messages_get_an_error_and_the_stream_goes_on(app, sample_id):
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        replies = []
+        for bad in ("not json", '{"no": "type"}', '{"type": "dance"}', '{"type": "mask", "regions": ["lips"]}',
+                    '{"type": "start", "source": "webcam"}'):
+            ws.send_text(bad)
+            replies.append(ws.receive_json())
+        assert [r["type"] for r in replies] == ["error"] * 5
+        assert "not JSON" in replies[0]["detail"] and "'dance'" in replies[2]["detail"]
+        assert "'lips'" in replies[3]["detail"] and "'webcam'" in replies[4]["detail"]
+        ws.send_json({"type": "ping", "t": 1.5})
+        pong = ws.receive_json()
+        assert pong["type"] == "pong" and pong["t"] == 1.5 and pong["server_time"] > 0
+
+
+def test_unknown_project_and_project_without_landmarks_are_closed_with_1008(app):
+    with TestClient(app) as client:
+        bare = client.post("/api/projects", json={"name": "no landmarks"}).json()["id"]
+        for pid, reason in (("A" * 22, "no project"), (bare, "no landmarks")):
+            with client.websocket_connect(f"/api/projects/{pid}/stream") as ws:
+                with pytest.raises(WebSocketDisconnect) as closed:
+                    ws.receive_json()
+                assert closed.value.code == 1008 and reason in closed.value.reason
+
+
+def test_a_slow_viewer_holds_only_the_newest_frame():
+    async def scenario():
+        hub = StreamHub()
+        box = hub.subscribe("p")
+        for i in range(100):  # a publisher far faster than the viewer
+            hub.publish("p", bytes([i]))
+            assert box.backlog <= 1
+        newest = await box.take()
+        hub.unsubscribe("p", box)
+        return newest, box.dropped, hub.viewer_count("p")
+
+    newest, dropped, left = asyncio.run(scenario())
+    assert newest == bytes([99]) and dropped == 99 and left == 0
