@@ -43,10 +43,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
                   "meshes, landmarks and rigs.")
     app.state.store = ProjectStore(data_dir)
     app.state.jobs = JobRegistry()
-    app.state.hub = StreamHub()
-    app.state.sources = {}       # project id -> running source
-    app.state.source_tasks = {}  # project id -> its asyncio task
-    app.state.masks = {}         # project id -> active regions (partial retargeting)
+    app.state.hub = StreamHub()  # live streams: viewers, sources, regions per project
     app.state.limits = Limits(max_upload_bytes=int(max_upload_bytes),
                               max_vertices=int(max_vertices))
     if sample:

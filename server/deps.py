@@ -10,14 +10,16 @@ from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
+from starlette.requests import HTTPConnection
 
 from retarget.mesh import Mesh, load_mesh
 
+from server.hub import StreamHub
 from server.jobs import JobRegistry
 from server.store import ProjectStore
 
-__all__ = ["JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep",
-           "get_jobs", "get_limits", "get_store"]
+__all__ = ["HubDep", "JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep",
+           "get_hub", "get_jobs", "get_limits", "get_store"]
 
 
 @dataclass(frozen=True)
@@ -40,9 +42,15 @@ def get_limits(request: Request) -> Limits:
     return request.app.state.limits
 
 
+def get_hub(connection: HTTPConnection) -> StreamHub:
+    """The app's `StreamHub`; takes an `HTTPConnection` so WebSocket routes can use it."""
+    return connection.app.state.hub
+
+
 StoreDep = Annotated[ProjectStore, Depends(get_store)]
 JobsDep = Annotated[JobRegistry, Depends(get_jobs)]
 LimitsDep = Annotated[Limits, Depends(get_limits)]
+HubDep = Annotated[StreamHub, Depends(get_hub)]
 ProjectIdDep = Annotated[str, Path(description="Project id (22 URL-safe characters)")]
 
 

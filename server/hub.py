@@ -2,17 +2,29 @@
 
 A slow viewer never slows the source or grows a queue: publishing overwrites whatever
 frame the viewer has not taken yet (counted as dropped), and the viewer's sender always
-sends the newest frame there is. Everything runs on the server's event loop.
+sends the newest frame there is. The hub also owns each project's running source (an
+asyncio task) and its partial-retargeting regions, so every viewer of a project sees the
+same performance; the source stops when the last viewer leaves. Everything runs on the
+server's event loop; the hub holds no maths.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections import defaultdict
+
+__all__ = ["Mailbox", "StreamHub"]
+
+log = logging.getLogger(__name__)
 
 
 class Mailbox:
-    """Holds at most one frame: the newest published and not yet taken."""
+    """Holds at most one frame: the newest published and not yet taken.
+
+    delivered, dropped : frames taken by the viewer, and frames overwritten before it
+        took them (for the latency and drop figures).
+    """
 
     def __init__(self):
         self._frame: bytes | None = None
@@ -36,14 +48,24 @@ class Mailbox:
 
     @property
     def backlog(self) -> int:
+        """Frames waiting: 0 or 1, never more."""
         return int(self._frame is not None)
 
 
 class StreamHub:
-    """Viewers' mailboxes per project id."""
+    """Per project id: the viewers' mailboxes, the running source and its regions.
+
+    A source is any object with ``fps``, ``set_regions(regions)`` and
+    ``async run(hub, project_id)`` that publishes encoded frames (`server.sources`).
+    """
 
     def __init__(self):
         self._viewers: dict[str, set[Mailbox]] = defaultdict(set)
+        self._sources: dict[str, object] = {}
+        self._tasks: dict[str, asyncio.Task] = {}
+        self._regions: dict[str, list[str] | None] = {}
+
+    # -- viewers ------------------------------------------------------------------------
 
     def subscribe(self, project_id: str) -> Mailbox:
         box = Mailbox()
@@ -51,9 +73,12 @@ class StreamHub:
         return box
 
     def unsubscribe(self, project_id: str, box: Mailbox) -> None:
+        """Forget the viewer's mailbox; the last viewer leaving stops the source."""
         self._viewers[project_id].discard(box)
         if not self._viewers[project_id]:
             del self._viewers[project_id]
+            self.stop_source(project_id)
+            self._regions.pop(project_id, None)
 
     def viewer_count(self, project_id: str) -> int:
         return len(self._viewers.get(project_id, ()))
@@ -61,3 +86,43 @@ class StreamHub:
     def publish(self, project_id: str, frame: bytes) -> None:
         for box in self._viewers.get(project_id, ()):
             box.put(frame)
+
+    # -- sources ------------------------------------------------------------------------
+
+    def source(self, project_id: str):
+        """The project's running source, or None."""
+        return self._sources.get(project_id)
+
+    def start_source(self, project_id: str, source) -> None:
+        """Run `source` for the project (replacing a running one) with its regions."""
+        self.stop_source(project_id)
+        source.set_regions(self._regions.get(project_id))
+        task = asyncio.get_running_loop().create_task(source.run(self, project_id))
+        self._sources[project_id], self._tasks[project_id] = source, task
+        task.add_done_callback(lambda t: self._finished(project_id, t))
+
+    def stop_source(self, project_id: str) -> bool:
+        """Stop the project's source; False when none was running."""
+        task = self._tasks.pop(project_id, None)
+        self._sources.pop(project_id, None)
+        if task is None:
+            return False
+        task.cancel()
+        return True
+
+    def regions(self, project_id: str) -> list[str] | None:
+        return self._regions.get(project_id)
+
+    def set_regions(self, project_id: str, regions: list[str] | None) -> None:
+        """Partial retargeting for the project's current and later sources (None: all)."""
+        source = self._sources.get(project_id)
+        if source is not None:
+            source.set_regions(regions)  # refuses unknown names before anything changes
+        self._regions[project_id] = regions
+
+    def _finished(self, project_id: str, task: asyncio.Task) -> None:
+        if self._tasks.get(project_id) is task:  # ended by itself, not replaced
+            self._tasks.pop(project_id)
+            self._sources.pop(project_id, None)
+        if not task.cancelled() and task.exception() is not None:
+            log.error("stream source of project %s failed", project_id, exc_info=task.exception())

@@ -1,6 +1,8 @@
 """The live stream over a real WebSocket (in-process): hello, demo frames, masks, errors."""
 
 import asyncio
+import json
+import time
 
 import numpy as np
 import pytest
@@ -111,3 +113,72 @@ def test_a_slow_viewer_holds_only_the_newest_frame():
 
     newest, dropped, left = asyncio.run(scenario())
     assert newest == bytes([99]) and dropped == 99 and left == 0
+
+
+def replies(ws, n: int):
+    """The next n JSON replies, skipping binary frames."""
+    out = []
+    while len(out) < n:
+        message = ws.receive()
+        if message.get("text") is not None:
+            out.append(json.loads(message["text"]))
+    return out
+
+
+def test_bad_fps_mid_stream_is_an_error_and_frames_keep_coming(app, sample_id):
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "start", "fps": 120})
+        assert replies(ws, 1) == [{"type": "started", "source": "demo", "fps": 120.0}]
+        before = frames(ws, 2)[-1].frame_index
+        for fps in (None, "fast", [60], 0, 1e6):
+            ws.send_json({"type": "start", "fps": fps})
+            reply = replies(ws, 1)[0]
+            assert reply["type"] == "error" and "fps" in reply["detail"]
+        assert frames(ws, 3)[-1].frame_index > before  # the running source was not replaced
+        ws.send_json({"type": "stop"})
+
+
+def test_the_last_viewer_leaving_stops_the_source(app, sample_id):
+    hub = app.state.hub
+    with TestClient(app) as client:
+        with client.websocket_connect(f"/api/projects/{sample_id}/stream") as a, \
+                client.websocket_connect(f"/api/projects/{sample_id}/stream") as b:
+            a.receive_json()
+            b.receive_json()
+            a.send_json({"type": "start", "fps": 120})
+            frames(a, 2)
+        with client.websocket_connect(f"/api/projects/{sample_id}/stream") as c:
+            assert c.receive_json()["fps"] is None  # the departed viewers' source is gone
+        deadline = time.monotonic() + 5.0
+        while hub.viewer_count(sample_id) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert hub.viewer_count(sample_id) == 0 and hub.source(sample_id) is None
+
+
+def test_a_slow_concurrent_viewer_gets_the_newest_frame_and_never_a_backlog():
+    async def scenario():
+        hub = StreamHub()
+        box = hub.subscribe("p")
+        backlogs, received = [], []
+
+        async def publisher():
+            for i in range(60):
+                hub.publish("p", i.to_bytes(4, "little"))
+                backlogs.append(box.backlog)
+                await asyncio.sleep(0.001)
+
+        async def viewer():
+            while not received or received[-1] != 59:
+                received.append(int.from_bytes(await box.take(), "little"))
+                await asyncio.sleep(0.01)  # ten times slower than the publisher
+
+        async with asyncio.TaskGroup() as group:
+            group.create_task(publisher())
+            group.create_task(viewer())
+        return hub, box, backlogs, received
+
+    hub, box, backlogs, received = asyncio.run(scenario())
+    assert max(backlogs) == 1 and received[-1] == 59
+    assert received == sorted(set(received)) and len(received) < 30
+    assert box.dropped == 60 - len(received) and box.delivered == len(received)

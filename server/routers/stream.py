@@ -13,9 +13,10 @@ source publishes. Control messages are JSON text:
 
 A malformed control message is answered ``{"type": "error", "detail"}`` and the stream goes
 on. An unknown project, or one without landmarks, is closed with code 1008 and a reason.
-Each viewer runs a receiver and a sender coroutine; the sender always sends the newest
-frame of the viewer's one-slot mailbox (`server.hub`), so a slow viewer drops stale
-frames instead of queueing them.
+Each viewer runs a receiver and a sender coroutine in one task group; the sender always
+sends the newest frame of the viewer's one-slot mailbox (`server.hub`), so a slow viewer
+drops stale frames instead of queueing them. The source, its fps and its regions belong
+to the project, shared by all its viewers; the last viewer leaving stops the source.
 """
 
 from __future__ import annotations
@@ -31,34 +32,39 @@ from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.mesh import load_mesh
-from server.hub import Mailbox
+from server.deps import HubDep
+from server.hub import Mailbox, StreamHub
 from server.sources import DemoSource
 from server.store import ProjectNotFound
 
 router = APIRouter(tags=["stream"])
 POLICY_VIOLATION = 1008
+DEFAULT_FPS = 60.0
 
 
 @router.websocket("/api/projects/{project_id}/stream")
-async def stream(websocket: WebSocket, project_id: str) -> None:
-    state = websocket.app.state
+async def stream(websocket: WebSocket, project_id: str, hub: HubDep) -> None:
+    # `server.deps.get_store` takes a Request, which a WebSocket is not
+    store = websocket.app.state.store
     await websocket.accept()
     try:
-        project = state.store.get(project_id)
-        target_points, layout = await asyncio.to_thread(_target_points, state.store, project)
+        project = store.get(project_id)
+        target_points, layout = await asyncio.to_thread(_target_points, store, project)
     except (ProjectNotFound, RetargetError) as exc:
         await websocket.close(code=POLICY_VIOLATION, reason=str(exc)[:120])
         return
-    source = state.sources.get(project_id)
+    source = hub.source(project_id)
     await websocket.send_json({"type": "hello", "project": project_id, "n_points": len(target_points),
                                "layout": layout, "fps": source.fps if source else None})
-    box = state.hub.subscribe(project_id)
-    sender = asyncio.create_task(_send_frames(websocket, box))
+    box = hub.subscribe(project_id)
+    sending = asyncio.Lock()  # the two coroutines share one socket
     try:
-        await _receive_controls(websocket, state, project_id, target_points, layout)
+        async with asyncio.TaskGroup() as group:
+            sender = group.create_task(_send_frames(websocket, box, sending))
+            group.create_task(_receive_controls(websocket, sending, hub, project_id, target_points,
+                                                layout, on_disconnect=sender.cancel))
     finally:
-        sender.cancel()
-        state.hub.unsubscribe(project_id, box)
+        hub.unsubscribe(project_id, box)
 
 
 def _target_points(store, project: dict):
@@ -73,28 +79,33 @@ def _target_points(store, project: dict):
     return points.positions(mesh.vertices), landmarks.get("layout") or ""
 
 
-async def _send_frames(websocket: WebSocket, box: Mailbox) -> None:
+async def _send_frames(websocket: WebSocket, box: Mailbox, sending: asyncio.Lock) -> None:
     try:
         while True:
-            await websocket.send_bytes(await box.take())
+            frame = await box.take()
+            async with sending:
+                await websocket.send_bytes(frame)
     except (WebSocketDisconnect, RuntimeError):
-        return  # the receiver sees the disconnect and cleans up
+        return  # the receiver sees the disconnect and ends the task group
 
 
-async def _receive_controls(websocket, state, project_id, target_points, layout) -> None:
+async def _receive_controls(websocket, sending, hub, project_id, target_points, layout, *,
+                            on_disconnect) -> None:
     while True:
         message = await websocket.receive()
         if message["type"] == "websocket.disconnect":
+            on_disconnect()
             return
         try:
-            reply = await _control(message.get("text"), state, project_id, target_points, layout)
+            reply = await _control(message.get("text"), hub, project_id, target_points, layout)
         except (ValueError, RetargetError) as exc:
             reply = {"type": "error", "detail": str(exc)}
         if reply is not None and websocket.client_state == WebSocketState.CONNECTED:
-            await websocket.send_json(reply)
+            async with sending:
+                await websocket.send_json(reply)
 
 
-async def _control(text, state, project_id, target_points, layout) -> dict | None:
+async def _control(text, hub: StreamHub, project_id, target_points, layout) -> dict | None:
     if text is None:
         raise ValueError("control messages are JSON text; binary messages are not accepted")
     try:
@@ -109,15 +120,14 @@ async def _control(text, state, project_id, target_points, layout) -> dict | Non
     if kind == "start":
         if msg.get("source", "demo") != "demo":
             raise ValueError(f"unknown source {msg.get('source')!r}; available: 'demo'")
-        fps = float(msg.get("fps", 60))
-        source = await asyncio.to_thread(DemoSource, target_points, layout, fps)
-        source.set_regions(state.masks.get(project_id))
-        _stop(state, project_id)
-        state.sources[project_id] = source
-        state.source_tasks[project_id] = asyncio.create_task(source.run(state.hub, project_id))
-        return {"type": "started", "source": "demo", "fps": fps}
+        fps = msg.get("fps", DEFAULT_FPS)
+        if isinstance(fps, bool) or not isinstance(fps, (int, float)):
+            raise ValueError(f'"fps" must be a number of frames per second; got {fps!r}')
+        source = await asyncio.to_thread(DemoSource, target_points, layout, float(fps))
+        hub.start_source(project_id, source)
+        return {"type": "started", "source": "demo", "fps": source.fps}
     if kind == "stop":
-        _stop(state, project_id)
+        hub.stop_source(project_id)
         return {"type": "stopped"}
     if kind == "mask":
         regions = msg.get("regions") or None
@@ -125,16 +135,6 @@ async def _control(text, state, project_id, target_points, layout) -> dict | Non
             raise ValueError('"regions" must be a list of region, group or point names')
         if regions is not None:
             get_layout(layout or "ibug68").region_mask(regions)  # RetargetError for unknown names
-        source = state.sources.get(project_id)
-        if source is not None:
-            source.set_regions(regions)
-        state.masks[project_id] = regions
+        hub.set_regions(project_id, regions)
         return {"type": "mask", "regions": regions}
     raise ValueError(f"unknown control message type {kind!r}")
-
-
-def _stop(state, project_id: str) -> None:
-    task = state.source_tasks.pop(project_id, None)
-    if task is not None:
-        task.cancel()
-    state.sources.pop(project_id, None)
