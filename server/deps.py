@@ -9,10 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Path, Request, status
+from fastapi import Depends, HTTPException, Path, status
 from starlette.requests import HTTPConnection
 
-from retarget.mesh import Mesh, load_mesh
+from retarget.mesh import Mesh
 
 from server.hub import StreamHub
 from server.jobs import JobRegistry
@@ -30,20 +30,21 @@ class Limits:
     max_vertices: int
 
 
-def get_store(request: Request) -> ProjectStore:
-    return request.app.state.store
+# The getters take an HTTPConnection so HTTP and WebSocket routes share them (and tests'
+# dependency_overrides reach both).
+def get_store(connection: HTTPConnection) -> ProjectStore:
+    return connection.app.state.store
 
 
-def get_jobs(request: Request) -> JobRegistry:
-    return request.app.state.jobs
+def get_jobs(connection: HTTPConnection) -> JobRegistry:
+    return connection.app.state.jobs
 
 
-def get_limits(request: Request) -> Limits:
-    return request.app.state.limits
+def get_limits(connection: HTTPConnection) -> Limits:
+    return connection.app.state.limits
 
 
 def get_hub(connection: HTTPConnection) -> StreamHub:
-    """The app's `StreamHub`; takes an `HTTPConnection` so WebSocket routes can use it."""
     return connection.app.state.hub
 
 
@@ -66,16 +67,14 @@ ProjectDep = Annotated[dict, Depends(get_project)]
 def get_mesh(project: ProjectDep, store: StoreDep) -> Mesh:
     """The project's stored mesh, parsed by `retarget.mesh.load_mesh`; 409 when the
     project has none yet."""
-    found = store.mesh_file(project["id"])
-    if found is None:
+    mesh = store.mesh(project["id"])
+    if mesh is None:
         raise HTTPException(
             status.HTTP_409_CONFLICT,
             f"project {project['id']!r} has no mesh yet: upload one with "
             f"PUT /api/projects/{project['id']}/mesh",
         )
-    path, ext = found
-    # from bytes, like the upload was checked: no resolver, so nothing beside the file is read
-    return load_mesh(path.read_bytes(), ext)
+    return mesh
 
 
 MeshDep = Annotated[Mesh, Depends(get_mesh)]

@@ -32,6 +32,7 @@ import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
+from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 
 __all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig"]
@@ -294,6 +295,17 @@ class ProjectStore:
             if row["mesh_format"] is None:
                 return None
             return self.folder(project_id) / f"mesh.{row['mesh_format']}", row["mesh_format"]
+
+    def mesh(self, project_id: str) -> Mesh | None:
+        """The stored mesh parsed by `retarget.mesh.load_mesh`, or None when there is none.
+
+        Parsed from bytes, as the upload was checked: no resolver, so nothing beside the
+        file is read."""
+        found = self.mesh_file(project_id)
+        if found is None:
+            return None
+        path, ext = found
+        return load_mesh(path.read_bytes(), ext)
 
     # -- landmarks ----------------------------------------------------------------------
 

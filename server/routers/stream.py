@@ -31,8 +31,7 @@ from starlette.websockets import WebSocketState
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
-from retarget.mesh import load_mesh
-from server.deps import HubDep
+from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
 from server.sources import DemoSource
 from server.store import ProjectNotFound
@@ -43,9 +42,7 @@ DEFAULT_FPS = 60.0
 
 
 @router.websocket("/api/projects/{project_id}/stream")
-async def stream(websocket: WebSocket, project_id: str, hub: HubDep) -> None:
-    # `server.deps.get_store` takes a Request, which a WebSocket is not
-    store = websocket.app.state.store
+async def stream(websocket: WebSocket, project_id: str, store: StoreDep, hub: HubDep) -> None:
     await websocket.accept()
     try:
         project = store.get(project_id)
@@ -70,11 +67,9 @@ async def stream(websocket: WebSocket, project_id: str, hub: HubDep) -> None:
 def _target_points(store, project: dict):
     """(N, 3) landmark positions on the project's mesh and the layout name."""
     landmarks = store.landmarks(project["id"])
-    found = store.mesh_file(project["id"])
-    if landmarks is None or found is None:
+    mesh = store.mesh(project["id"])
+    if landmarks is None or mesh is None:
         raise RetargetError(f"project {project['id']!r} has no landmarks yet: place them before streaming")
-    path, ext = found
-    mesh = load_mesh(path.read_bytes(), ext)
     points = landmarks_from_json(landmarks, mesh.vertices, mesh.faces)
     return points.positions(mesh.vertices), landmarks.get("layout") or ""
 
