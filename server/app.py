@@ -19,9 +19,10 @@ from retarget.errors import RetargetError
 from server.deps import Limits
 from server.jobs import JobRegistry
 from server.hub import StreamHub
-from server.routers import landmarks, meshes, projects, rigs, stream
+from server.routers import landmarks, layouts, meshes, projects, rigs, stream
 from server.sample import ensure_sample_project
 from server.store import ProjectNotFound, ProjectStore, StaleRig
+from server.web import mount_web
 
 __all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "create_app"]
 
@@ -61,6 +62,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     async def _stale(request: Request, exc: StaleRig) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status.HTTP_409_CONFLICT)
 
-    for module in (projects, meshes, landmarks, rigs, stream):
+    for module in (projects, meshes, landmarks, rigs, stream, layouts):
         app.include_router(module.router)
+    mount_web(app)
     return app

@@ -1,0 +1,50 @@
+"""Feature-point layouts for the landmark picker: names, regions, sides, mirror partners
+and a reference position for each point (on the built-in sample face, cm, +y up, the
+face looking down +z), so the browser can show which point comes next."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from fastapi import APIRouter
+
+from retarget.layouts import GROUPS, LAYOUTS, REGIONS, get_layout
+from retarget.sample_face import sample_face
+
+router = APIRouter(prefix="/api/layouts", tags=["layouts"])
+
+
+@lru_cache(maxsize=1)
+def _reference68() -> list[list[float]]:
+    face = sample_face(1)
+    return face.vertices[face.landmarks68].round(3).tolist()
+
+
+def _layout_json(name: str) -> dict:
+    layout = get_layout(name)
+    reference = _reference68()
+    return {
+        "name": layout.name,
+        "description": layout.description,
+        "n_points": layout.n_points,
+        "points": [
+            {"name": point, "region": region, "side": side, "mirror": mirror,
+             "reference": reference[i68]}
+            for point, region, side, mirror, i68 in zip(
+                layout.point_names, layout.regions, layout.sides, layout.mirror, layout.ibug68)
+        ],
+        "regions": list(REGIONS),
+        "groups": {group: list(members) for group, members in GROUPS.items()},
+    }
+
+
+@router.get("")
+def list_layouts() -> list[dict]:
+    """Every built-in layout with its points."""
+    return [_layout_json(name) for name in LAYOUTS]
+
+
+@router.get("/{name}")
+def get_layout_json(name: str) -> dict:
+    """One layout; 422 naming the known ones for an unknown name."""
+    return _layout_json(name)

@@ -1,0 +1,47 @@
+"""The browser client's files: the page, its modules, the GLSL shaders and the npm
+packages installed by ``npm ci --prefix web`` (served from here, never from a CDN).
+
+    /                      web/static/index.html
+    /static/...            web/static/
+    /shaders/...           web/shaders/
+    /vendor/<package>/...  web/node_modules/<package>/  (only the packages in VENDORED)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.staticfiles import StaticFiles
+
+__all__ = ["VENDORED", "WEB_DIR", "mount_web"]
+
+WEB_DIR = Path(__file__).resolve().parent.parent / "web"
+VENDORED = ("three", "three-mesh-bvh")
+
+_MISSING = """<!doctype html><meta charset="utf-8"><title>retarget: front-end packages missing</title>
+<h1>The browser client's packages are not installed</h1>
+<p>{missing} not found under <code>{node_modules}</code>. Install them with
+<code>npm ci --prefix web</code> (the README's run command does this) and reload.</p>"""
+
+
+def mount_web(app: FastAPI, web_dir: Path = WEB_DIR) -> None:
+    """Serve the client from `web_dir`. When the npm packages are missing the page says
+    how to install them (HTTP 503) instead of failing on a blank screen."""
+    node_modules = web_dir / "node_modules"
+    missing = [name for name in VENDORED if not (node_modules / name / "package.json").is_file()]
+    index = web_dir / "static" / "index.html"
+
+    @app.get("/", include_in_schema=False, response_model=None)
+    def index_page() -> FileResponse | HTMLResponse:
+        if missing:
+            return HTMLResponse(_MISSING.format(missing=", ".join(missing), node_modules=node_modules),
+                                status_code=503)
+        return FileResponse(index, headers={"Cache-Control": "no-cache"})
+
+    app.mount("/static", StaticFiles(directory=web_dir / "static"), name="static")
+    app.mount("/shaders", StaticFiles(directory=web_dir / "shaders", check_dir=False), name="shaders")
+    for name in VENDORED:
+        if name not in missing:
+            app.mount(f"/vendor/{name}", StaticFiles(directory=node_modules / name), name=f"vendor-{name}")

@@ -1,0 +1,125 @@
+"""End-to-end fixtures: a real `retarget serve` on a free port and Debian's Chromium
+driven by Playwright, WebGL2 through SwiftShader.
+
+Screenshots of every e2e test are kept in ``test-artifacts/e2e/`` (the test's name),
+and browser console errors or uncaught page exceptions fail the test that caused them.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+from playwright.sync_api import sync_playwright
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "e2e"
+_STARTUP_S = 60.0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Server:
+    """One `retarget serve` process on 127.0.0.1; `restart()` keeps the data dir."""
+
+    data_dir: Path
+    port: int = field(default_factory=free_port)
+    process: subprocess.Popen | None = None
+    log: Path | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self) -> "Server":
+        self.log = self.data_dir.parent / f"server-{self.port}-{time.monotonic_ns()}.log"
+        with open(self.log, "wb") as out:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", "retarget.cli", "serve", "--port", str(self.port),
+                 "--data-dir", str(self.data_dir)],
+                stdout=out, stderr=subprocess.STDOUT, cwd=Path(__file__).resolve().parents[2])
+        deadline = time.monotonic() + _STARTUP_S
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"server exited with {self.process.returncode}:\n{self.log.read_text()}")
+            try:
+                with urllib.request.urlopen(self.url + "/api/projects", timeout=1) as reply:
+                    if reply.status == 200:
+                        return self
+            except OSError:
+                time.sleep(0.1)
+        raise RuntimeError(f"server did not answer within {_STARTUP_S} s:\n{self.log.read_text()}")
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(10)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self.process = None
+
+    def restart(self) -> "Server":
+        self.stop()
+        return self.start()
+
+
+@pytest.fixture
+def server(tmp_path):
+    """A real server on a free port with a fresh data dir (holding the sample project)."""
+    srv = Server(tmp_path / "data").start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="session")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser, request):
+    """A fresh page (1280 x 800). Console errors and page exceptions fail the test; a
+    screenshot is saved under test-artifacts/e2e/ whatever the outcome."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    pg = context.new_page()
+    errors: list[str] = []
+    pg.on("console", lambda msg: errors.append(f"console.{msg.type}: {msg.text}")
+          if msg.type == "error" and not _expected_error(msg.text) else None)
+    pg.on("pageerror", lambda exc: errors.append(f"page error: {exc}"))
+    pg.console_errors = errors
+    yield pg
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", request.node.name)
+    try:
+        pg.screenshot(path=str(ARTIFACTS / f"{name}.png"))
+    except Exception:  # a crashed page has no screenshot; the test already failed
+        pass
+    context.close()
+    assert not errors, "browser reported errors:\n" + "\n".join(errors)
+
+
+def _expected_error(text: str) -> bool:
+    """HTTP errors a test provokes on purpose (bad uploads) are logged by Chromium as
+    'Failed to load resource'; the UI's own handling of them is what tests check."""
+    return "Failed to load resource" in text

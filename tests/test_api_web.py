@@ -1,0 +1,65 @@
+"""The client's files and the layouts route, in-process."""
+
+import pytest
+from fastapi.testclient import TestClient
+
+from retarget.layouts import LAYOUTS, get_layout
+from server.app import create_app
+from server.web import VENDORED
+
+
+@pytest.fixture
+def client(tmp_path):
+    return TestClient(create_app(tmp_path, sample=False))
+
+
+def test_index_page_and_vendored_modules_are_served_locally(client):
+    page = client.get("/")
+    assert page.status_code == 200 and "<html" in page.text.lower()
+    assert "cdn" not in page.text.lower() and "https://" not in page.text
+    assert client.get("/vendor/three/build/three.module.js").status_code == 200
+    assert client.get("/vendor/three-mesh-bvh/src/index.js").status_code == 200
+    assert client.get("/static/js/StreamDecoder.js").status_code == 200
+
+
+def test_vendor_mounts_hold_only_the_listed_packages(client):
+    assert VENDORED == ("three", "three-mesh-bvh")
+    assert client.get("/vendor/gltf-validator/package.json").status_code == 404
+    assert client.get("/vendor/three/../../package.json").status_code == 404
+
+
+def test_missing_npm_packages_give_a_page_that_says_how_to_install(tmp_path):
+    from server.web import mount_web
+    from fastapi import FastAPI
+
+    web = tmp_path / "web"
+    (web / "static").mkdir(parents=True)
+    (web / "static" / "index.html").write_text("<html></html>")
+    app = FastAPI()
+    mount_web(app, web)
+    reply = TestClient(app).get("/")
+    assert reply.status_code == 503
+    assert "npm ci --prefix web" in reply.text and "three" in reply.text
+
+
+def test_layouts_list_every_layout_with_reference_positions(client):
+    layouts = client.get("/api/layouts").json()
+    assert [layout["name"] for layout in layouts] == list(LAYOUTS)
+    for layout in layouts:
+        lib = get_layout(layout["name"])
+        assert layout["n_points"] == lib.n_points == len(layout["points"])
+        assert [p["name"] for p in layout["points"]] == list(lib.point_names)
+        assert [p["mirror"] for p in layout["points"]] == list(lib.mirror)
+        for point in layout["points"]:
+            assert len(point["reference"]) == 3
+    ibug = next(layout for layout in layouts if layout["name"] == "ibug68")
+    # the reference face looks down +z with the subject's right at -x
+    right = [p["reference"][0] for p in ibug["points"] if p["side"] == "right"]
+    left = [p["reference"][0] for p in ibug["points"] if p["side"] == "left"]
+    assert max(right) < 0 < min(left)
+
+
+def test_unknown_layout_is_refused_with_the_known_names(client):
+    reply = client.get("/api/layouts/nope")
+    assert reply.status_code == 422
+    assert "ibug68" in reply.json()["detail"]
