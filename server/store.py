@@ -2,16 +2,19 @@
 
 Layout on disk::
 
-    <data_dir>/index.sqlite            the index (WAL mode): one row per project
-    <data_dir>/projects/<id>/mesh.<ext> the upload's bytes exactly as uploaded
-    <data_dir>/projects/<id>/landmarks.json
-    <data_dir>/projects/<id>/rig.npz    `retarget.skin.SkinWeights.save`
+    <data_dir>/index.sqlite                      the index (WAL mode): one row per project
+    <data_dir>/projects/<id>/mesh-r<R>.<ext>     the upload's bytes exactly as uploaded
+    <data_dir>/projects/<id>/landmarks-r<R>.json
+    <data_dir>/projects/<id>/rig-r<R>-<hex>.npz  `retarget.skin.SkinWeights.save`
 
-The index is the source of truth: a file counts only once its row says so. Every file
-is written atomically (a temporary file in the same folder, fsync, `os.replace`, fsync of
-the folder) and every index change is one SQLite transaction, so a crash mid-write leaves
-either the old or the new state, and a new `ProjectStore` on the same folder finds
-everything a previous one committed.
+R is the project revision the file was written for. The index is the source of truth:
+its row names the current file of each kind, and a file counts only once the row says
+so. A new file never overwrites the one in use: it is written atomically under a new
+name (a temporary file in the same folder, fsync, `os.replace`, fsync of the folder),
+then one SQLite transaction points the row at it, then the replaced files are deleted.
+A crash at any step leaves the old or the new state whole (never a new mesh with the
+old mesh's landmarks); files no row names are swept when the store opens, and a new
+`ProjectStore` on the same folder finds everything a previous one committed.
 
 Project ids come from `secrets.token_urlsafe(16)` and every id is matched against
 `ID_PATTERN` before it is joined to a path; uploaded file names never reach the
@@ -43,6 +46,10 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
 MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf")
 """File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads)."""
 
+_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file")
+_FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz|\.tmp-.*)")
+"""Names the store writes in a project folder (plus its temporary files)."""
+
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS projects (
     id            TEXT PRIMARY KEY,
@@ -57,7 +64,10 @@ CREATE TABLE IF NOT EXISTS projects (
     n_landmarks   INTEGER,           -- NULL = no landmarks
     rig_method    TEXT,              -- NULL = no rig
     revision      INTEGER NOT NULL DEFAULT 0,  -- bumped when mesh or landmarks change
-    settings      TEXT NOT NULL DEFAULT '{}'
+    settings      TEXT NOT NULL DEFAULT '{}',
+    mesh_file     TEXT,              -- current file names in the project folder
+    landmarks_file TEXT,
+    rig_file      TEXT
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 """
@@ -135,10 +145,46 @@ class ProjectStore:
         self._db.row_factory = sqlite3.Row
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=FULL")
-        with self._transaction():
+        with self._transaction() as db:
             for statement in _SCHEMA.split(";"):
                 if statement.strip():
-                    self._db.execute(statement)
+                    db.execute(statement)
+            self._upgrade(db)
+        self._sweep_all()
+
+    def _upgrade(self, db) -> None:
+        """Index files from before per-revision file names: their fixed names become the
+        row's file names."""
+        columns = {row["name"] for row in db.execute("PRAGMA table_info(projects)")}
+        for column in _FILE_COLUMNS:
+            if column not in columns:
+                db.execute(f"ALTER TABLE projects ADD COLUMN {column} TEXT")
+        db.execute("UPDATE projects SET mesh_file = 'mesh.' || mesh_format "
+                   "WHERE mesh_file IS NULL AND mesh_format IS NOT NULL")
+        db.execute("UPDATE projects SET landmarks_file = 'landmarks.json' "
+                   "WHERE landmarks_file IS NULL AND n_landmarks IS NOT NULL")
+        db.execute("UPDATE projects SET rig_file = 'rig.npz' "
+                   "WHERE rig_file IS NULL AND rig_method IS NOT NULL")
+
+    def _sweep(self, project_id: str, row: sqlite3.Row | None = None) -> None:
+        """Delete the store's files in the project's folder that its row does not name:
+        files replaced by the last commit, or left by a crash before a commit."""
+        folder = self.folder(project_id)
+        with self._lock:
+            row = row if row is not None else self._db.execute(
+                "SELECT * FROM projects WHERE id = ?", (project_id,)).fetchone()
+            if row is None:
+                return
+            keep = {row[column] for column in _FILE_COLUMNS}
+            for path in folder.iterdir() if folder.is_dir() else ():
+                if path.is_file() and path.name not in keep and _FILE_PATTERN.fullmatch(path.name):
+                    path.unlink(missing_ok=True)
+
+    def _sweep_all(self) -> None:
+        with self._lock:
+            ids = [row["id"] for row in self._db.execute("SELECT id FROM projects")]
+        for project_id in ids:
+            self._sweep(project_id)
 
     # -- plumbing -----------------------------------------------------------------------
 
@@ -275,17 +321,16 @@ class ProjectStore:
         folder = self.folder(project_id)
         with self._transaction() as db:
             old = self._row(project_id)
-            write_atomic(folder / f"mesh.{extension}", data)
+            name = f"mesh-r{old['revision'] + 1}.{extension}"
+            write_atomic(folder / name, data)
             db.execute(
                 "UPDATE projects SET mesh_filename = ?, mesh_format = ?, n_vertices = ?, "
                 "n_faces = ?, layout = NULL, n_landmarks = NULL, rig_method = NULL, "
+                "mesh_file = ?, landmarks_file = NULL, rig_file = NULL, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
-                (filename[:255], extension, n_vertices, n_faces, _now(), project_id),
+                (filename[:255], extension, n_vertices, n_faces, name, _now(), project_id),
             )
-        if old["mesh_format"] not in (None, extension):
-            (folder / f"mesh.{old['mesh_format']}").unlink(missing_ok=True)
-        for stale in ("landmarks.json", "rig.npz"):
-            (folder / stale).unlink(missing_ok=True)
+        self._sweep(project_id)
         return self.get(project_id)
 
     def mesh_file(self, project_id: str) -> tuple[Path, str] | None:
@@ -294,18 +339,20 @@ class ProjectStore:
             row = self._row(project_id)
             if row["mesh_format"] is None:
                 return None
-            return self.folder(project_id) / f"mesh.{row['mesh_format']}", row["mesh_format"]
+            return self.folder(project_id) / row["mesh_file"], row["mesh_format"]
 
     def mesh(self, project_id: str) -> Mesh | None:
         """The stored mesh parsed by `retarget.mesh.load_mesh`, or None when there is none.
 
         Parsed from bytes, as the upload was checked: no resolver, so nothing beside the
         file is read."""
-        found = self.mesh_file(project_id)
-        if found is None:
-            return None
-        path, ext = found
-        return load_mesh(path.read_bytes(), ext)
+        with self._lock:  # a replacing upload deletes the old file after its commit
+            found = self.mesh_file(project_id)
+            if found is None:
+                return None
+            path, ext = found
+            data = path.read_bytes()
+        return load_mesh(data, ext)
 
     # -- landmarks ----------------------------------------------------------------------
 
@@ -318,13 +365,15 @@ class ProjectStore:
             row = self._row(project_id)
             if row["revision"] != revision:
                 raise StaleRig("the mesh changed while the landmarks were checked; send them again")
-            write_atomic(folder / "landmarks.json", json.dumps(landmarks).encode())
+            name = f"landmarks-r{revision + 1}.json"
+            write_atomic(folder / name, json.dumps(landmarks).encode())
             db.execute(
                 "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
+                "landmarks_file = ?, rig_file = NULL, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
-                (layout, n_points, _now(), project_id),
+                (layout, n_points, name, _now(), project_id),
             )
-        (folder / "rig.npz").unlink(missing_ok=True)
+        self._sweep(project_id)
         return self.get(project_id)
 
     def landmarks(self, project_id: str) -> dict | None:
@@ -332,7 +381,7 @@ class ProjectStore:
             row = self._row(project_id)
             if row["n_landmarks"] is None:
                 return None
-            return json.loads((self.folder(project_id) / "landmarks.json").read_text())
+            return json.loads((self.folder(project_id) / row["landmarks_file"]).read_text())
 
     # -- rig ----------------------------------------------------------------------------
 
@@ -346,11 +395,14 @@ class ProjectStore:
                 raise StaleRig(
                     "the mesh or landmarks changed while the rig was computed; start it again"
                 )
-            write_atomic(folder / "rig.npz", writer=weights.save)
+            # a rig may be recomputed at the same revision (another method): new name each time
+            name = f"rig-r{revision}-{secrets.token_hex(4)}.npz"
+            write_atomic(folder / name, writer=weights.save)
             db.execute(
-                "UPDATE projects SET rig_method = ?, updated = ? WHERE id = ?",
-                (weights.method, _now(), project_id),
+                "UPDATE projects SET rig_method = ?, rig_file = ?, updated = ? WHERE id = ?",
+                (weights.method, name, _now(), project_id),
             )
+        self._sweep(project_id)
         return self.get(project_id)
 
     def rig(self, project_id: str) -> SkinWeights | None:
@@ -358,4 +410,4 @@ class ProjectStore:
             row = self._row(project_id)
             if row["rig_method"] is None:
                 return None
-            return SkinWeights.load(self.folder(project_id) / "rig.npz")
+            return SkinWeights.load(self.folder(project_id) / row["rig_file"])

@@ -165,7 +165,7 @@ def test_traversal_file_name_is_stored_under_a_safe_name(client, tmp_path):
     r = upload(client, pid, "../../evil.obj", data)
     assert r.status_code == 200, r.text
     assert r.json()["mesh"]["filename"] == "../../evil.obj"  # display only
-    assert sorted(os.listdir(tmp_path / "data" / "projects" / pid)) == ["mesh.obj"]
+    assert sorted(os.listdir(tmp_path / "data" / "projects" / pid)) == ["mesh-r1.obj"]
     assert not list(tmp_path.rglob("*evil*"))
     assert client.get(f"/api/projects/{pid}/mesh").content == data
 
@@ -178,7 +178,7 @@ def test_new_mesh_replaces_the_old_file_and_drops_landmarks(client, tmp_path):
     ply = _saved(tmp_path, "o.ply", v, f)
     project = upload(client, pid, "b.ply", ply).json()
     assert project["mesh"]["format"] == "ply" and project["landmarks"] is None
-    assert sorted(os.listdir(tmp_path / "data" / "projects" / pid)) == ["mesh.ply"]
+    assert sorted(os.listdir(tmp_path / "data" / "projects" / pid)) == ["mesh-r3.ply"]
     assert client.get(f"/api/projects/{pid}/mesh").content == ply
     assert client.get(f"/api/projects/{pid}/landmarks").status_code == 404
 

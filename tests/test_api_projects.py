@@ -165,8 +165,45 @@ def test_store_writes_leave_no_temporary_files(tmp_path):
     store.put_landmarks(pid, {"vertex_indices": [0]}, n_points=1, layout="",
                         revision=store.get(pid)["revision"])
     names = sorted(p.name for p in (tmp_path / "projects" / pid).iterdir())
-    assert names == ["landmarks.json", "mesh.obj"]
+    assert names == ["landmarks-r2.json", "mesh-r1.obj"]
     assert store.get(pid)["mesh"]["filename"] == "../x.obj"  # display only
+
+
+def test_crash_around_the_index_commit_leaves_old_or_new_state_whole(tmp_path, monkeypatch):
+    """A replacing mesh must never pair the old landmarks with the new vertices,
+    whether the process dies before the index commit or after it."""
+    store = ProjectStore(tmp_path)
+    pid = store.create("p")["id"]
+    store.put_mesh(pid, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "obj", filename="a.obj",
+                   n_vertices=3, n_faces=1)
+    store.put_landmarks(pid, {"vertex_indices": [0, 1, 2]}, n_points=3, layout="",
+                        revision=store.get(pid)["revision"])
+    folder = tmp_path / "projects" / pid
+
+    def power_cut(*args, **kwargs):
+        raise KeyboardInterrupt("power cut")
+
+    # dies inside the transaction after the new file is written: the index never names it
+    state = (store.mesh_file(pid), store.landmarks(pid), store.get(pid)["revision"])
+    monkeypatch.setattr("server.store._now", power_cut)
+    with pytest.raises(KeyboardInterrupt):
+        store.put_mesh(pid, b"v 9 9 9\n", "obj", filename="c.obj", n_vertices=1, n_faces=0)
+    monkeypatch.undo()
+    assert (store.mesh_file(pid), store.landmarks(pid), store.get(pid)["revision"]) == state
+    assert store.mesh(pid).n_vertices == 3
+    store.close()
+    store = ProjectStore(tmp_path)  # opening sweeps the orphan the crash left
+    assert sorted(p.name for p in folder.iterdir()) == ["landmarks-r2.json", "mesh-r1.obj"]
+
+    # dies after the commit, before the replaced files are deleted: the new state is whole
+    monkeypatch.setattr("server.store.ProjectStore._sweep", power_cut)
+    with pytest.raises(KeyboardInterrupt):
+        store.put_mesh(pid, b"v 5 5 5\n", "obj", filename="b.obj", n_vertices=1, n_faces=0)
+    monkeypatch.undo()
+    assert store.mesh_file(pid)[0].read_bytes() == b"v 5 5 5\n" and store.landmarks(pid) is None
+    store.close()
+    ProjectStore(tmp_path).close()
+    assert sorted(p.name for p in folder.iterdir()) == ["mesh-r3.obj"]
 
 
 def test_dependency_override_swaps_the_store(client, tmp_path):
