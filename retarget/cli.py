@@ -486,7 +486,12 @@ def _cmd_serve(args) -> int:
             "pip install fastapi 'uvicorn[standard]' python-multipart"
         ) from exc
     data_dir = Path(args.data_dir)
-    app = create_app(data_dir)
+    limits = {}  # flags not given keep the app's defaults
+    if args.max_upload_mb is not None:
+        limits["max_upload_bytes"] = int(args.max_upload_mb * 2**20)
+    if args.max_vertices is not None:
+        limits["max_vertices"] = args.max_vertices
+    app = create_app(data_dir, **limits)
     host = f"[{args.host}]" if ":" in args.host else args.host
     print(f"retarget server: http://{host}:{args.port}/ (API docs at /docs), "
           f"projects in {data_dir.resolve()}", flush=True)
@@ -505,6 +510,16 @@ def _port(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from None
     if not 0 <= value <= 65535:
         raise argparse.ArgumentTypeError(f"expected a port in [0, 65535], got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
 
 
@@ -617,6 +632,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=_port, default=8000, help="port (default: 8000)")
     p.add_argument("--data-dir", default=SERVE_DATA_DIR, metavar="DIR",
                    help=f"project store folder, created if missing (default: ./{SERVE_DATA_DIR})")
+    p.add_argument("--max-upload-mb", type=_positive_float, metavar="MB",
+                   help="largest mesh upload accepted, MiB (default: 64)")
+    p.add_argument("--max-vertices", type=_positive_int, metavar="V",
+                   help="most vertices an uploaded mesh may have (default: 500000)")
     p.set_defaults(run=_cmd_serve, quiet=True)
     return parser
 
