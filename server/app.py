@@ -19,7 +19,7 @@ from retarget.errors import RetargetError
 from server.deps import Limits
 from server.jobs import JobRegistry
 from server.hub import StreamHub
-from server.routers import landmarks, layouts, meshes, projects, rigs, stream
+from server.routers import info, landmarks, layouts, meshes, projects, rigs, stream
 from server.sample import ensure_sample_project
 from server.store import ProjectNotFound, ProjectStore, StaleRig
 from server.web import mount_web
@@ -62,7 +62,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     async def _stale(request: Request, exc: StaleRig) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status.HTTP_409_CONFLICT)
 
-    for module in (projects, meshes, landmarks, rigs, stream, layouts):
+    for module in (projects, meshes, landmarks, rigs, stream, layouts, info):
         app.include_router(module.router)
     mount_web(app)
     return app

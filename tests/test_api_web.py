@@ -63,3 +63,13 @@ def test_unknown_layout_is_refused_with_the_known_names(client):
     reply = client.get("/api/layouts/nope")
     assert reply.status_code == 422
     assert "ibug68" in reply.json()["detail"]
+
+
+def test_info_says_what_the_server_accepts(tmp_path):
+    from retarget.weights import DEFAULT_METHOD, METHODS
+
+    info = TestClient(create_app(tmp_path, sample=False, max_upload_bytes=1234,
+                                 max_vertices=99)).get("/api/info").json()
+    assert info["max_upload_bytes"] == 1234 and info["max_vertices"] == 99
+    assert "obj" in info["mesh_extensions"] and "glb" in info["mesh_extensions"]
+    assert info["rig_methods"] == list(METHODS) and info["default_rig_method"] == DEFAULT_METHOD

@@ -37,6 +37,7 @@ class Server:
     """One `retarget serve` process on 127.0.0.1; `restart()` keeps the data dir."""
 
     data_dir: Path
+    args: tuple[str, ...] = ()  # extra `retarget serve` flags, e.g. ("--max-upload-mb", "1")
     port: int = field(default_factory=free_port)
     process: subprocess.Popen | None = None
     log: Path | None = None
@@ -50,7 +51,7 @@ class Server:
         with open(self.log, "wb") as out:
             self.process = subprocess.Popen(
                 [sys.executable, "-m", "retarget.cli", "serve", "--port", str(self.port),
-                 "--data-dir", str(self.data_dir)],
+                 "--data-dir", str(self.data_dir), *self.args],
                 stdout=out, stderr=subprocess.STDOUT, cwd=Path(__file__).resolve().parents[2])
         deadline = time.monotonic() + _STARTUP_S
         while time.monotonic() < deadline:
