@@ -27,24 +27,26 @@ DEMO_SECONDS = 10.0
 class DemoSource:
     """The demo performance for one project.
 
-    target_points : (68, 3) the project's landmark positions, iBUG 68 order.
-    layout : the project's layout name (regions for masks).
+    target_points : (N, 3) the project's landmark positions, in its layout's order.
+    layout : the project's layout name (the performer's points are picked through the
+        layout's iBUG-68 indices; regions for masks). Projects saved without a layout
+        are taken as iBUG 68.
     """
 
     def __init__(self, target_points: np.ndarray, layout: str, fps: float = 60.0):
-        if target_points.shape != (68, 3):
+        self.layout = get_layout(layout or "ibug68")
+        if target_points.shape != (self.layout.n_points, 3):
             raise RetargetError(
-                f"the demo performance drives the 68-point iBUG layout; this project has "
-                f"{len(target_points)} landmarks")
+                f"the demo performance drives the {self.layout.n_points} points of layout "
+                f"{self.layout.name!r}; this project has {len(target_points)} landmarks")
         if not 1.0 <= fps <= 240.0:
             raise RetargetError(f"fps must be between 1 and 240; got {fps}")
         performer = sample_face(identity=_PERFORMER_IDENTITY)
-        lm = performer.landmarks68
+        lm = np.asarray(performer.landmarks68)[list(self.layout.ibug68)]
         weights = demo_weights(int(round(DEMO_SECONDS * fps)), fps)
         self.neutral = performer.vertices[lm]
         self.frames = self.neutral + np.tensordot(weights, performer.expressions[:, lm], axes=1)
         self.target_points = target_points
-        self.layout = get_layout(layout or "ibug68")
         self.fps = float(fps)
         self.set_regions(None)
 
@@ -54,7 +56,7 @@ class DemoSource:
         self.retargeter = Retargeter(mask=mask).fit(self.neutral, self.target_points)
 
     def displacements(self, index: int) -> np.ndarray:
-        """(68, 3) float32 target feature displacements of frame `index` (looping)."""
+        """(N, 3) float32 target feature displacements of frame `index` (looping)."""
         return self.retargeter.displacements(self.frames[index % len(self.frames)])
 
     async def run(self, hub: StreamHub, project_id: str) -> None:

@@ -182,3 +182,22 @@ def test_a_slow_concurrent_viewer_gets_the_newest_frame_and_never_a_backlog():
     assert max(backlogs) == 1 and received[-1] == 59
     assert received == sorted(set(received)) and len(received) < 30
     assert box.dropped == 60 - len(received) and box.delivered == len(received)
+
+
+def test_demo_drives_every_layout_through_its_ibug_indices(app, sample_id):
+    """A project picked with the 21-point Dutreve layout streams the demo too."""
+    layout = get_layout("dutreve21")
+    with TestClient(app) as client:
+        sample = client.get(f"/api/projects/{sample_id}/landmarks").json()
+        pid = client.post("/api/projects", json={"name": "21 points"}).json()["id"]
+        mesh = client.get(f"/api/projects/{sample_id}/mesh").content
+        assert client.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", mesh)}).status_code == 200
+        picked = {"layout": "dutreve21",
+                  "vertex_indices": [sample["vertex_indices"][i] for i in layout.ibug68]}
+        assert client.put(f"/api/projects/{pid}/landmarks", json=picked).status_code == 200
+        with client.websocket_connect(f"/api/projects/{pid}/stream") as ws:
+            assert ws.receive_json()["n_points"] == 21
+            ws.send_json({"type": "start", "fps": 120})
+            got = frames(ws, 10)
+            assert all(f.displacements.shape == (21, 3) for f in got)
+            assert max(np.abs(f.displacements).max() for f in got) > 1e-3
