@@ -12,7 +12,7 @@ from starlette.websockets import WebSocketDisconnect
 from retarget.layouts import get_layout
 from server.app import create_app
 from server.hub import StreamHub
-from server.stream_codec import decode_frame
+from server.stream_codec import FLAG_NEUTRAL, decode_frame
 
 
 @pytest.fixture(scope="module")
@@ -201,3 +201,16 @@ def test_demo_drives_every_layout_through_its_ibug_indices(app, sample_id):
             got = frames(ws, 10)
             assert all(f.displacements.shape == (21, 3) for f in got)
             assert max(np.abs(f.displacements).max() for f in got) > 1e-3
+
+
+def test_stop_sends_a_neutral_frame(app, sample_id):
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "start", "fps": 120})
+        frames(ws, 3)
+        ws.send_json({"type": "stop"})
+        for _ in range(200):  # frames already in flight may precede it
+            (frame,) = frames(ws, 1)
+            if frame.flags & FLAG_NEUTRAL:
+                break
+        assert frame.flags & FLAG_NEUTRAL and np.all(frame.displacements == 0.0)

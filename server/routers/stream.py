@@ -6,7 +6,8 @@ source publishes. Control messages are JSON text:
 
 - ``{"type": "start", "source": "demo", "fps": 60}``: start (or restart) the built-in demo
   performance for the project (`server.sources.DemoSource`);
-- ``{"type": "stop"}``: stop it;
+- ``{"type": "stop"}``: stop it; every viewer then gets a neutral frame (flag bit 0, zero
+  displacements) that puts the face back at rest;
 - ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
   regions, groups or points move (empty or null: all);
 - ``{"type": "ping", "t": <client time>}``: answered ``{"type": "pong", "t", "server_time"}``.
@@ -25,6 +26,7 @@ import asyncio
 import json
 import time
 
+import numpy as np
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
@@ -34,6 +36,7 @@ from retarget.layouts import get_layout
 from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
 from server.sources import DemoSource
+from server.stream_codec import FLAG_NEUTRAL, encode_frame
 from server.store import ProjectNotFound
 
 router = APIRouter(tags=["stream"])
@@ -123,6 +126,9 @@ async def _control(text, hub: StreamHub, project_id, target_points, layout) -> d
         return {"type": "started", "source": "demo", "fps": source.fps}
     if kind == "stop":
         hub.stop_source(project_id)
+        # every viewer puts its face back at rest
+        hub.publish(project_id, encode_frame(np.zeros((len(target_points), 3), np.float32),
+                                             frame_index=0, source_time=0.0, flags=FLAG_NEUTRAL))
         return {"type": "stopped"}
     if kind == "mask":
         regions = msg.get("regions") or None
