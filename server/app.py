@@ -39,7 +39,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     sample : create the built-in sample project when the data dir is new (see
         `server.sample`).
     """
-    app = FastAPI(title="retarget", version=__version__,
+    app = FastAPI(title="retarget", version=__version__, docs_url=None, redoc_url=None,
                   description="Facial animation retargeting from feature points: projects, "
                   "meshes, landmarks and rigs.")
     app.state.store = ProjectStore(data_dir)

@@ -5,6 +5,7 @@ packages installed by ``npm ci --prefix web`` (served from here, never from a CD
     /static/...            web/static/
     /shaders/...           web/shaders/
     /vendor/<package>/...  web/node_modules/<package>/  (only the packages in VENDORED)
+    /docs                  the OpenAPI docs, Swagger UI from the npm package swagger-ui-dist
 """
 
 from __future__ import annotations
@@ -12,13 +13,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from fastapi import FastAPI
+from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 __all__ = ["VENDORED", "WEB_DIR", "mount_web"]
 
 WEB_DIR = Path(__file__).resolve().parent.parent / "web"
-VENDORED = ("three", "three-mesh-bvh")
+VENDORED = ("three", "three-mesh-bvh", "swagger-ui-dist")
 
 _MISSING = """<!doctype html><meta charset="utf-8"><title>retarget: front-end packages missing</title>
 <h1>The browser client's packages are not installed</h1>
@@ -28,7 +30,10 @@ _MISSING = """<!doctype html><meta charset="utf-8"><title>retarget: front-end pa
 
 def mount_web(app: FastAPI, web_dir: Path = WEB_DIR) -> None:
     """Serve the client from `web_dir`. When the npm packages are missing the page says
-    how to install them (HTTP 503) instead of failing on a blank screen."""
+    how to install them (HTTP 503) instead of failing on a blank screen.
+
+    The app must be made with ``docs_url=None``: FastAPI's own /docs loads Swagger UI
+    from a CDN; this one serves it from `web_dir`."""
     node_modules = web_dir / "node_modules"
     missing = [name for name in VENDORED if not (node_modules / name / "package.json").is_file()]
     index = web_dir / "static" / "index.html"
@@ -39,6 +44,16 @@ def mount_web(app: FastAPI, web_dir: Path = WEB_DIR) -> None:
             return HTMLResponse(_MISSING.format(missing=", ".join(missing), node_modules=node_modules),
                                 status_code=503)
         return FileResponse(index, headers={"Cache-Control": "no-cache"})
+
+    @app.get("/docs", include_in_schema=False, response_model=None)
+    def docs_page() -> HTMLResponse:
+        if "swagger-ui-dist" in missing:
+            return HTMLResponse(_MISSING.format(missing="swagger-ui-dist", node_modules=node_modules),
+                                status_code=503)
+        return get_swagger_ui_html(openapi_url=app.openapi_url, title=f"{app.title} API",
+                                   swagger_js_url="/vendor/swagger-ui-dist/swagger-ui-bundle.js",
+                                   swagger_css_url="/vendor/swagger-ui-dist/swagger-ui.css",
+                                   swagger_favicon_url="/vendor/swagger-ui-dist/favicon-32x32.png")
 
     app.mount("/static", StaticFiles(directory=web_dir / "static"), name="static")
     app.mount("/shaders", StaticFiles(directory=web_dir / "shaders", check_dir=False), name="shaders")

@@ -22,8 +22,17 @@ def test_index_page_and_vendored_modules_are_served_locally(client):
     assert client.get("/static/js/StreamDecoder.js").status_code == 200
 
 
+def test_api_docs_load_swagger_ui_locally(client):
+    docs = client.get("/docs")
+    assert docs.status_code == 200
+    assert "/vendor/swagger-ui-dist/swagger-ui-bundle.js" in docs.text
+    assert "cdn" not in docs.text.lower() and "https://" not in docs.text
+    assert client.get("/vendor/swagger-ui-dist/swagger-ui-bundle.js").status_code == 200
+    assert client.get("/openapi.json").json()["info"]["title"] == "retarget"
+
+
 def test_vendor_mounts_hold_only_the_listed_packages(client):
-    assert VENDORED == ("three", "three-mesh-bvh")
+    assert VENDORED == ("three", "three-mesh-bvh", "swagger-ui-dist")
     assert client.get("/vendor/gltf-validator/package.json").status_code == 404
     assert client.get("/vendor/three/../../package.json").status_code == 404
 
