@@ -1,0 +1,223 @@
+/**
+ * The server's REST API (server/routers/*.py), as promise-returning functions.
+ *
+ * Every failure rejects with an `ApiError` carrying the HTTP status and the server's
+ * human `detail`, so the page can show exactly what the server said.
+ */
+
+export class ApiError extends Error {
+
+	/**
+	 * @param {number} status - HTTP status; 0 when no answer came (network, aborted).
+	 * @param {string} detail - the server's `detail`, or what went wrong on the way.
+	 */
+	constructor( status, detail ) {
+
+		super( status ? `${ detail } (HTTP ${ status })` : detail );
+		this.name = 'ApiError';
+		this.status = status;
+		this.detail = detail;
+
+	}
+
+}
+
+/**
+ * The `detail` of an error answer: FastAPI gives a string, or for request validation a
+ * list of {loc, msg}; anything else is shown as text.
+ * @param {*} body
+ * @param {string} fallback
+ * @returns {string}
+ */
+function detailOf( body, fallback ) {
+
+	const detail = body && body.detail;
+	if ( typeof detail === 'string' ) return detail;
+	if ( Array.isArray( detail ) ) {
+
+		return detail.map( ( d ) => ( d.loc ? d.loc.filter( ( l ) => l !== 'body' ).join( '.' ) + ': ' : '' ) + d.msg ).join( '; ' );
+
+	}
+
+	return fallback;
+
+}
+
+async function request( method, url, { json, binary = false } = {} ) {
+
+	let response;
+	try {
+
+		response = await fetch( url, {
+			method,
+			headers: json === undefined ? {} : { 'Content-Type': 'application/json' },
+			body: json === undefined ? undefined : JSON.stringify( json ),
+		} );
+
+	} catch ( error ) {
+
+		throw new ApiError( 0, `${ method } ${ url } failed: the server did not answer (${ error.message })` );
+
+	}
+
+	if ( ! response.ok ) {
+
+		const text = await response.text();
+		let body = null;
+		try {
+
+			body = JSON.parse( text );
+
+		} catch {
+
+			// a proxy's or crash page's HTML: show its status line instead
+
+		}
+
+		throw new ApiError( response.status, detailOf( body, `${ method } ${ url }: ${ response.statusText || 'request failed' }` ) );
+
+	}
+
+	if ( response.status === 204 ) return null;
+	return binary ? response.arrayBuffer() : response.json();
+
+}
+
+function header( buffer, magic, what ) {
+
+	const view = new DataView( buffer );
+	const found = String.fromCharCode( ...new Uint8Array( buffer, 0, Math.min( 4, buffer.byteLength ) ) );
+	if ( found !== magic ) throw new ApiError( 0, `${ what }: expected "${ magic }" data, got "${ found }"` );
+	const version = view.getUint32( 4, true );
+	if ( version !== 1 ) throw new ApiError( 0, `${ what }: unsupported format version ${ version }` );
+	return view;
+
+}
+
+export const api = {
+
+	/**
+	 * What the server accepts.
+	 * @returns {Promise<{version: string, max_upload_bytes: number, max_vertices: number,
+	 *   mesh_extensions: string[], rig_methods: string[], default_rig_method: string}>}
+	 */
+	info: () => request( 'GET', '/api/info' ),
+
+	/** @returns {Promise<Array<object>>} every project, oldest first */
+	projects: () => request( 'GET', '/api/projects' ),
+
+	project: ( id ) => request( 'GET', `/api/projects/${ id }` ),
+
+	createProject: ( name ) => request( 'POST', '/api/projects', { json: { name } } ),
+
+	/** @param {string} id @param {{name?: string, settings?: object}} patch */
+	patchProject: ( id, patch ) => request( 'PATCH', `/api/projects/${ id }`, { json: patch } ),
+
+	deleteProject: ( id ) => request( 'DELETE', `/api/projects/${ id }` ),
+
+	/** @returns {Promise<Array<object>>} layouts with points {name, region, side, mirror, reference} */
+	layouts: () => request( 'GET', '/api/layouts' ),
+
+	/**
+	 * The mesh as arrays (the "RTMA" format of server/routers/meshes.py).
+	 * @returns {Promise<{positions: Float32Array, faces: Uint32Array}>} positions (3V) in the
+	 *   mesh's own units; faces (3F) vertex indices.
+	 */
+	async meshArrays( id ) {
+
+		const buffer = await request( 'GET', `/api/projects/${ id }/mesh/arrays`, { binary: true } );
+		const view = header( buffer, 'RTMA', 'mesh arrays' );
+		const v = view.getUint32( 8, true ), f = view.getUint32( 12, true );
+		return {
+			positions: new Float32Array( buffer, 16, 3 * v ),
+			faces: new Uint32Array( buffer, 16 + 12 * v, 3 * f ),
+		};
+
+	},
+
+	/** @returns {Promise<{layout: string, triangles: number[][], barycentric: number[][]}>} */
+	landmarks: ( id ) => request( 'GET', `/api/projects/${ id }/landmarks` ),
+
+	/** @param {{layout: string, triangles: number[][], barycentric: number[][]}} landmarks */
+	putLandmarks: ( id, landmarks ) => request( 'PUT', `/api/projects/${ id }/landmarks`, { json: landmarks } ),
+
+	/** @returns {Promise<object>} the job {id, state, progress, detail} */
+	startRig: ( id, method ) => request( 'POST', `/api/projects/${ id }/rig`, { json: { method } } ),
+
+	job: ( jobId ) => request( 'GET', `/api/jobs/${ jobId }` ),
+
+	/** @returns {Promise<{method: string, n_vertices: number, n_joints: number, n_influences: number}>} */
+	rig: ( id ) => request( 'GET', `/api/projects/${ id }/rig` ),
+
+	/**
+	 * The rig's skin weights (the "RTSW" format of server/routers/rigs.py).
+	 * @returns {Promise<{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array}>}
+	 *   indices and weights are (V, k) row-major.
+	 */
+	async rigWeights( id ) {
+
+		const buffer = await request( 'GET', `/api/projects/${ id }/rig/weights`, { binary: true } );
+		const view = header( buffer, 'RTSW', 'rig weights' );
+		const v = view.getUint32( 8, true ), k = view.getUint32( 12, true ), n = view.getUint32( 16, true );
+		const indexBytes = 2 * v * k;
+		return {
+			nJoints: n,
+			nInfluences: k,
+			indices: new Uint16Array( buffer, 20, v * k ),
+			weights: new Float32Array( buffer, 20 + indexBytes + ( indexBytes % 4 ), v * k ),
+		};
+
+	},
+
+	/**
+	 * Upload a mesh file (multipart field "file") with progress; XHR because fetch
+	 * reports no upload progress.
+	 * @param {string} id
+	 * @param {File} file
+	 * @param {(fraction: number) => void} onProgress - 0..1 of the bytes sent
+	 * @returns {Promise<object>} the updated project
+	 */
+	uploadMesh( id, file, onProgress ) {
+
+		return new Promise( ( resolve, reject ) => {
+
+			const xhr = new XMLHttpRequest();
+			xhr.open( 'PUT', `/api/projects/${ id }/mesh` );
+			xhr.responseType = 'text';
+			xhr.upload.onprogress = ( event ) => {
+
+				if ( event.lengthComputable ) onProgress( event.loaded / event.total );
+
+			};
+
+			xhr.onload = () => {
+
+				let body = null;
+				try {
+
+					body = JSON.parse( xhr.responseText );
+
+				} catch {
+
+					// not JSON: reported by status below
+
+				}
+
+				if ( xhr.status >= 200 && xhr.status < 300 ) resolve( body );
+				else reject( new ApiError( xhr.status, detailOf( body, `upload of ${ file.name } failed: ${ xhr.statusText }` ) ) );
+
+			};
+
+			// the server closes early on an oversized body, which browsers may report as a
+			// network error rather than the 413 it sent
+			xhr.onerror = () => reject( new ApiError( 0, `upload of ${ file.name } failed: the connection was closed (is the file over the server's size limit?)` ) );
+			xhr.onabort = () => reject( new ApiError( 0, `upload of ${ file.name } was cancelled` ) );
+			const form = new FormData();
+			form.append( 'file', file, file.name );
+			xhr.send( form );
+
+		} );
+
+	},
+
+};
