@@ -1,0 +1,241 @@
+"""The skinning shader against its CPU twin, in a real Chromium (WebGL2 via SwiftShader).
+
+`SkinnedFace.deformedPositions()` runs web/shaders/skinning.glsl, the function the display
+shader draws with, over every vertex and reads the result back; it must match
+`retarget.skin.skin_displacements` on the rig the server stored, for the dense
+weight-texture path (the sample's biharmonic rig, k = N = 68), the vertex-attribute path
+(an ellipsoid rig, k = 4) and truncations of the dense rig (k = 8 with negative weights;
+k = 12 with arbitrary joint order, scattered into the texture). The drawn pixels follow
+the pose, the heat map and the wireframe switch.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import time
+import urllib.request
+
+import numpy as np
+import pytest
+
+from retarget.skin import SkinWeights, skin_displacements
+
+TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal
+
+# A page of the server's origin with the client's import map; the modules under test are
+# imported from /static/js like the app does.
+PAGE = """<!doctype html><meta charset="utf-8"><title>skin check</title>
+<script type="importmap">{"imports": {"three": "/vendor/three/build/three.module.js",
+  "three/addons/": "/vendor/three/examples/jsm/"}}</script>
+<style>body { margin: 0 } #viewport { width: 640px; height: 480px }</style>
+<div id="viewport"></div>
+<script type="module">
+import { Viewer } from '/static/js/Viewer.js';
+import { SkinnedFace } from '/static/js/SkinnedFace.js';
+
+const bytes = ( base64 ) => Uint8Array.from( atob( base64 ), ( c ) => c.charCodeAt( 0 ) ).buffer;
+
+async function fetchBinary( url ) {
+	const response = await fetch( url );
+	if ( ! response.ok ) throw new Error( `${ url }: HTTP ${ response.status }` );
+	return response.arrayBuffer();
+}
+
+// GET /api/projects/{id}/rig/weights (format: server/routers/rigs.py)
+function parseRig( buffer ) {
+	const view = new DataView( buffer );
+	const [ v, k, n ] = [ view.getUint32( 8, true ), view.getUint32( 12, true ), view.getUint32( 16, true ) ];
+	const weightsAt = 20 + 2 * v * k + ( ( 2 * v * k ) % 4 );
+	return {
+		nJoints: n, nInfluences: k,
+		indices: new Uint16Array( buffer.slice( 20, 20 + 2 * v * k ) ),
+		weights: new Float32Array( buffer, weightsAt, v * k ),
+	};
+}
+
+window.check = {
+	async load( projectId ) {
+		const buffer = await fetchBinary( `/api/projects/${ projectId }/mesh/arrays` );
+		const view = new DataView( buffer );
+		const [ v, f ] = [ view.getUint32( 8, true ), view.getUint32( 12, true ) ];
+		const face = await SkinnedFace.create( {
+			positions: new Float32Array( buffer, 16, 3 * v ),
+			faces: new Uint32Array( buffer, 16 + 12 * v, 3 * f ),
+		} );
+		this.viewer ??= new Viewer( document.getElementById( 'viewport' ) );
+		this.face?.dispose();
+		this.face = face;
+		this.viewer.setObject( face.mesh );
+		return v;
+	},
+	async setServerRig( projectId ) {
+		this.face.setRig( parseRig( await fetchBinary( `/api/projects/${ projectId }/rig/weights` ) ) );
+		return this.face.nInfluences;
+	},
+	setRig( nJoints, nInfluences, indices, weights ) {
+		this.face.setRig( { nJoints, nInfluences, indices: new Uint16Array( bytes( indices ) ), weights: new Float32Array( bytes( weights ) ) } );
+	},
+	// the canvas as drawn: RGBA8, rows bottom-up (read before the frame is composited)
+	pixels() {
+		this.viewer.render();
+		const gl = this.viewer.renderer.getContext();
+		const out = new Uint8Array( 4 * gl.drawingBufferWidth * gl.drawingBufferHeight );
+		gl.readPixels( 0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight, gl.RGBA, gl.UNSIGNED_BYTE, out );
+		return btoa( Array.from( out, ( c ) => String.fromCharCode( c ) ).join( '' ) );
+	},
+	deformed( displacements ) {
+		this.face.setDisplacements( displacements === null ? null : new Float32Array( bytes( displacements ) ) );
+		this.viewer.render();
+		const positions = this.face.deformedPositions();
+		return btoa( String.fromCharCode( ...new Uint8Array( positions.buffer ) ) );
+	},
+};
+window.ready = true;
+</script>
+"""
+
+
+def _b64(array: np.ndarray) -> str:
+    return base64.b64encode(np.ascontiguousarray(array).tobytes()).decode()
+
+
+def _api(server, method: str, path: str, body=None):
+    data = None if body is None else json.dumps(body).encode()
+    request = urllib.request.Request(server.url + path, data=data, method=method,
+                                     headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=30) as reply:
+        return json.loads(reply.read())
+
+
+def _mesh_arrays(server, project_id: str) -> tuple[np.ndarray, np.ndarray]:
+    with urllib.request.urlopen(f"{server.url}/api/projects/{project_id}/mesh/arrays", timeout=30) as reply:
+        data = reply.read()
+    v, f = np.frombuffer(data, "<u4", 2, 8)
+    return (np.frombuffer(data, "<f4", 3 * v, 16).reshape(v, 3),
+            np.frombuffer(data, "<u4", 3 * f, 16 + 12 * v).reshape(f, 3))
+
+
+def _stored_rig(server, project_id: str) -> SkinWeights:
+    """The rig as the store wrote it (`SkinWeights.save`), read without the server."""
+    files = sorted((server.data_dir / "projects" / project_id).glob("rig-*.npz"))
+    assert len(files) == 1, files
+    return SkinWeights.load(files[0])
+
+
+def _wait_for_rig(server, project_id: str, method: str) -> None:
+    job = _api(server, "POST", f"/api/projects/{project_id}/rig", {"method": method})
+    deadline = time.monotonic() + 120
+    while job["state"] == "running":
+        assert time.monotonic() < deadline, job
+        time.sleep(0.2)
+        job = _api(server, "GET", f"/api/jobs/{job['id']}")
+    assert job["state"] == "done", job
+
+
+@pytest.fixture
+def sample(server, page):
+    """The sample project shown in the check page: (page, project id, rest positions)."""
+    project_id = next(p["id"] for p in _api(server, "GET", "/api/projects") if p["settings"].get("sample"))
+    page.route(server.url + "/skin-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
+    page.goto(server.url + "/skin-check")
+    page.wait_for_function("window.ready === true")
+    positions, _ = _mesh_arrays(server, project_id)
+    assert page.evaluate("(id) => check.load(id)", project_id) == len(positions)
+    return page, project_id, positions
+
+
+def _displacements(n_joints: int, size: float, seed: int) -> np.ndarray:
+    """(N, 3) float32 feature displacements of a few percent of the face's size."""
+    return (np.random.default_rng(seed).normal(size=(n_joints, 3)) * 0.03 * size).astype(np.float32)
+
+
+def _shader_error(page, rig: SkinWeights, positions: np.ndarray, seed: int) -> float:
+    """Max |GPU - CPU| over the vertices, relative to the bounding-box diagonal."""
+    size = float(np.linalg.norm(positions.max(0) - positions.min(0)))
+    d = _displacements(rig.n_joints, size, seed)
+    gpu = np.frombuffer(base64.b64decode(page.evaluate("(d) => check.deformed(d)", _b64(d))), np.float32)
+    cpu = positions + skin_displacements(rig, d)
+    moved = float(np.abs(cpu - positions).max())
+    assert moved > 0.01 * size, "the test displacements barely move the face"
+    error = float(np.abs(gpu.reshape(-1, 3) - cpu).max()) / size
+    print(f"{rig.method} k={rig.n_influences}: max |GPU - CPU| = {error:.2e} x mesh size (moved up to {moved / size:.3f})")
+    return error
+
+
+def test_dense_rig_matches_cpu(sample, server):
+    page, project_id, positions = sample
+    rig = _stored_rig(server, project_id)
+    assert rig.n_influences == rig.n_joints > 8  # the weight-texture path
+    assert page.evaluate("(id) => check.setServerRig(id)", project_id) == rig.n_influences
+    assert (rig.weights < 0).any(), "the biharmonic rig should have negative weights, which must not be clamped"
+    assert _shader_error(page, rig, positions, seed=1) < TOLERANCE
+    rest = np.frombuffer(base64.b64decode(page.evaluate("check.deformed(null)")), np.float32)
+    assert np.array_equal(rest.reshape(-1, 3), positions)
+
+
+def test_sparse_rig_matches_cpu(sample, server):
+    page, project_id, positions = sample
+    _wait_for_rig(server, project_id, "ellipsoid")
+    rig = _stored_rig(server, project_id)
+    assert rig.n_influences <= 8  # the vertex-attribute path
+    assert page.evaluate("(id) => check.setServerRig(id)", project_id) == rig.n_influences
+    assert _shader_error(page, rig, positions, seed=2) < TOLERANCE
+
+
+@pytest.mark.parametrize("k", [8, 12])
+def test_truncated_rig_matches_cpu(sample, server, k):
+    """k = 8: attributes, both halves used, negative weights; k = 12: texture from an
+    arbitrary joint order."""
+    page, project_id, positions = sample
+    rig = _stored_rig(server, project_id).top_k(k)
+    page.evaluate("([n, k, i, w]) => check.setRig(n, k, i, w)",
+                  [rig.n_joints, k, _b64(rig.indices.astype("<u2")), _b64(rig.weights.astype("<f4"))])
+    assert _shader_error(page, rig, positions, seed=3) < TOLERANCE
+
+
+def _pixels(page) -> np.ndarray:
+    return np.frombuffer(base64.b64decode(page.evaluate("check.pixels()")), np.uint8).reshape(-1, 4)[:, :3].astype(int)
+
+
+def _changed(a: np.ndarray, b: np.ndarray) -> float:
+    """Fraction of pixels that differ by more than a rounding step."""
+    return float((np.abs(a - b).max(1) > 2).mean())
+
+
+def _red(pixels: np.ndarray) -> np.ndarray:
+    """Bright, saturated red pixels: the heat map's negative weights, never skin."""
+    r, g, b = pixels.T
+    return (r > 100) & (r > 2 * g) & (r > 2 * b)
+
+
+def test_pose_heatmap_and_wireframe_change_the_pixels(sample, server):
+    page, project_id, positions = sample
+    rig = _stored_rig(server, project_id)
+    page.evaluate("(id) => check.setServerRig(id)", project_id)
+    rest = _pixels(page)
+    face = (np.abs(rest - rest[0]).max(1) > 2).mean()  # the corner pixel is background
+    assert 0.1 < face < 0.9, f"the face covers {face:.0%} of the view"
+
+    # a pose moves the drawn surface, and neutral puts it back exactly
+    size = float(np.linalg.norm(positions.max(0) - positions.min(0)))
+    page.evaluate("(d) => check.deformed(d)", _b64(_displacements(rig.n_joints, size, seed=4)))
+    assert _changed(_pixels(page), rest) > 0.02
+    page.evaluate("check.deformed(null)")
+    assert _changed(_pixels(page), rest) == 0
+
+    # the heat map of the joint with the most negative weight shows weights, negative ones in red
+    joint = int(rig.indices.ravel()[np.argmin(rig.weights)])
+    page.evaluate("(j) => check.face.setHeatmap(j)", joint)
+    heat = _pixels(page)
+    assert _changed(heat, rest) > 0.5 * face
+    assert _red(heat).sum() > 50 and not _red(rest).any()
+    page.evaluate("(j) => check.face.setHeatmap(j)", (joint + 1) % rig.n_joints)
+    assert _changed(_pixels(page), heat) > 0.01
+    page.evaluate("check.face.setHeatmap(null)")
+    assert _changed(_pixels(page), rest) == 0
+
+    page.evaluate("check.viewer.setWireframe(true)")
+    assert _changed(_pixels(page), rest) > 0.1 * face
+    page.evaluate("check.viewer.setWireframe(false)")
+    assert _changed(_pixels(page), rest) == 0
