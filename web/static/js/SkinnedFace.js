@@ -267,12 +267,14 @@ export class SkinnedFace {
 
 	/**
 	 * Pose the face: feature displacements, such as a stream frame's.
+	 * A face without a rig has nothing that could move it and stays at rest; the call is
+	 * accepted then, so a stream may run before the rig has loaded.
 	 * @param {Float32Array|null} displacements - (N*3) point-major x, y, z in mesh units,
 	 *   N = the rig's nJoints; null puts the face at rest.
 	 */
 	setDisplacements( displacements ) {
 
-		if ( this._displacements === null ) throw new Error( 'SkinnedFace.setDisplacements: the face has no rig; call setRig first.' );
+		if ( this._displacements === null ) return;
 		const texels = this._displacements;
 		if ( displacements === null ) {
 
