@@ -5,8 +5,9 @@ shader draws with, over every vertex and reads the result back; it must match
 `retarget.skin.skin_displacements` on the rig the server stored, for the dense
 weight-texture path (the sample's biharmonic rig, k = N = 68), the vertex-attribute path
 (an ellipsoid rig, k = 4) and truncations of the dense rig (k = 8 with negative weights;
-k = 12 with arbitrary joint order, scattered into the texture). The drawn pixels follow
-the pose, the heat map and the wireframe switch.
+k = 12 with arbitrary joint order, scattered into the texture). The normals drawn with
+(`deformedNormals()`) are the deformed mesh's area-weighted vertex normals. The drawn
+pixels follow the pose, the heat map and the wireframe switch.
 """
 
 from __future__ import annotations
@@ -90,6 +91,9 @@ window.check = {
 		const positions = this.face.deformedPositions();
 		return btoa( String.fromCharCode( ...new Uint8Array( positions.buffer ) ) );
 	},
+	normals() {
+		return btoa( String.fromCharCode( ...new Uint8Array( this.face.deformedNormals().buffer ) ) );
+	},
 };
 window.ready = true;
 </script>
@@ -150,8 +154,20 @@ def _displacements(n_joints: int, size: float, seed: int) -> np.ndarray:
     return (np.random.default_rng(seed).normal(size=(n_joints, 3)) * 0.03 * size).astype(np.float32)
 
 
-def _shader_error(page, rig: SkinWeights, positions: np.ndarray, seed: int) -> float:
-    """Max |GPU - CPU| over the vertices, relative to the bounding-box diagonal."""
+def _vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit area-weighted vertex normals (three.js's computeVertexNormals)."""
+    p = positions.astype(np.float64)
+    face_normals = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    normals = np.zeros_like(p)
+    for corner in range(3):
+        np.add.at(normals, faces[:, corner], face_normals)
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def _shader_error(page, server, project_id, rig: SkinWeights, seed: int) -> float:
+    """Max |GPU - CPU| over the vertex positions, relative to the bounding-box diagonal.
+    The deformed normals are checked on the way (max |GPU - CPU| of unit vectors < 1e-3)."""
+    positions, faces = _mesh_arrays(server, project_id)
     size = float(np.linalg.norm(positions.max(0) - positions.min(0)))
     d = _displacements(rig.n_joints, size, seed)
     gpu = np.frombuffer(base64.b64decode(page.evaluate("(d) => check.deformed(d)", _b64(d))), np.float32)
@@ -159,7 +175,15 @@ def _shader_error(page, rig: SkinWeights, positions: np.ndarray, seed: int) -> f
     moved = float(np.abs(cpu - positions).max())
     assert moved > 0.01 * size, "the test displacements barely move the face"
     error = float(np.abs(gpu.reshape(-1, 3) - cpu).max()) / size
-    print(f"{rig.method} k={rig.n_influences}: max |GPU - CPU| = {error:.2e} x mesh size (moved up to {moved / size:.3f})")
+
+    used = np.unique(faces)  # a vertex in no triangle has no normal to compare
+    gpu_normals = np.frombuffer(base64.b64decode(page.evaluate("check.normals()")), np.float32).reshape(-1, 3)
+    cpu_normals = _vertex_normals(cpu, faces)
+    normal_error = float(np.abs(gpu_normals[used] - cpu_normals[used]).max())
+    turned = float(np.abs(cpu_normals[used] - _vertex_normals(positions, faces)[used]).max())
+    print(f"{rig.method} k={rig.n_influences}: max |GPU - CPU| = {error:.2e} x mesh size (moved up to "
+          f"{moved / size:.3f}); normals {normal_error:.1e} (turned up to {turned:.2f})")
+    assert turned > 0.1 and normal_error < 1e-3
     return error
 
 
@@ -169,29 +193,29 @@ def test_dense_rig_matches_cpu(sample, server):
     assert rig.n_influences == rig.n_joints > 8  # the weight-texture path
     assert page.evaluate("(id) => check.setServerRig(id)", project_id) == rig.n_influences
     assert (rig.weights < 0).any(), "the biharmonic rig should have negative weights, which must not be clamped"
-    assert _shader_error(page, rig, positions, seed=1) < TOLERANCE
+    assert _shader_error(page, server, project_id, rig, seed=1) < TOLERANCE
     rest = np.frombuffer(base64.b64decode(page.evaluate("check.deformed(null)")), np.float32)
     assert np.array_equal(rest.reshape(-1, 3), positions)
 
 
 def test_sparse_rig_matches_cpu(sample, server):
-    page, project_id, positions = sample
+    page, project_id, _ = sample
     _wait_for_rig(server, project_id, "ellipsoid")
     rig = _stored_rig(server, project_id)
     assert rig.n_influences <= 8  # the vertex-attribute path
     assert page.evaluate("(id) => check.setServerRig(id)", project_id) == rig.n_influences
-    assert _shader_error(page, rig, positions, seed=2) < TOLERANCE
+    assert _shader_error(page, server, project_id, rig, seed=2) < TOLERANCE
 
 
 @pytest.mark.parametrize("k", [8, 12])
 def test_truncated_rig_matches_cpu(sample, server, k):
     """k = 8: attributes, both halves used, negative weights; k = 12: texture from an
     arbitrary joint order."""
-    page, project_id, positions = sample
+    page, project_id, _ = sample
     rig = _stored_rig(server, project_id).top_k(k)
     page.evaluate("([n, k, i, w]) => check.setRig(n, k, i, w)",
                   [rig.n_joints, k, _b64(rig.indices.astype("<u2")), _b64(rig.weights.astype("<f4"))])
-    assert _shader_error(page, rig, positions, seed=3) < TOLERANCE
+    assert _shader_error(page, server, project_id, rig, seed=3) < TOLERANCE
 
 
 def _pixels(page) -> np.ndarray:

@@ -26,7 +26,7 @@ const SKIN_TEXTURE_WIDTH = 4096; // texels; web/shaders/skinning.glsl's SKIN_TEX
 const MAX_SPARSE_INFLUENCES = 8;
 const MAX_JOINTS = 4096; // the displacement texture is one row
 const MAX_VERTICES = 2 ** 24; // vertex indices are stored in float32 textures, exact up to 2^24
-const SHADER_FILES = [ 'skinning.glsl', 'skin_pass.vert', 'skin_pass.frag', 'face.vert', 'face.frag' ];
+const SHADER_FILES = [ 'skinning.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 'normal_pass.vert', 'texel_pass.frag', 'face.vert', 'face.frag' ];
 
 const shaderSources = new Map(); // base URL -> Promise of { file name: GLSL with includes resolved }
 
@@ -34,12 +34,13 @@ const shaderSources = new Map(); // base URL -> Promise of { file name: GLSL wit
  * A face mesh skinned on the GPU by its feature points (Dutreve et al. 2008, §3.1: feature
  * points are translation-only joints), `v = v0 + sum_k w[v,k] d[j[v,k]]`.
  *
- * The geometry holds the rest pose (raycasting and picking work on it). Drawing takes two
- * passes: a skinning pass (web/shaders/skin_pass.vert, running web/shaders/skinning.glsl)
- * writes every vertex's skinned position to an RGBA32F texture whenever the pose or rig
- * changed, and the display pass (face.vert) draws from that texture, with normals of the
- * deformed surface. `deformedPositions()` reads that very texture back, so tests compare
- * what is drawn with the CPU twin (retarget/skin.py).
+ * The geometry holds the rest pose (raycasting and picking work on it). Whenever the pose
+ * or rig changed, two passes write one RGBA32F texel per vertex: the skinning pass
+ * (web/shaders/skin_pass.vert, running web/shaders/skinning.glsl) the skinned positions,
+ * then the normal pass (normal_pass.vert) the normals of the deformed surface. The display
+ * pass (face.vert) draws from those textures, and `deformedPositions()` /
+ * `deformedNormals()` read those very textures back, so tests compare what is drawn with
+ * the CPU twin (retarget/skin.py).
  *
  * Rigs with at most 8 influences per vertex go in vertex attributes; denser ones (the
  * default biharmonic rig weights every vertex by every joint) in an RGBA32F texture. Both
@@ -107,55 +108,46 @@ export class SkinnedFace {
 		const geometry = new BufferGeometry();
 		geometry.setAttribute( 'position', new BufferAttribute( positions, 3 ) );
 		geometry.setIndex( new BufferAttribute( faces, 1 ) );
-		geometry.computeVertexNormals(); // the rest normals, for picking tools and degenerate triangles
+		geometry.computeVertexNormals(); // rest normals: for picking tools, and where triangles collapse
 		geometry.computeBoundingBox();
 		geometry.computeBoundingSphere();
-		const { ranges, texture: incidenceTexture } = incidences( faces, nVertices );
-		geometry.setAttribute( 'incidence', new BufferAttribute( ranges, 2 ) );
 
-		// shared by the skinning pass and the display (heat map) materials
+		// shared by the skinning pass and the display material (heat map)
 		this._skinUniforms = {
 			displacementTexture: { value: null },
 			skinWeightTexture: { value: null },
 			skinQuads: { value: 0 },
 		};
 
-		// the skinning pass draws the same vertices, unindexed, as points into a float target
-		const width = SKIN_TEXTURE_WIDTH;
-		const height = Math.ceil( nVertices / width );
-		const passGeometry = new BufferGeometry();
-		passGeometry.setAttribute( 'position', geometry.getAttribute( 'position' ) );
+		// Per pose, two passes draw every vertex as a point (unindexed, so gl_VertexID is the
+		// vertex index) into its texel of a float target: skinned positions, then normals.
+		const size = { value: [ SKIN_TEXTURE_WIDTH, Math.ceil( nVertices / SKIN_TEXTURE_WIDTH ) ] };
+		const positionTarget = vertexTarget( size.value );
+		const normalTarget = vertexTarget( size.value );
+		const { ranges, texture: incidenceTexture } = incidences( faces, nVertices );
+		const skinPass = pointsPass( shaders[ 'skin_pass.vert' ], shaders[ 'texel_pass.frag' ],
+			Object.assign( { passSize: size }, this._skinUniforms ), { position: geometry.getAttribute( 'position' ) } );
+		const normalPass = pointsPass( shaders[ 'normal_pass.vert' ], shaders[ 'texel_pass.frag' ], {
+			passSize: size,
+			skinnedPositions: { value: positionTarget.texture },
+			incidenceTexture: { value: incidenceTexture },
+		}, {
+			position: geometry.getAttribute( 'position' ), // its count is the number of points
+			normal: geometry.getAttribute( 'normal' ),
+			incidence: new BufferAttribute( ranges, 2 ),
+		} );
 		this._pass = {
-			geometry: passGeometry,
-			material: new ShaderMaterial( {
-				name: 'SkinnedFace.skinPass',
-				glslVersion: GLSL3,
-				uniforms: Object.assign( { skinPassSize: { value: [ width, height ] } }, this._skinUniforms ),
-				vertexShader: shaders[ 'skin_pass.vert' ],
-				fragmentShader: shaders[ 'skin_pass.frag' ],
-				blending: NoBlending, // float targets cannot blend without EXT_float_blend
-				depthTest: false,
-				depthWrite: false,
-			} ),
-			target: new WebGLRenderTarget( width, height, {
-				type: FloatType, format: RGBAFormat, minFilter: NearestFilter, magFilter: NearestFilter,
-				depthBuffer: false, generateMipmaps: false,
-			} ),
-			scene: new Scene(),
-			camera: new Camera(), // unused by the shader; three.js needs one
-			done: new WeakMap(), // renderer -> the pose version its target holds
-			renderer: null, // a private one, only if deformedPositions() comes before any drawing
+			skin: skinPass, normal: normalPass, positionTarget, normalTarget,
+			camera: new Camera(), // unused by the shaders; three.js needs one
+			done: new WeakMap(), // renderer -> the version of the pose its targets hold
+			renderer: null, // a private one, only if a readback comes before any drawing
 		};
-
-		const points = new Points( passGeometry, this._pass.material );
-		points.frustumCulled = false;
-		this._pass.scene.add( points );
 		this._version = 0; // bumped by every change of pose or rig
 
 		const uniforms = UniformsUtils.merge( [ UniformsLib.lights ] );
 		Object.assign( uniforms, this._skinUniforms, {
-			skinnedPositions: { value: this._pass.target.texture },
-			incidenceTexture: { value: incidenceTexture },
+			skinnedPositions: { value: positionTarget.texture },
+			skinnedNormals: { value: normalTarget.texture },
 			diffuse: { value: new Color( 0xd9b8a6 ) },
 			specular: { value: 0.03 },
 			shininess: { value: 24 },
@@ -177,12 +169,12 @@ export class SkinnedFace {
 		this.mesh.name = 'SkinnedFace';
 		// the skinned surface leaves the rest pose's bounding sphere, and one object gains nothing from culling
 		this.mesh.frustumCulled = false;
-		// a nested render, as three.js's Reflector does: the skinning pass runs only when the
-		// pose changed since this renderer last ran it
+		// a nested render, as three.js's Reflector does; the passes run only when the pose
+		// changed since this renderer last ran them
 		this.mesh.onBeforeRender = ( renderer ) => {
 
 			this._renderer = renderer;
-			this._skin( renderer );
+			this._runPasses( renderer );
 
 		};
 
@@ -334,23 +326,19 @@ export class SkinnedFace {
 	 */
 	deformedPositions( renderer = this._renderer ?? this._privateRenderer() ) {
 
-		const v = this.nVertices;
-		const { target } = this._pass;
-		this._skin( renderer );
-		const texels = new Float32Array( 4 * target.width * target.height );
-		renderer.readRenderTargetPixels( target, 0, 0, target.width, target.height, texels );
+		return this._readBack( renderer, this._pass.positionTarget );
 
-		const positions = new Float32Array( 3 * v );
-		for ( let i = 0; i < v; i ++ ) {
+	}
 
-			if ( texels[ 4 * i + 3 ] !== 1 ) throw new Error( `SkinnedFace.deformedPositions: vertex ${ i } was not written by the skinning pass.` );
-			positions[ 3 * i ] = texels[ 4 * i ];
-			positions[ 3 * i + 1 ] = texels[ 4 * i + 1 ];
-			positions[ 3 * i + 2 ] = texels[ 4 * i + 2 ];
+	/**
+	 * The unit normals of the deformed surface as drawn (area-weighted over each vertex's
+	 * triangles), read back from the GPU.
+	 * @param {WebGLRenderer} [renderer] - defaults to the renderer that last drew the face.
+	 * @returns {Float32Array} (V*3) unit vectors, object space.
+	 */
+	deformedNormals( renderer = this._renderer ?? this._privateRenderer() ) {
 
-		}
-
-		return positions;
+		return this._readBack( renderer, this._pass.normalTarget );
 
 	}
 
@@ -360,16 +348,23 @@ export class SkinnedFace {
 		this._disposeRigTextures();
 		this.mesh.geometry.dispose();
 		this.mesh.material.dispose();
-		this.mesh.material.uniforms.incidenceTexture.value.dispose();
-		this._pass.geometry.dispose();
-		this._pass.material.dispose();
-		this._pass.target.dispose();
+		const { skin, normal, positionTarget, normalTarget } = this._pass;
+		for ( const pass of [ skin, normal ] ) {
+
+			pass.geometry.dispose();
+			pass.material.dispose();
+
+		}
+
+		normal.material.uniforms.incidenceTexture.value.dispose();
+		positionTarget.dispose();
+		normalTarget.dispose();
 		this._pass.renderer?.dispose();
 
 	}
 
-	/** Run the skinning pass on `renderer` unless its target already holds this pose. */
-	_skin( renderer ) {
+	/** Run the skinning and normal passes on `renderer` unless its targets hold this pose. */
+	_runPasses( renderer ) {
 
 		const pass = this._pass;
 		if ( pass.done.get( renderer ) === this._version ) return;
@@ -379,10 +374,15 @@ export class SkinnedFace {
 		const previousClearAlpha = renderer.getClearAlpha();
 		try {
 
-			renderer.setRenderTarget( pass.target );
 			renderer.setClearColor( 0x000000, 0 );
-			renderer.clear();
-			renderer.render( pass.scene, pass.camera );
+			for ( const [ { scene }, target ] of [ [ pass.skin, pass.positionTarget ], [ pass.normal, pass.normalTarget ] ] ) {
+
+				renderer.setRenderTarget( target );
+				renderer.clear();
+				renderer.render( scene, pass.camera );
+
+			}
+
 			pass.done.set( renderer, this._version );
 
 		} finally {
@@ -391,6 +391,28 @@ export class SkinnedFace {
 			renderer.setClearColor( previousClearColor, previousClearAlpha );
 
 		}
+
+	}
+
+	/** (V*3) floats of a per-vertex target, brought up to date first. */
+	_readBack( renderer, target ) {
+
+		this._runPasses( renderer );
+		const v = this.nVertices;
+		const texels = new Float32Array( 4 * target.width * target.height );
+		renderer.readRenderTargetPixels( target, 0, 0, target.width, target.height, texels );
+
+		const values = new Float32Array( 3 * v );
+		for ( let i = 0; i < v; i ++ ) {
+
+			if ( texels[ 4 * i + 3 ] !== 1 ) throw new Error( `SkinnedFace: vertex ${ i } was not written by its pass.` );
+			values[ 3 * i ] = texels[ 4 * i ];
+			values[ 3 * i + 1 ] = texels[ 4 * i + 1 ];
+			values[ 3 * i + 2 ] = texels[ 4 * i + 2 ];
+
+		}
+
+		return values;
 
 	}
 
@@ -406,7 +428,7 @@ export class SkinnedFace {
 				const attribute = new BufferAttribute( new ArrayType( 4 * v ), 4 );
 				if ( ArrayType === Uint16Array ) attribute.gpuType = IntType; // uvec4 in the shader, not normalised floats
 				geometry.setAttribute( name, attribute );
-				this._pass.geometry.setAttribute( name, attribute );
+				this._pass.skin.geometry.setAttribute( name, attribute );
 
 			}
 
@@ -456,7 +478,7 @@ export class SkinnedFace {
 	_setDefine( define ) {
 
 		const defines = define === null ? {} : { [ define ]: '' };
-		for ( const material of [ this.mesh.material, this._pass.material ] ) {
+		for ( const material of [ this.mesh.material, this._pass.skin.material ] ) {
 
 			material.defines = defines;
 			material.needsUpdate = true;
@@ -509,7 +531,44 @@ async function loadShaders( baseURL ) {
 }
 
 /**
- * Each vertex's triangles for the deformed normals (web/shaders/face.vert): for every
+ * A float target with one texel per vertex (web/shaders/vertex_texels.glsl).
+ * @param {number[]} size - [width, height] texels.
+ */
+function vertexTarget( [ width, height ] ) {
+
+	return new WebGLRenderTarget( width, height, {
+		type: FloatType, format: RGBAFormat, minFilter: NearestFilter, magFilter: NearestFilter,
+		depthBuffer: false, generateMipmaps: false,
+	} );
+
+}
+
+/**
+ * A pass that draws one point per vertex with `vertexShader`; render its scene into a
+ * vertexTarget.
+ * @param {Object<string, BufferAttribute>} attributes - shared with the face's geometry.
+ * @returns {{scene: Scene, geometry: BufferGeometry, material: ShaderMaterial}}
+ */
+function pointsPass( vertexShader, fragmentShader, uniforms, attributes ) {
+
+	const geometry = new BufferGeometry();
+	for ( const [ name, attribute ] of Object.entries( attributes ) ) geometry.setAttribute( name, attribute );
+	const material = new ShaderMaterial( {
+		glslVersion: GLSL3, uniforms, vertexShader, fragmentShader,
+		blending: NoBlending, // float targets cannot blend without EXT_float_blend
+		depthTest: false,
+		depthWrite: false,
+	} );
+	const points = new Points( geometry, material );
+	points.frustumCulled = false;
+	const scene = new Scene();
+	scene.add( points );
+	return { scene, geometry, material };
+
+}
+
+/**
+ * Each vertex's triangles for the deformed normals (web/shaders/normal_pass.vert): for every
  * corner of every triangle, the other two corners in winding order, grouped by vertex.
  * @param {Uint32Array} faces - (F*3) vertex indices.
  * @param {number} nVertices
