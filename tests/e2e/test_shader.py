@@ -56,12 +56,12 @@ function parseRig( buffer ) {
 }
 
 window.check = {
-	async load( projectId ) {
+	async load( projectId, scale = 1 ) {
 		const buffer = await fetchBinary( `/api/projects/${ projectId }/mesh/arrays` );
 		const view = new DataView( buffer );
 		const [ v, f ] = [ view.getUint32( 8, true ), view.getUint32( 12, true ) ];
 		const face = await SkinnedFace.create( {
-			positions: new Float32Array( buffer, 16, 3 * v ),
+			positions: new Float32Array( buffer, 16, 3 * v ).map( ( x ) => x * scale ),
 			faces: new Uint32Array( buffer, 16 + 12 * v, 3 * f ),
 		} );
 		this.viewer ??= new Viewer( document.getElementById( 'viewport' ) );
@@ -263,3 +263,24 @@ def test_pose_heatmap_and_wireframe_change_the_pixels(sample, server):
     assert _changed(_pixels(page), rest) > 0.1 * face
     page.evaluate("check.viewer.setWireframe(false)")
     assert _changed(_pixels(page), rest) == 0
+
+
+def test_viewer_frames_any_units_projects_and_resizes(sample):
+    """Framing depends on the bounding sphere only: the face in metres, centimetres or
+    millimetres looks the same; project() gives page pixels; the view follows its container."""
+    page, project_id, positions = sample
+    coverage, clipping = {}, {}
+    for scale in (0.01, 1, 10):
+        page.evaluate("([id, s]) => check.load(id, s)", [project_id, scale])
+        coverage[scale] = _pixels(page)
+        clipping[scale] = np.array(page.evaluate("[check.viewer.camera.near, check.viewer.camera.far]")) / scale
+    for scale in (0.01, 10):
+        assert _changed(coverage[scale], coverage[1]) < 0.002
+        assert clipping[scale] == pytest.approx(clipping[1])
+
+    centre = page.evaluate("check.face.mesh.geometry.boundingSphere.center.toArray()")
+    assert page.evaluate("(p) => check.viewer.project(p)", centre) == pytest.approx({"x": 320, "y": 240}, abs=0.5)
+    page.evaluate("document.getElementById('viewport').style.width = '320px'")
+    page.wait_for_function("check.viewer.renderer.domElement.width === 320 * devicePixelRatio")
+    assert page.evaluate("check.viewer.camera.aspect") == pytest.approx(320 / 480)
+    assert page.evaluate("(p) => check.viewer.project(p)", centre) == pytest.approx({"x": 160, "y": 240}, abs=0.5)
