@@ -11,6 +11,7 @@ THREE.Mesh.prototype.raycast = acceleratedRaycast;
 
 const CLICK_SLOP = 5; // CSS px a click may move and still place a point (more is an orbit)
 const GRAB_SLOP = 1.5; // CSS px beyond a marker's drawn radius that still grab it (close neighbours stay clickable)
+const SNAP_PX = 3; // CSS px: a click this close to the surface still lands on it
 const MARKER_SCALE = 0.0085; // marker radius as a fraction of the mesh's bounding-sphere radius
 
 /**
@@ -24,8 +25,9 @@ const MARKER_SCALE = 0.0085; // marker radius as a fraction of the mesh's boundi
 
 /**
  * Landmark picking on a face mesh: click to place the layout's next point, drag a marker
- * to slide it over the surface, select and delete, mirror left/right partners, undo and
- * redo every edit. Picking raycasts the rest pose through a three-mesh-bvh bounds tree.
+ * to slide it over the surface, select (Shift+click, or a click once all are placed) and
+ * delete, mirror left/right partners, undo and redo every edit. Picking raycasts the rest
+ * pose through a three-mesh-bvh bounds tree.
  *
  * Dispatches 'change' after any edit, selection or layout change, and 'hover' (detail:
  * {index}, -1 for none) as the pointer moves over markers.
@@ -604,26 +606,42 @@ export class LandmarkPicker extends EventTarget {
 
 	}
 
-	/** The ray through a pointer event's position. */
-	_ray( event ) {
+	/** The raycaster set to the ray through page point (x, y), CSS px. */
+	_ray( x, y ) {
 
 		const rect = this.viewer.renderer.domElement.getBoundingClientRect();
-		const ndc = new THREE.Vector2(
-			( ( event.clientX - rect.left ) / rect.width ) * 2 - 1,
-			- ( ( event.clientY - rect.top ) / rect.height ) * 2 + 1,
-		);
+		const ndc = new THREE.Vector2( ( ( x - rect.left ) / rect.width ) * 2 - 1, - ( ( y - rect.top ) / rect.height ) * 2 + 1 );
 		this._raycaster.setFromCamera( ndc, this.viewer.camera );
 		return this._raycaster;
 
 	}
 
-	/** The face hit under the pointer: {faceIndex, local point, distance} or null. */
+	/**
+	 * The face hit under the pointer: {faceIndex, local point, distance} or null. A pointer
+	 * just off the surface (on an eyelid's or the mouth's edge, at the silhouette) snaps to
+	 * the front-most hit on the nearest ring of rays within SNAP_PX, so points on a hole's
+	 * rim are as easy to place as any other.
+	 */
 	_hitFace( event ) {
 
 		if ( ! this.mesh ) return null;
-		const hit = this._ray( event ).intersectObject( this.mesh, false )[ 0 ];
-		if ( ! hit ) return null;
-		return { faceIndex: hit.faceIndex, local: this.mesh.worldToLocal( hit.point.clone() ), distance: hit.distance };
+		for ( let r = 0; r <= SNAP_PX; r ++ ) {
+
+			const rays = r === 0 ? 1 : 8 * r;
+			let best = null;
+			for ( let k = 0; k < rays; k ++ ) {
+
+				const angle = ( 2 * Math.PI * k ) / rays;
+				const hit = this._ray( event.clientX + r * Math.cos( angle ), event.clientY + r * Math.sin( angle ) ).intersectObject( this.mesh, false )[ 0 ];
+				if ( hit && ( ! best || hit.distance < best.distance ) ) best = hit;
+
+			}
+
+			if ( best ) return { faceIndex: best.faceIndex, local: this.mesh.worldToLocal( best.point.clone() ), distance: best.distance };
+
+		}
+
+		return null;
 
 	}
 
@@ -680,11 +698,9 @@ export class LandmarkPicker extends EventTarget {
 			pointerId: event.pointerId, controls: this.viewer.controls.enabled };
 		if ( marker >= 0 ) {
 
-			// a marker grab: the camera must not orbit while it slides
+			// maybe a marker drag: the camera must not orbit while it slides
 			this.viewer.controls.enabled = false;
 			this.viewer.renderer.domElement.style.cursor = 'grabbing';
-			this.selected = marker;
-			this._changed();
 
 		}
 
@@ -698,7 +714,13 @@ export class LandmarkPicker extends EventTarget {
 
 		const gesture = this._gesture;
 		if ( ! gesture || event.pointerId !== gesture.pointerId ) return;
-		if ( Math.hypot( event.clientX - gesture.x, event.clientY - gesture.y ) > CLICK_SLOP ) gesture.moved = true;
+		if ( ! gesture.moved && Math.hypot( event.clientX - gesture.x, event.clientY - gesture.y ) > CLICK_SLOP ) {
+
+			gesture.moved = true;
+			if ( gesture.marker >= 0 ) this.selected = gesture.marker;
+
+		}
+
 		if ( gesture.marker < 0 || ! gesture.moved ) return;
 		const hit = this._hitFace( event );
 		if ( ! hit ) return;
@@ -715,9 +737,11 @@ export class LandmarkPicker extends EventTarget {
 		const gesture = this._gesture;
 		if ( ! gesture || event.pointerId !== gesture.pointerId ) return;
 		this._endGesture();
-		if ( gesture.marker >= 0 ) {
+		if ( event.type === 'pointercancel' ) return;
+		if ( gesture.moved ) {
 
-			if ( this.state !== gesture.before ) {
+			// a marker drag is one undo step; any other drag was an orbit
+			if ( gesture.marker >= 0 && this.state !== gesture.before ) {
 
 				this._undo.push( gesture.before );
 				this._redo.length = 0;
@@ -729,8 +753,17 @@ export class LandmarkPicker extends EventTarget {
 
 		}
 
-		if ( gesture.moved || event.type === 'pointercancel' ) return; // an orbit, not a click
+		// a click places the next point, even on a marker: on a closed mouth the lower inner
+		// lip's points lie on the upper's. With nothing left to place, or with Shift, a
+		// click on a marker selects it.
 		const next = this.next;
+		if ( gesture.marker >= 0 && ( next < 0 || event.shiftKey ) ) {
+
+			this.select( gesture.marker );
+			return;
+
+		}
+
 		const hit = this._hitFace( event );
 		if ( next >= 0 && hit ) this.place( next, this._surfacePoint( hit.faceIndex, hit.local ) );
 		else if ( this.selected >= 0 ) this.select( - 1 );

@@ -43,7 +43,7 @@ function detailOf( body, fallback ) {
 
 }
 
-async function request( method, url, { json, binary = false } = {} ) {
+async function request( method, url, { json, binary = false, keepalive = false } = {} ) {
 
 	let response;
 	try {
@@ -52,6 +52,7 @@ async function request( method, url, { json, binary = false } = {} ) {
 			method,
 			headers: json === undefined ? {} : { 'Content-Type': 'application/json' },
 			body: json === undefined ? undefined : JSON.stringify( json ),
+			keepalive,
 		} );
 
 	} catch ( error ) {
@@ -110,8 +111,12 @@ export const api = {
 
 	createProject: ( name ) => request( 'POST', '/api/projects', { json: { name } } ),
 
-	/** @param {string} id @param {{name?: string, settings?: object}} patch */
-	patchProject: ( id, patch ) => request( 'PATCH', `/api/projects/${ id }`, { json: patch } ),
+	/**
+	 * @param {string} id
+	 * @param {{name?: string, settings?: object}} patch
+	 * @param {{keepalive?: boolean}} [options] - keepalive: the request outlives the page (unload).
+	 */
+	patchProject: ( id, patch, { keepalive = false } = {} ) => request( 'PATCH', `/api/projects/${ id }`, { json: patch, keepalive } ),
 
 	deleteProject: ( id ) => request( 'DELETE', `/api/projects/${ id }` ),
 

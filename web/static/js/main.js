@@ -185,8 +185,9 @@ class App {
 		this._rigJob = null;
 		if ( this.stream ) {
 
-			this.stream.close();
-			this.stream = null;
+			const stream = this.stream;
+			this.stream = null; // first: its 'closed' status is no news to report
+			stream.close();
 
 		}
 
@@ -274,7 +275,7 @@ class App {
 		heatmap.replaceChildren( option( '', 'off' ), ...jointNames.map( ( name, j ) => option( String( j ), `${ j } · ${ name }` ) ) );
 		heatmap.disabled = ! this.face?.nJoints;
 
-		const regions = layout ? [ ...new Set( layout.points.map( ( p ) => p.region ) ) ] : [];
+		const regions = layout ? layout.regions.filter( ( region ) => layout.points.some( ( p ) => p.region === region ) ) : [];
 		const fieldset = $( 'regions' );
 		fieldset.replaceChildren( fieldset.querySelector( 'legend' ), ...regions.map( ( region ) => {
 
@@ -472,6 +473,7 @@ class App {
 
 		const picker = this.picker;
 		if ( ! this.project?.mesh ) throw new ApiError( 0, 'Upload a mesh before placing landmarks.' );
+		if ( ! picker.dirty && this.project.landmarks ) return;
 		const missing = picker.missing();
 		if ( missing.length ) {
 
@@ -481,8 +483,8 @@ class App {
 		}
 
 		const id = this.projectId, ticket = this._open;
-		const button = $( 'save-landmarks' );
-		button.disabled = true;
+		clearTimeout( this._draftTimer ); // the save supersedes the draft
+		$( 'save-landmarks' ).disabled = true;
 		try {
 
 			const sent = picker.state;
@@ -504,7 +506,6 @@ class App {
 
 		} finally {
 
-			button.disabled = false;
 			this._updateLandmarkUI();
 
 		}
@@ -527,7 +528,7 @@ class App {
 		$( 'delete-point' ).disabled = picker.selected < 0;
 		$( 'mirror' ).disabled = ! hasMesh || ! this._canMirror();
 		$( 'clear-points' ).disabled = picker.placedCount === 0;
-		$( 'save-landmarks' ).disabled = ! hasMesh;
+		$( 'save-landmarks' ).disabled = ! hasMesh || ! picker.dirty; // saving drops the rig: only when something changed
 		this.guide.setLayout( layout );
 		this.guide.update( { placed: picker.points.map( Boolean ), next: hasMesh ? next : - 1, selected: picker.selected } );
 		this._updateHint();
@@ -549,7 +550,7 @@ class App {
 		if ( ! this.project ) text = 'Create a project to start.';
 		else if ( ! this.face ) text = '';
 		else if ( hovered >= 0 && layout ) text = `${ layout.points[ hovered ].name } · drag to slide it over the surface`;
-		else if ( layout && this.picker.next >= 0 ) text = `Click the mesh to place ${ layout.points[ this.picker.next ].name } · drag a marker to move it · right-drag pans`;
+		else if ( layout && this.picker.next >= 0 ) text = `Click the mesh to place ${ layout.points[ this.picker.next ].name } · drag a marker to move it · Shift+click selects`;
 		else if ( this.picker.selected >= 0 && layout ) text = `${ layout.points[ this.picker.selected ].name } selected · Delete removes it`;
 		else text = 'Drag to orbit · right-drag pans · wheel zooms · F frames the face';
 		$( 'hint' ).textContent = text;
@@ -568,7 +569,8 @@ class App {
 
 	}
 
-	async _flushDraft() {
+	/** @param {{keepalive?: boolean}} [options] - keepalive: the page is being unloaded. */
+	async _flushDraft( { keepalive = false } = {} ) {
 
 		clearTimeout( this._draftTimer );
 		this._draftTimer = 0;
@@ -583,7 +585,7 @@ class App {
 		if ( ! draft && ! project.settings?.draft ) return;
 		try {
 
-			const updated = await api.patchProject( project.id, { settings: { draft } } );
+			const updated = await api.patchProject( project.id, { settings: { draft } }, { keepalive } );
 			if ( this.project && this.project.id === updated.id ) this.project = updated;
 
 		} catch ( error ) {
@@ -663,9 +665,10 @@ class App {
 
 	_connectStream() {
 
-		if ( this.stream ) this.stream.close();
+		const old = this.stream;
 		const stream = new StreamClient( this.projectId );
-		this.stream = stream;
+		this.stream = stream; // before closing the old one, whose 'closed' status is then ignored
+		old?.close();
 		this._streaming = false;
 		stream.addEventListener( 'status', ( event ) => {
 
@@ -901,7 +904,7 @@ class App {
 		window.addEventListener( 'keydown', guard( ( event ) => this._key( event ) ) );
 		window.addEventListener( 'beforeunload', () => {
 
-			if ( this._draftTimer ) this._flushDraft();
+			if ( this._draftTimer ) this._flushDraft( { keepalive: true } );
 
 		} );
 
