@@ -67,7 +67,7 @@ def serve_instrumented(port: int, data_dir: str) -> None:
     import uvicorn
     from uvicorn.protocols.websockets.auto import AutoWebSocketsProtocol  # what ws="auto" runs
 
-    from server.app import create_app
+    from server.app import UVICORN_OPTIONS, create_app
 
     protocols = weakref.WeakSet()
     cls = AutoWebSocketsProtocol
@@ -142,7 +142,7 @@ def serve_instrumented(port: int, data_dir: str) -> None:
             out["log_index"], out["log_time"] = log_index.tolist(), log_time.tolist()
         return out
 
-    uvicorn.run(app, host="127.0.0.1", port=port, log_level="info")
+    uvicorn.run(app, host="127.0.0.1", port=port, log_level="info", **UVICORN_OPTIONS)
 
 
 def instrumented_command(port: int, data_dir: Path) -> list[str]:

@@ -479,7 +479,7 @@ def _cmd_serve(args) -> int:
     try:
         import uvicorn
 
-        from server.app import create_app
+        from server.app import UVICORN_OPTIONS, create_app
     except ImportError as exc:
         raise RetargetError(
             f"'{PROG} serve' needs the web server's packages ({exc.name} is missing): "
@@ -495,7 +495,7 @@ def _cmd_serve(args) -> int:
     host = f"[{args.host}]" if ":" in args.host else args.host
     print(f"retarget server: http://{host}:{args.port}/ (API docs at /docs), "
           f"projects in {data_dir.resolve()}", flush=True)
-    uvicorn.run(app, host=args.host, port=args.port, log_level="info")
+    uvicorn.run(app, host=args.host, port=args.port, log_level="info", **UVICORN_OPTIONS)
     return 0
 
 

@@ -24,10 +24,16 @@ from server.sample import ensure_sample_project
 from server.store import ProjectNotFound, ProjectStore, StaleRig
 from server.web import mount_web
 
-__all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "create_app"]
+__all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "UVICORN_OPTIONS", "create_app"]
 
 DEFAULT_MAX_UPLOAD_BYTES = 64 * 2**20
 DEFAULT_MAX_VERTICES = 500_000
+UVICORN_OPTIONS = {
+    # stream frames are float32 noise to deflate, which cost two thirds of the server's
+    # streaming CPU with 50 viewers (bench/viewers.py)
+    "ws_per_message_deflate": False,
+}
+"""How `retarget serve` runs uvicorn (benchmarks run the app the same way)."""
 
 
 def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,

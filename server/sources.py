@@ -9,6 +9,7 @@ a webcam or a file. The server only schedules it and encodes what the library re
 from __future__ import annotations
 
 import asyncio
+from functools import lru_cache
 
 import numpy as np
 
@@ -41,11 +42,9 @@ class DemoSource:
                 f"{self.layout.name!r}; this project has {len(target_points)} landmarks")
         if not 1.0 <= fps <= 240.0:
             raise RetargetError(f"fps must be between 1 and 240; got {fps}")
-        performer = sample_face(identity=_PERFORMER_IDENTITY)
-        lm = np.asarray(performer.landmarks68)[list(self.layout.ibug68)]
-        weights = demo_weights(int(round(DEMO_SECONDS * fps)), fps)
-        self.neutral = performer.vertices[lm]
-        self.frames = self.neutral + np.tensordot(weights, performer.expressions[:, lm], axes=1)
+        neutral68, frames68 = _performance68(float(fps))
+        ibug = list(self.layout.ibug68)
+        self.neutral, self.frames = neutral68[ibug], frames68[:, ibug]
         self.target_points = target_points
         self.fps = float(fps)
         self.set_regions(None)
@@ -67,5 +66,20 @@ class DemoSource:
             frame = encode_frame(self.displacements(index), frame_index=index,
                                  source_time=index / self.fps)
             hub.publish(project_id, frame)
-            index += 1
+            # after a stall, jump to the frame that is due now: a live source skips the
+            # frames it missed rather than publishing a burst of stale ones
+            index = max(index + 1, int((loop.time() - start) * self.fps))
             await asyncio.sleep(max(0.0, start + index / self.fps - loop.time()))
+
+
+@lru_cache(maxsize=4)
+def _performance68(fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """The performer's 68 landmarks: neutral (68, 3) and the looping performance
+    (F, 68, 3) at `fps`, built once per fps (generating the performer takes ~0.7 s)."""
+    performer = sample_face(identity=_PERFORMER_IDENTITY)
+    lm = np.asarray(performer.landmarks68)
+    weights = demo_weights(int(round(DEMO_SECONDS * fps)), fps)
+    neutral = performer.vertices[lm]
+    frames = neutral + np.tensordot(weights, performer.expressions[:, lm], axes=1)
+    neutral.flags.writeable = frames.flags.writeable = False  # shared by every source
+    return neutral, frames

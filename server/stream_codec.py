@@ -11,7 +11,8 @@ against each other. Layout (byte offsets):
     8   uint32   frame index
     12  uint32   point count N
     16  float64  source timestamp, seconds (when the source produced the frame)
-    24  float64  send timestamp, seconds since the Unix epoch (for latency figures)
+    24  float64  publish timestamp, seconds since the Unix epoch, taken when the frame is
+                 encoded, just before the hub publishes it (for latency figures)
     32  N x 3 float32 displacements, point-major (x0 y0 z0 x1 ...), target units
 
 The header is 32 bytes, a multiple of 4, so the decoder views the payload as a
