@@ -63,12 +63,13 @@ class DemoSource:
         loop = asyncio.get_running_loop()
         start, index = loop.time(), 0
         while hub.viewer_count(project_id):
+            # after a stall, jump to the frame that is due now: a live source skips the
+            # frames it missed rather than publishing a burst of stale ones
+            index = max(index, int((loop.time() - start) * self.fps))
             frame = encode_frame(self.displacements(index), frame_index=index,
                                  source_time=index / self.fps)
             hub.publish(project_id, frame)
-            # after a stall, jump to the frame that is due now: a live source skips the
-            # frames it missed rather than publishing a burst of stale ones
-            index = max(index + 1, int((loop.time() - start) * self.fps))
+            index += 1
             await asyncio.sleep(max(0.0, start + index / self.fps - loop.time()))
 
 

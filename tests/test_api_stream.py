@@ -214,3 +214,33 @@ def test_stop_sends_a_neutral_frame(app, sample_id):
             if frame.flags & FLAG_NEUTRAL:
                 break
         assert frame.flags & FLAG_NEUTRAL and np.all(frame.displacements == 0.0)
+
+
+def test_after_a_stall_the_demo_skips_to_the_due_frame_instead_of_a_stale_burst():
+    from retarget.sample_face import sample_face
+    from server.sources import DemoSource
+
+    face = sample_face(1)
+    source = DemoSource(face.vertices[face.landmarks68], "ibug68", fps=100.0)
+
+    class Recorder(StreamHub):
+        published: list[int] = []
+
+        def publish(self, project_id, frame):
+            self.published.append(decode_frame(frame).frame_index)
+
+    async def scenario():
+        hub = Recorder()
+        hub.subscribe("p")
+        task = asyncio.get_running_loop().create_task(source.run(hub, "p"))
+        await asyncio.sleep(0.1)
+        before = len(hub.published)
+        time.sleep(0.3)  # the event loop stalls for 30 frames
+        await asyncio.sleep(0.1)
+        task.cancel()
+        return hub.published, before
+
+    published, before = asyncio.run(scenario())
+    jump = published[before] - published[before - 1]
+    assert jump >= 25, f"after a 0.3 s stall the next frame index moved by {jump}, not ~30"
+    assert len(published) < before + 25, "the missed frames were published as a burst"
