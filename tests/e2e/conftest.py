@@ -121,6 +121,8 @@ def page(browser, request):
 
 
 def _expected_error(text: str) -> bool:
-    """HTTP errors a test provokes on purpose (bad uploads) are logged by Chromium as
-    'Failed to load resource'; the UI's own handling of them is what tests check."""
-    return "Failed to load resource" in text
+    """Errors Chromium logs for what tests provoke on purpose, whose handling by the UI
+    is what the tests check: HTTP errors of bad uploads ('Failed to load resource') and
+    the stream's reconnect attempts while a test restarts the server."""
+    return "Failed to load resource" in text or (
+        text.startswith("WebSocket connection to") and "ERR_CONNECTION_REFUSED" in text)
