@@ -4,6 +4,7 @@ unsaved points survive a reload."""
 
 from __future__ import annotations
 
+import base64
 import json
 import urllib.request
 
@@ -212,3 +213,38 @@ def test_unsaved_points_survive_a_reload(server, page, face_file):
     assert page.is_visible("#unsaved")
     assert page.inner_text("#next-point") == layout.point_names[5]
     assert api(server, "GET", f"/api/projects/{project['id']}")["landmarks"] is None
+
+
+def drop_file(page, name: str, data: bytes) -> None:
+    """Drop a file on the view as a drag from the desktop would."""
+    page.evaluate("""([name, b64]) => {
+        const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+        const transfer = new DataTransfer();
+        transfer.items.add(new File([bytes], name));
+        const zone = document.querySelector('#drop-zone');
+        for (const type of ['dragenter', 'dragover', 'drop'])
+            zone.dispatchEvent(new DragEvent(type, {dataTransfer: transfer, bubbles: true, cancelable: true}));
+    }""", [name, base64.b64encode(data).decode()])
+
+
+def test_drop_a_mesh_on_the_view_keeps_the_landmarked_project(server, page, face_file):
+    path, face = face_file
+    (sample,) = api(server, "GET", "/api/projects")
+    open_page(page, server, sample["id"])
+
+    drop_file(page, "notes.docx", b"PK\x03\x04")
+    page.wait_for_function("() => document.querySelector('#error').innerText.includes('.docx')")
+    page.click("#error-close")
+    assert not page.is_visible("#error")
+
+    # the sample has landmarks and a rig: the dropped mesh goes into a new project
+    drop_file(page, path.name, path.read_bytes())
+    page.wait_for_function("id => window.app.projectId !== id && window.app.face && window.app.face"
+                           ".mesh.geometry.attributes.position.count === 8430", arg=sample["id"], timeout=30_000)
+    page.evaluate("() => window.app.ready")
+    projects = api(server, "GET", "/api/projects")
+    assert [p["name"] for p in projects] == ["Sample face", path.stem]
+    assert projects[0] == sample
+    assert page.evaluate("() => location.hash") == f"#p={projects[1]['id']}"
+    assert page.input_value("#project-select") == projects[1]["id"]
+    assert "new project" in page.inner_text("#landmarks-note")

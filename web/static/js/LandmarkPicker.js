@@ -523,8 +523,7 @@ export class LandmarkPicker extends EventTarget {
 
 	_changed() {
 
-		this._updateMarkers();
-		this.viewer.render();
+		this._updateMarkers(); // drawn by the viewer's next frame
 		this.dispatchEvent( new Event( 'change' ) );
 
 	}
@@ -809,7 +808,6 @@ export class LandmarkPicker extends EventTarget {
 
 				this.hovered = marker;
 				this._updateMarkers();
-				this.viewer.render();
 				this.dispatchEvent( new CustomEvent( 'hover', { detail: { index: marker } } ) );
 
 			}

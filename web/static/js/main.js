@@ -36,6 +36,8 @@ class App {
 		this.project = null;
 		this.projects = [];
 		this.layouts = [];
+		this.info = null; // GET /api/info: upload limits, mesh formats, rig methods
+		this.rigInfo = null; // GET /api/projects/{id}/rig of the shown project
 		this.ready = Promise.resolve();
 
 		this._open = 0; // bumps on every project switch: late answers for an old project are dropped
@@ -116,12 +118,12 @@ class App {
 	async openProject( id, { force = false } = {} ) {
 
 		if ( id === this.projectId && ! force ) return true;
-		await this._flushDraft();
 		let resolveReady;
 		this.ready = new Promise( ( resolve ) => ( resolveReady = resolve ) );
 		const ticket = ++ this._open;
 		try {
 
+			await this._flushDraft();
 			this._closeProject();
 			this.projectId = id;
 			$( 'project-select' ).value = id;
@@ -203,7 +205,9 @@ class App {
 		}
 
 		this.project = null;
+		this.rigInfo = null;
 		$( 'mesh-info' ).textContent = '';
+		$( 'landmarks-note' ).textContent = '';
 		$( 'rig-progress' ).value = 0;
 		$( 'rig-message' ).textContent = '';
 		$( 'status' ).textContent = 'offline';
