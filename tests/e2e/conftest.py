@@ -7,6 +7,7 @@ and browser console errors or uncaught page exceptions fail the test that caused
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import socket
@@ -78,6 +79,36 @@ class Server:
     def restart(self) -> "Server":
         self.stop()
         return self.start()
+
+    def read(self, path: str) -> bytes:
+        """The bytes of GET `path`."""
+        with urllib.request.urlopen(self.url + path, timeout=30) as reply:
+            return reply.read()
+
+    def api(self, method: str, path: str, body: dict | None = None):
+        """A JSON request to the REST API; its JSON answer (None for 204)."""
+        data = None if body is None else json.dumps(body).encode()
+        request = urllib.request.Request(self.url + path, data=data, method=method,
+                                         headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(request, timeout=30) as reply:
+            return json.loads(reply.read() or b"null")
+
+    def wait_for_project(self, project_id: str, check, timeout_s: float = 120.0) -> dict:
+        """Poll the project's JSON until `check(project)` holds; the project."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            project = self.api("GET", f"/api/projects/{project_id}")
+            if check(project):
+                return project
+            assert time.monotonic() < deadline, f"project never got there: {project}"
+            time.sleep(0.1)
+
+
+def open_project(page, server: Server, project_id: str) -> None:
+    """Load the app on `project_id` and wait until it is shown."""
+    page.goto(f"{server.url}/#p={project_id}")
+    page.wait_for_function("() => window.app && window.app.projectId")
+    page.evaluate("() => window.app.ready")
 
 
 @pytest.fixture

@@ -5,9 +5,6 @@ demo performance and see the face move; restart the server and find it all again
 from __future__ import annotations
 
 import io
-import json
-import time
-import urllib.request
 
 import numpy as np
 import pytest
@@ -16,7 +13,7 @@ from PIL import Image
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
-from tests.e2e.conftest import ARTIFACTS
+from tests.e2e.conftest import ARTIFACTS, open_project
 
 _IDENTITY = np.array([-0.8, 0.6, -0.5, 0.4, 0.9])  # not the sample project's face
 
@@ -30,29 +27,10 @@ def face_file(tmp_path_factory):
     return path, face
 
 
-def api(server, method: str, path: str, body: dict | None = None):
-    data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(server.url + path, data=data, method=method,
-                                     headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(request, timeout=30) as reply:
-        return json.loads(reply.read() or b"null")
 
 
-def wait_for_project(server, project_id: str, check, timeout_s: float = 60.0) -> dict:
-    """Poll the project's JSON until `check(project)` holds."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        project = api(server, "GET", f"/api/projects/{project_id}")
-        if check(project):
-            return project
-        assert time.monotonic() < deadline, f"project never got there: {project}"
-        time.sleep(0.1)
 
 
-def open_project(page, server, project_id: str) -> None:
-    page.goto(f"{server.url}/#p={project_id}")
-    page.wait_for_function("() => window.app && window.app.projectId !== undefined")
-    page.evaluate("() => window.app.ready")
 
 
 def face_clip(page, points: np.ndarray) -> dict:
@@ -70,7 +48,7 @@ def pixels(page, clip: dict) -> np.ndarray:
 
 def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file):
     path, face = face_file
-    project = api(server, "POST", "/api/projects", {"name": "e2e face"})
+    project = server.api("POST", "/api/projects", {"name": "e2e face"})
     open_project(page, server, project["id"])
 
     # upload through the file picker; the mesh appears with the uploaded vertex count
@@ -88,8 +66,8 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
         clicks.append((xy["x"], xy["y"]))
         page.mouse.click(xy["x"], xy["y"])
     page.click("#save-landmarks")
-    wait_for_project(server, project["id"], lambda p: p["landmarks"] and p["landmarks"]["n_points"] == 68)
-    stored = api(server, "GET", f"/api/projects/{project['id']}/landmarks")
+    server.wait_for_project(project["id"], lambda p: p["landmarks"] and p["landmarks"]["n_points"] == 68)
+    stored = server.api("GET", f"/api/projects/{project['id']}/landmarks")
     placed = landmarks_from_json(stored, face.vertices, face.faces).positions(face.vertices)
     # every point lands under its click ...
     shown = np.array([list(page.evaluate("p => window.app.viewer.project(p)", p.tolist()).values())
@@ -104,7 +82,7 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
 
     # rig with the default deformer; the progress bar finishes and the rig arrives
     page.click("#rig-button")
-    wait_for_project(server, project["id"], lambda p: p["rig"] is not None)
+    server.wait_for_project(project["id"], lambda p: p["rig"] is not None)
     page.wait_for_function("() => { const p = document.querySelector('#rig-progress');"
                            " return p.value >= p.max; }")
 
@@ -133,10 +111,10 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
     page.reload()
     page.wait_for_function("() => window.app && window.app.projectId")
     page.evaluate("() => window.app.ready")
-    again = api(server, "GET", f"/api/projects/{project['id']}")
+    again = server.api("GET", f"/api/projects/{project['id']}")
     assert again["mesh"]["n_vertices"] == len(face.vertices)
     assert again["landmarks"]["n_points"] == 68 and again["rig"] is not None
-    assert api(server, "GET", f"/api/projects/{project['id']}/landmarks") == stored
+    assert server.api("GET", f"/api/projects/{project['id']}/landmarks") == stored
     page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
                            ".attributes.position.count === n && window.app.face.nJoints === 68",
                            arg=len(face.vertices), timeout=30_000)

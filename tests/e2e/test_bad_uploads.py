@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import urllib.request
 
 import pytest
 
@@ -18,10 +17,6 @@ def small_server(tmp_path):
     srv.stop()
 
 
-def get(server, path: str):
-    with urllib.request.urlopen(server.url + path, timeout=30) as reply:
-        return reply.read()
-
 
 BAD = {
     "not_a_mesh.obj": (b"this is not a mesh\n" * 10, "no triangle mesh"),
@@ -35,9 +30,9 @@ BAD = {
 @pytest.mark.parametrize("name", list(BAD))
 def test_bad_upload_shows_the_reason_and_keeps_projects(small_server, page, tmp_path, name):
     data, reason = BAD[name]
-    projects = json.loads(get(small_server, "/api/projects"))
+    projects = json.loads(small_server.read("/api/projects"))
     (sample,) = projects
-    before = {path: get(small_server, f"/api/projects/{sample['id']}{path}")
+    before = {path: small_server.read(f"/api/projects/{sample['id']}{path}")
               for path in ("", "/mesh/arrays", "/landmarks", "/rig/weights")}
 
     page.goto(f"{small_server.url}/#p={sample['id']}")
@@ -51,9 +46,9 @@ def test_bad_upload_shows_the_reason_and_keeps_projects(small_server, page, tmp_
     message = page.inner_text("#error")
     assert reason.lower() in message.lower(), message
 
-    after = {path: get(small_server, f"/api/projects/{sample['id']}{path}") for path in before}
+    after = {path: small_server.read(f"/api/projects/{sample['id']}{path}") for path in before}
     assert after == before
-    assert json.loads(get(small_server, "/api/projects")) == projects
+    assert json.loads(small_server.read("/api/projects")) == projects
     # the face on screen is still the sample's
     n = json.loads(before[""])["mesh"]["n_vertices"]
     assert page.evaluate("() => window.app.face.mesh.geometry.attributes.position.count") == n

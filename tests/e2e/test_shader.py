@@ -13,9 +13,7 @@ pixels follow the pose, the heat map and the wireframe switch.
 from __future__ import annotations
 
 import base64
-import json
 import time
-import urllib.request
 
 import numpy as np
 import pytest
@@ -104,17 +102,10 @@ def _b64(array: np.ndarray) -> str:
     return base64.b64encode(np.ascontiguousarray(array).tobytes()).decode()
 
 
-def _api(server, method: str, path: str, body=None):
-    data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(server.url + path, data=data, method=method,
-                                     headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(request, timeout=30) as reply:
-        return json.loads(reply.read())
 
 
 def _mesh_arrays(server, project_id: str) -> tuple[np.ndarray, np.ndarray]:
-    with urllib.request.urlopen(f"{server.url}/api/projects/{project_id}/mesh/arrays", timeout=30) as reply:
-        data = reply.read()
+    data = server.read(f"/api/projects/{project_id}/mesh/arrays")
     v, f = np.frombuffer(data, "<u4", 2, 8)
     return (np.frombuffer(data, "<f4", 3 * v, 16).reshape(v, 3),
             np.frombuffer(data, "<u4", 3 * f, 16 + 12 * v).reshape(f, 3))
@@ -128,19 +119,19 @@ def _stored_rig(server, project_id: str) -> SkinWeights:
 
 
 def _wait_for_rig(server, project_id: str, method: str) -> None:
-    job = _api(server, "POST", f"/api/projects/{project_id}/rig", {"method": method})
+    job = server.api("POST", f"/api/projects/{project_id}/rig", {"method": method})
     deadline = time.monotonic() + 120
     while job["state"] == "running":
         assert time.monotonic() < deadline, job
         time.sleep(0.2)
-        job = _api(server, "GET", f"/api/jobs/{job['id']}")
+        job = server.api("GET", f"/api/jobs/{job['id']}")
     assert job["state"] == "done", job
 
 
 @pytest.fixture
 def sample(server, page):
     """The sample project shown in the check page: (page, project id, rest positions)."""
-    project_id = next(p["id"] for p in _api(server, "GET", "/api/projects") if p["settings"].get("sample"))
+    project_id = next(p["id"] for p in server.api("GET", "/api/projects") if p["settings"].get("sample"))
     page.route(server.url + "/skin-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
     page.goto(server.url + "/skin-check")
     page.wait_for_function("window.ready === true")

@@ -4,8 +4,6 @@ reconnect after a policy close (1008) or close()."""
 
 from __future__ import annotations
 
-import json
-import urllib.request
 
 import pytest
 
@@ -36,12 +34,6 @@ window.ready = true;
 """
 
 
-def _api(server, method: str, path: str, body=None):
-    data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(server.url + path, data=data, method=method,
-                                     headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(request, timeout=30) as reply:
-        return json.loads(reply.read())
 
 
 @pytest.fixture
@@ -53,7 +45,7 @@ def client_page(server, page):
 
 
 def _sample_id(server) -> str:
-    return next(p["id"] for p in _api(server, "GET", "/api/projects") if p["settings"].get("sample"))
+    return next(p["id"] for p in server.api("GET", "/api/projects") if p["settings"].get("sample"))
 
 
 def _log(page) -> dict:
@@ -105,7 +97,7 @@ def test_reconnects_and_restarts_the_demo(server, client_page):
 
 def test_policy_close_does_not_reconnect(server, client_page):
     page = client_page
-    project_id = _api(server, "POST", "/api/projects", {"name": "no landmarks"})["id"]
+    project_id = server.api("POST", "/api/projects", {"name": "no landmarks"})["id"]
     page.evaluate("(id) => open_(id).connect()", project_id)
     page.wait_for_function("log.statuses.at(-1).state === 'closed'", timeout=20_000)
     page.wait_for_timeout(1000)  # longer than the first backoff steps

@@ -5,8 +5,6 @@ unsaved points survive a reload."""
 from __future__ import annotations
 
 import base64
-import json
-import urllib.request
 
 import numpy as np
 import pytest
@@ -15,6 +13,7 @@ from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
+from tests.e2e.conftest import open_project
 
 _IDENTITY = np.array([0.5, -0.4, 0.7, -0.3, 0.2])  # neither the sample project's face nor test_app_flow's
 CLICK_TOLERANCE = 0.15  # cm: a click lands within a few pixels, about 0.03 cm each at this zoom
@@ -29,18 +28,8 @@ def face_file(tmp_path_factory):
     return path, face
 
 
-def api(server, method: str, path: str, body: dict | None = None):
-    data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(server.url + path, data=data, method=method,
-                                     headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(request, timeout=30) as reply:
-        return json.loads(reply.read() or b"null")
 
 
-def open_page(page, server, project_id: str) -> None:
-    page.goto(f"{server.url}/#p={project_id}")
-    page.wait_for_function("() => window.app && window.app.projectId")
-    page.evaluate("() => window.app.ready")
 
 
 def screen(page, point) -> tuple[float, float]:
@@ -70,8 +59,8 @@ def placed_count(page) -> int:
 def uploaded_project(server, page, face_file) -> tuple[dict, object]:
     """A new project with the face uploaded through the file picker, shown in the page."""
     path, face = face_file
-    project = api(server, "POST", "/api/projects", {"name": "editing"})
-    open_page(page, server, project["id"])
+    project = server.api("POST", "/api/projects", {"name": "editing"})
+    open_project(page, server, project["id"])
     page.set_input_files("#file-input", str(path))
     page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
                            ".attributes.position.count === n", arg=len(face.vertices), timeout=30_000)
@@ -155,7 +144,7 @@ def test_pick_drag_undo_delete_mirror_save_reload_and_switch_layout(server, page
     assert page.is_visible("#unsaved")
     page.click("#save-landmarks")
     page.wait_for_function("() => !window.app.picker.dirty")
-    stored = api(server, "GET", f"/api/projects/{project['id']}/landmarks")
+    stored = server.api("GET", f"/api/projects/{project['id']}/landmarks")
     assert stored["layout"] == "dutreve21"
     positions = landmarks_from_json(stored, face.vertices, face.faces).positions(face.vertices)
     np.testing.assert_allclose(positions, mirrored, atol=1e-4)
@@ -192,7 +181,7 @@ def test_pick_drag_undo_delete_mirror_save_reload_and_switch_layout(server, page
     page.click("#clear-points")
     page.click("#save-landmarks")
     assert "not placed" in page.inner_text("#error") and "brow_right_outer" in page.inner_text("#error")
-    assert api(server, "GET", f"/api/projects/{project['id']}/landmarks") == stored
+    assert server.api("GET", f"/api/projects/{project['id']}/landmarks") == stored
 
 
 def test_unsaved_points_survive_a_reload(server, page, face_file):
@@ -203,16 +192,15 @@ def test_unsaved_points_survive_a_reload(server, page, face_file):
         click_at(page, point)
     before = picked(page)
     # the draft reaches the server in the project's settings shortly after the last edit
-    page.wait_for_function("id => fetch(`/api/projects/${id}`).then(r => r.json())"
-                           ".then(p => p.settings.draft && p.settings.draft.points.filter(Boolean).length === 5)",
-                           arg=project["id"])
+    server.wait_for_project(project["id"], lambda p: p["settings"].get("draft") and sum(
+        point is not None for point in p["settings"]["draft"]["points"]) == 5)
     page.reload()
     page.wait_for_function("() => window.app && window.app.projectId")
     page.evaluate("() => window.app.ready")
     assert picked(page) == before
     assert page.is_visible("#unsaved")
     assert page.inner_text("#next-point") == layout.point_names[5]
-    assert api(server, "GET", f"/api/projects/{project['id']}")["landmarks"] is None
+    assert server.api("GET", f"/api/projects/{project['id']}")["landmarks"] is None
 
 
 def drop_file(page, name: str, data: bytes) -> None:
@@ -229,8 +217,8 @@ def drop_file(page, name: str, data: bytes) -> None:
 
 def test_drop_a_mesh_on_the_view_keeps_the_landmarked_project(server, page, face_file):
     path, face = face_file
-    (sample,) = api(server, "GET", "/api/projects")
-    open_page(page, server, sample["id"])
+    (sample,) = server.api("GET", "/api/projects")
+    open_project(page, server, sample["id"])
 
     drop_file(page, "notes.docx", b"PK\x03\x04")
     page.wait_for_function("() => document.querySelector('#error').innerText.includes('.docx')")
@@ -242,7 +230,7 @@ def test_drop_a_mesh_on_the_view_keeps_the_landmarked_project(server, page, face
     page.wait_for_function("id => window.app.projectId !== id && window.app.face && window.app.face"
                            ".mesh.geometry.attributes.position.count === 8430", arg=sample["id"], timeout=30_000)
     page.evaluate("() => window.app.ready")
-    projects = api(server, "GET", "/api/projects")
+    projects = server.api("GET", "/api/projects")
     assert [p["name"] for p in projects] == ["Sample face", path.stem]
     assert projects[0] == sample
     assert page.evaluate("() => location.hash") == f"#p={projects[1]['id']}"
