@@ -104,7 +104,7 @@ def main(argv=None) -> int:
                       f" ({'GPU' if args.gpu else 'SwiftShader'}), {args.repeats} x {args.seconds:g} s"
                       f" at {args.fps:g} fps:")
                 print(f"  publish -> applied in the page: {fmt(stats(applied))}")
-                print(f"  per repeat medians: " + ", ".join(
+                print("  per repeat medians: " + ", ".join(
                     f"{stats(run['applied'])['median']:.2f}" for run in runs) + " ms")
                 if draw:
                     print(f"  publish -> next animation frame: {fmt(stats(painted))}")
