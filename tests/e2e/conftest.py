@@ -119,8 +119,10 @@ def server(tmp_path):
     srv.stop()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser():
+    """Chromium for one test module: Playwright's sync API keeps an asyncio loop running
+    while it is open, which would break later tests that run their own loop."""
     if not os.path.exists(CHROMIUM):
         pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
     with sync_playwright() as p:
