@@ -104,6 +104,20 @@ class Server:
             time.sleep(0.1)
 
 
+def upload_face(server: Server, page, face_file, name: str) -> tuple[dict, object]:
+    """A new project `name` shown in the page, with `face_file` = (path, SampleFace)
+    uploaded through the file picker; the project JSON and the face."""
+    path, face = face_file
+    project = server.api("POST", "/api/projects", {"name": name})
+    open_project(page, server, project["id"])
+    page.set_input_files("#file-input", str(path))
+    page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
+                           ".attributes.position.count === n", arg=len(face.vertices), timeout=30_000)
+    page.evaluate("() => window.app.ready")
+    assert page.inner_text("#error").strip() == ""
+    return project, face
+
+
 def open_project(page, server: Server, project_id: str) -> None:
     """Load the app on `project_id` and wait until it is shown."""
     page.goto(f"{server.url}/#p={project_id}")

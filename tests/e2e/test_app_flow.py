@@ -13,7 +13,7 @@ from PIL import Image
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
-from tests.e2e.conftest import ARTIFACTS, open_project
+from tests.e2e.conftest import ARTIFACTS, upload_face
 
 _IDENTITY = np.array([-0.8, 0.6, -0.5, 0.4, 0.9])  # not the sample project's face
 
@@ -47,15 +47,8 @@ def pixels(page, clip: dict) -> np.ndarray:
 
 
 def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file):
-    path, face = face_file
-    project = server.api("POST", "/api/projects", {"name": "e2e face"})
-    open_project(page, server, project["id"])
-
     # upload through the file picker; the mesh appears with the uploaded vertex count
-    page.set_input_files("#file-input", str(path))
-    page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
-                           ".attributes.position.count === n", arg=len(face.vertices), timeout=30_000)
-    assert page.inner_text("#error").strip() == ""
+    project, face = upload_face(server, page, face_file, "e2e face")
 
     # click every landmark at its projected position, in layout order
     page.select_option("#layout-select", "ibug68")

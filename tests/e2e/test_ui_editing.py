@@ -13,7 +13,7 @@ from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
-from tests.e2e.conftest import open_project
+from tests.e2e.conftest import open_project, upload_face
 
 _IDENTITY = np.array([0.5, -0.4, 0.7, -0.3, 0.2])  # neither the sample project's face nor test_app_flow's
 CLICK_TOLERANCE = 0.15  # cm: a click lands within a few pixels, about 0.03 cm each at this zoom
@@ -56,21 +56,9 @@ def placed_count(page) -> int:
     return page.evaluate("() => window.app.picker.placedCount")
 
 
-def uploaded_project(server, page, face_file) -> tuple[dict, object]:
-    """A new project with the face uploaded through the file picker, shown in the page."""
-    path, face = face_file
-    project = server.api("POST", "/api/projects", {"name": "editing"})
-    open_project(page, server, project["id"])
-    page.set_input_files("#file-input", str(path))
-    page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
-                           ".attributes.position.count === n", arg=len(face.vertices), timeout=30_000)
-    page.evaluate("() => window.app.ready")
-    assert page.inner_text("#error").strip() == ""
-    return project, face
-
 
 def test_pick_drag_undo_delete_mirror_save_reload_and_switch_layout(server, page, face_file):
-    project, face = uploaded_project(server, page, face_file)
+    project, face = upload_face(server, page, face_file, "editing")
     layout = get_layout("dutreve21")
     page.select_option("#layout-select", "dutreve21")
     targets = face.vertices[face.landmarks68[list(layout.ibug68)]]
@@ -185,7 +173,7 @@ def test_pick_drag_undo_delete_mirror_save_reload_and_switch_layout(server, page
 
 
 def test_unsaved_points_survive_a_reload(server, page, face_file):
-    project, face = uploaded_project(server, page, face_file)
+    project, face = upload_face(server, page, face_file, "editing")
     layout = get_layout("dutreve21")
     page.select_option("#layout-select", "dutreve21")
     for point in face.vertices[face.landmarks68[list(layout.ibug68[:5])]]:
