@@ -104,6 +104,18 @@ class Server:
             time.sleep(0.1)
 
 
+def write_face_file(folder: Path, name: str, identity) -> tuple[Path, object]:
+    """An OBJ `name` in `folder` of the built-in face (cm) with `identity`, and the
+    `SampleFace` (its vertices and 68 landmark indices are the test's ground truth)."""
+    from retarget.mesh import mesh_from_arrays, save_mesh
+    from retarget.sample_face import sample_face
+
+    face = sample_face(1, identity=identity)
+    path = folder / name
+    save_mesh(mesh_from_arrays(face.vertices, face.faces), path)
+    return path, face
+
+
 def upload_face(server: Server, page, face_file, name: str) -> tuple[dict, object]:
     """A new project `name` shown in the page, with `face_file` = (path, SampleFace)
     uploaded through the file picker; the project JSON and the face."""

@@ -11,9 +11,7 @@ import pytest
 from PIL import Image
 
 from retarget.landmarks import landmarks_from_json
-from retarget.mesh import mesh_from_arrays, save_mesh
-from retarget.sample_face import sample_face
-from tests.e2e.conftest import ARTIFACTS, upload_face
+from tests.e2e.conftest import write_face_file, ARTIFACTS, upload_face
 
 _IDENTITY = np.array([-0.8, 0.6, -0.5, 0.4, 0.9])  # not the sample project's face
 
@@ -21,10 +19,7 @@ _IDENTITY = np.array([-0.8, 0.6, -0.5, 0.4, 0.9])  # not the sample project's fa
 @pytest.fixture(scope="module")
 def face_file(tmp_path_factory):
     """An OBJ of a generated face (cm) and its 68 landmark vertex indices."""
-    face = sample_face(1, identity=_IDENTITY)
-    path = tmp_path_factory.mktemp("meshes") / "my_face.obj"
-    save_mesh(mesh_from_arrays(face.vertices, face.faces), path)
-    return path, face
+    return write_face_file(tmp_path_factory.mktemp("meshes"), "my_face.obj", _IDENTITY)
 
 
 

@@ -11,9 +11,7 @@ import pytest
 
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
-from retarget.mesh import mesh_from_arrays, save_mesh
-from retarget.sample_face import sample_face
-from tests.e2e.conftest import open_project, upload_face
+from tests.e2e.conftest import write_face_file, open_project, upload_face
 
 _IDENTITY = np.array([0.5, -0.4, 0.7, -0.3, 0.2])  # neither the sample project's face nor test_app_flow's
 CLICK_TOLERANCE = 0.15  # cm: a click lands within a few pixels, about 0.03 cm each at this zoom
@@ -22,10 +20,7 @@ CLICK_TOLERANCE = 0.15  # cm: a click lands within a few pixels, about 0.03 cm e
 @pytest.fixture(scope="module")
 def face_file(tmp_path_factory):
     """An OBJ of a generated face (cm, symmetric about x = 0) and the face."""
-    face = sample_face(1, identity=_IDENTITY)
-    path = tmp_path_factory.mktemp("meshes") / "edit_face.obj"
-    save_mesh(mesh_from_arrays(face.vertices, face.faces), path)
-    return path, face
+    return write_face_file(tmp_path_factory.mktemp("meshes"), "edit_face.obj", _IDENTITY)
 
 
 
