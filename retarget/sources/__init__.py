@@ -1,0 +1,1 @@
+"""Performance sources: recorded takes, their files, trackers, filters and conditioning."""
