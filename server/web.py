@@ -4,7 +4,8 @@ packages installed by ``npm ci --prefix web`` (served from here, never from a CD
     /                      web/static/index.html
     /static/...            web/static/
     /shaders/...           web/shaders/
-    /vendor/<package>/...  web/node_modules/<package>/  (only the packages in VENDORED)
+    /vendor/<package>/...  web/node_modules/<package>/  (only the packages in VENDORED;
+                           @mediapipe/face_mesh is the browser's markerless face tracker)
     /docs                  the OpenAPI docs, Swagger UI from the npm package swagger-ui-dist
 """
 
@@ -20,7 +21,7 @@ from fastapi.staticfiles import StaticFiles
 __all__ = ["VENDORED", "WEB_DIR", "mount_web"]
 
 WEB_DIR = Path(__file__).resolve().parent.parent / "web"
-VENDORED = ("three", "three-mesh-bvh", "swagger-ui-dist")
+VENDORED = ("three", "three-mesh-bvh", "swagger-ui-dist", "@mediapipe/face_mesh")
 
 _MISSING = """<!doctype html><meta charset="utf-8"><title>retarget: front-end packages missing</title>
 <h1>The browser client's packages are not installed</h1>

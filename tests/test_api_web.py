@@ -20,6 +20,11 @@ def test_index_page_and_vendored_modules_are_served_locally(client):
     assert client.get("/vendor/three/build/three.module.js").status_code == 200
     assert client.get("/vendor/three-mesh-bvh/src/index.js").status_code == 200
     assert client.get("/static/js/StreamDecoder.js").status_code == 200
+    # the markerless tracker: its script, and the wasm it fetches with a type that
+    # lets the browser compile it while it streams in
+    assert client.get("/vendor/@mediapipe/face_mesh/face_mesh.js").status_code == 200
+    wasm = client.get("/vendor/@mediapipe/face_mesh/face_mesh_solution_simd_wasm_bin.wasm")
+    assert wasm.status_code == 200 and wasm.headers["content-type"] == "application/wasm"
 
 
 def test_api_docs_load_swagger_ui_locally(client):
@@ -32,7 +37,7 @@ def test_api_docs_load_swagger_ui_locally(client):
 
 
 def test_vendor_mounts_hold_only_the_listed_packages(client):
-    assert VENDORED == ("three", "three-mesh-bvh", "swagger-ui-dist")
+    assert VENDORED == ("three", "three-mesh-bvh", "swagger-ui-dist", "@mediapipe/face_mesh")
     assert client.get("/vendor/gltf-validator/package.json").status_code == 404
     assert client.get("/vendor/three/../../package.json").status_code == 404
 
@@ -59,6 +64,7 @@ def test_layouts_list_every_layout_with_reference_positions(client):
         assert layout["n_points"] == lib.n_points == len(layout["points"])
         assert [p["name"] for p in layout["points"]] == list(lib.point_names)
         assert [p["mirror"] for p in layout["points"]] == list(lib.mirror)
+        assert [p["mediapipe468"] for p in layout["points"]] == list(lib.mediapipe468)
         for point in layout["points"]:
             assert len(point["reference"]) == 3
     ibug = next(layout for layout in layouts if layout["name"] == "ibug68")

@@ -1,6 +1,8 @@
-"""Feature-point layouts for the landmark picker: names, regions, sides, mirror partners
-and a reference position for each point (on the built-in sample face, cm, +y up, the
-face looking down +z), so the browser can show which point comes next."""
+"""Feature-point layouts for the landmark picker and the browser's face tracker: names,
+regions, sides, mirror partners, a reference position for each point (on the built-in
+sample face, cm, +y up, the face looking down +z), so the browser can show which point
+comes next, and each point's MediaPipe face-mesh vertex (`mediapipe468`), so the
+browser's tracker can read its 468 landmarks into the layout."""
 
 from __future__ import annotations
 
@@ -29,9 +31,10 @@ def _layout_json(name: str) -> dict:
         "n_points": layout.n_points,
         "points": [
             {"name": point, "region": region, "side": side, "mirror": mirror,
-             "reference": reference[i68]}
-            for point, region, side, mirror, i68 in zip(
-                layout.point_names, layout.regions, layout.sides, layout.mirror, layout.ibug68)
+             "reference": reference[i68], "mediapipe468": i468}
+            for point, region, side, mirror, i68, i468 in zip(
+                layout.point_names, layout.regions, layout.sides, layout.mirror, layout.ibug68,
+                layout.mediapipe468)
         ],
         "regions": list(REGIONS),
         "groups": {group: list(members) for group, members in GROUPS.items()},
