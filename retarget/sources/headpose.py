@@ -1,0 +1,277 @@
+"""Rigid head motion: the pose of the head from stable points, and its removal.
+
+Woodward et al., §5.1 "Head local coordinate frame and reference marker positions": to
+measure the non-rigid motion of an expression, the rigid motion of the head is removed
+from every frame using anchor markers that expressions do not move, and the markers are
+compared with a neutral recorded in that head frame during the first seconds (head
+movement allowed, face still). Woodward builds the frame from four anchors arranged as
+two orthogonal vectors and notes that "a minimum of three points can be used"; here the
+frame is the least-squares rigid fit of any K >= 3 anchors (Kabsch 1976; Umeyama 1991,
+without scale), which uses every anchor, averages their noise and tolerates a lost one.
+
+Conventions: ``R, t`` map a frame **into the neutral's head frame**,
+``stabilised = points @ R.T + t``; the head's own pose relative to the neutral is the
+inverse, ``(R.T, -R.T @ t)``. Units are those of the points (cm, mm, ...).
+
+Stable points (`STABLE_POINT_NAMES`, iBUG names from `retarget.layouts`): the nose root,
+bridge and tip and the inner and outer eye corners. On the sample face's 12 expressions
+they move at most 2.4 mm (eye corners) and 0.9 mm (nose). Layouts with fewer than
+`MIN_STABLE` of them (``dutreve21`` has only the nose tip) add `STABLE_FALLBACK_NAMES`:
+the nose alae and the inner lower lids (at most 3.1 mm and 0.8 mm on the sample face).
+
+Degenerate input (policy): a frame whose stable points are fewer than 3 usable (finite)
+or collinear keeps the previous frame's pose (the head moves little between frames);
+frames before the first estimable pose get NaN points and a NaN pose, as lost points are
+NaN everywhere in `retarget.sources`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.layouts import Layout, get_layout
+
+__all__ = [
+    "STABLE_POINT_NAMES",
+    "STABLE_FALLBACK_NAMES",
+    "MIN_STABLE",
+    "stable_indices",
+    "rigid_transform",
+    "remove_head_motion",
+    "head_neutral",
+    "HeadMotionRemover",
+]
+
+STABLE_POINT_NAMES: tuple[str, ...] = (
+    "nose_root",
+    "nose_bridge_upper",
+    "nose_bridge_lower",
+    "nose_tip",
+    "eye_right_inner",
+    "eye_left_inner",
+    "eye_right_outer",
+    "eye_left_outer",
+)
+"""iBUG point names that expressions barely move: the head frame's anchors."""
+
+STABLE_FALLBACK_NAMES: tuple[str, ...] = (
+    "nose_ala_right",
+    "nose_ala_left",
+    "eye_right_lower_inner",
+    "eye_left_lower_inner",
+)
+"""Anchors added when a layout holds fewer than `MIN_STABLE` of `STABLE_POINT_NAMES`."""
+
+MIN_STABLE = 4
+"""Fewest primary anchors used alone: 3 fix a pose, one more averages noise."""
+
+# The second principal spread of the anchors (relative to the first) below which they
+# count as collinear: a rotation about their line would be undetermined.
+_COLLINEAR_TOL = 1e-3
+
+
+def stable_indices(layout: Layout | str) -> np.ndarray:
+    """(K,) int64 indices of the layout's anchor points, in the layout's order.
+
+    The layout's points named in `STABLE_POINT_NAMES`; with `STABLE_FALLBACK_NAMES` added
+    when fewer than `MIN_STABLE` are present. `RetargetError` if the result has fewer
+    than 3 points.
+    """
+    layout = layout if isinstance(layout, Layout) else get_layout(layout)
+    names = np.asarray(layout.point_names)
+    keep = np.isin(names, STABLE_POINT_NAMES)
+    if keep.sum() < MIN_STABLE:
+        keep |= np.isin(names, STABLE_FALLBACK_NAMES)
+    if keep.sum() < 3:
+        raise RetargetError(
+            f"layout {layout.name!r} has {int(keep.sum())} stable points "
+            f"({', '.join(names[keep]) or 'none'}); head pose needs 3 of "
+            f"{STABLE_POINT_NAMES + STABLE_FALLBACK_NAMES}"
+        )
+    return np.flatnonzero(keep)
+
+
+def _rigid_transforms(src: np.ndarray, dst: np.ndarray, weights: np.ndarray):
+    """Batched weighted Kabsch: (F, K, 3), (F, K, 3), (F, K) -> R (F,3,3), t (F,3), ok (F,).
+
+    Weights of zero drop a point (its coordinates may be anything finite). `ok` is False
+    where fewer than 3 points have weight or they are collinear; R, t are NaN there.
+    """
+    w = weights / np.maximum(weights.sum(axis=1, keepdims=True), np.finfo(float).tiny)
+    src_mean = np.einsum("fk,fkd->fd", w, src)
+    dst_mean = np.einsum("fk,fkd->fd", w, dst)
+    a = src - src_mean[:, None]
+    b = dst - dst_mean[:, None]
+    cov = np.einsum("fk,fki,fkj->fij", w, a, b)
+    spread = np.linalg.eigvalsh(np.einsum("fk,fki,fkj->fij", w, a, a))  # ascending
+    ok = ((weights > 0).sum(axis=1) >= 3) & (spread[:, 1] > _COLLINEAR_TOL**2 * spread[:, 2])
+    u, _, vt = np.linalg.svd(cov)
+    # A reflection would fit coplanar anchors as well as a rotation; force det(R) = +1.
+    d = np.sign(np.linalg.det(np.einsum("fij,fjk->fik", u, vt)))
+    d[d == 0] = 1.0
+    vt = vt * np.stack([np.ones_like(d), np.ones_like(d), d], axis=1)[:, :, None]
+    rot = np.einsum("fji,fkj->fik", vt, u)  # V diag(1, 1, d) U^T
+    trans = dst_mean - np.einsum("fij,fj->fi", rot, src_mean)
+    rot[~ok] = np.nan
+    trans[~ok] = np.nan
+    return rot, trans, ok
+
+
+def _usable(points: np.ndarray, weights: np.ndarray | None) -> np.ndarray:
+    """Weights with NaN rows zeroed: (..., K, 3), (K,) | None -> (..., K) float64."""
+    finite = np.isfinite(points).all(axis=-1)
+    w = np.ones(points.shape[:-1]) if weights is None else np.broadcast_to(weights, points.shape[:-1])
+    return np.where(finite, w, 0.0)
+
+
+def rigid_transform(src, dst, weights=None) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and translation taking `src` onto `dst` in the least-squares sense.
+
+    src, dst : (N, 3) float, same units; rows with a NaN in either are ignored.
+    weights : optional (N,) float >= 0, each point's weight.
+    Returns R (3, 3) float64 with det +1 and t (3,) float64 minimising
+    ``sum_i w_i |R src_i + t - dst_i|²`` (Kabsch; Umeyama without scale). `RetargetError`
+    if fewer than 3 usable rows remain or they are collinear.
+    """
+    s = np.asarray(src, dtype=np.float64)
+    d = np.asarray(dst, dtype=np.float64)
+    if s.ndim != 2 or s.shape[1] != 3 or d.shape != s.shape:
+        raise RetargetError(f"src and dst must both have shape (N, 3); got {s.shape} and {d.shape}")
+    if weights is not None:
+        weights = np.asarray(weights, dtype=np.float64)
+        if weights.shape != (len(s),) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+            raise RetargetError(
+                f"weights must be ({len(s)},) finite and >= 0; got shape {weights.shape}"
+            )
+    w = _usable(s, weights) * _usable(d, None)
+    rot, trans, ok = _rigid_transforms(
+        np.nan_to_num(s)[None], np.nan_to_num(d)[None], w[None]
+    )
+    if not ok[0]:
+        raise RetargetError(
+            f"rigid_transform needs at least 3 usable, non-collinear points; got "
+            f"{int((w > 0).sum())} usable of {len(s)}"
+        )
+    return rot[0], trans[0]
+
+
+def _check_stable(stable, n_points: int) -> np.ndarray:
+    k = np.asarray(stable)
+    if k.ndim != 1 or not np.issubdtype(k.dtype, np.integer) or k.size < 3:
+        raise RetargetError(f"stable must be (K,) integer indices with K >= 3; got {k!r}")
+    if np.any((k < 0) | (k >= n_points)):
+        raise RetargetError(f"stable indices {k.tolist()} fall outside [0, {n_points})")
+    return k
+
+
+def _check_frames(frames, neutral, stable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    f = np.asarray(frames, dtype=np.float64)
+    n = np.asarray(neutral, dtype=np.float64)
+    if f.ndim != 3 or f.shape[2] != 3:
+        raise RetargetError(f"frames must have shape (F, N, 3); got {f.shape}")
+    if n.shape != f.shape[1:]:
+        raise RetargetError(f"neutral must have shape {f.shape[1:]} to match frames; got {n.shape}")
+    k = _check_stable(stable, f.shape[1])
+    # An anchor lost in the neutral cannot anchor anything; the others still can.
+    finite = np.isfinite(n[k]).all(axis=1)
+    if finite.sum() < 3:
+        raise RetargetError(
+            f"neutral has {int(finite.sum())} finite stable points of {k.tolist()}; need 3"
+        )
+    return f, n, k[finite]
+
+
+def _held(rot, trans, ok):
+    """Each frame's pose, a frame without one holding the last frame that had one."""
+    last = np.maximum.accumulate(np.where(ok, np.arange(len(ok)), -1))
+    src = np.maximum(last, 0)
+    rot, trans = rot[src], trans[src]
+    rot[last < 0] = np.nan
+    trans[last < 0] = np.nan
+    return rot, trans
+
+
+def remove_head_motion(frames, neutral, stable):
+    """Every frame mapped back into the neutral's head frame (Woodward §5.1).
+
+    frames : (F, N, 3) float, any units; a lost point is a NaN row.
+    neutral : (N, 3) float, the same points at rest in the head frame wanted.
+    stable : (K,) int, K >= 3, indices of the anchor points (`stable_indices`).
+    Returns stabilised (F, N, 3) float32, R (F, 3, 3) float64 and t (F, 3) float64 with
+    ``stabilised[f] = frames[f] @ R[f].T + t[f]``. See the module docstring for frames
+    whose anchors do not fix a pose.
+    """
+    f, n, k = _check_frames(frames, neutral, stable)
+    src = f[:, k]
+    w = _usable(src, None)
+    rot, trans, ok = _rigid_transforms(
+        np.nan_to_num(src), np.broadcast_to(n[k], src.shape), w
+    )
+    rot, trans = _held(rot, trans, ok)
+    out = np.einsum("fnj,fij->fni", f, rot) + trans[:, None]
+    return out.astype(np.float32), rot, trans
+
+
+def head_neutral(frames, stable, iterations: int = 2) -> np.ndarray:
+    """(N, 3) float32: the rest shape of frames recorded with the head moving.
+
+    Woodward §5.1 records the neutral in the first seconds with the face still and head
+    movement allowed. Each frame is registered on its anchors to the current estimate
+    (first the first frame whose anchors fix a pose), and the per-point median of the
+    registered frames is the next estimate; its head frame is the first such frame's.
+    frames : (F, N, 3) float; stable : (K,) int. `RetargetError` if no frame has a
+    pose, or a point is lost in every frame.
+    """
+    f = np.asarray(frames, dtype=np.float64)
+    if f.ndim != 3 or f.shape[2] != 3 or f.shape[0] == 0:
+        raise RetargetError(f"frames must have shape (F, N, 3) with F >= 1; got {f.shape}")
+    lost = ~np.isfinite(f).all(axis=2).any(axis=0)
+    if lost.any():
+        raise RetargetError(
+            f"head_neutral: points {np.flatnonzero(lost).tolist()} are lost in every frame"
+        )
+    k = _check_stable(stable, f.shape[1])
+    posed = np.isfinite(f[:, k]).all(axis=2).sum(axis=1) >= 3
+    if not posed.any():
+        raise RetargetError("head_neutral: no frame has 3 finite stable points")
+    estimate = f[int(np.argmax(posed))]
+    for _ in range(max(1, iterations)):
+        registered, _, _ = remove_head_motion(f, estimate, k)
+        estimate = np.nanmedian(registered, axis=0)
+    return estimate.astype(np.float32)
+
+
+class HeadMotionRemover:
+    """Online `remove_head_motion`: one frame per call, the same result as offline.
+
+    neutral : (N, 3) float, rest points in the head frame wanted.
+    stable : (K,) int, K >= 3, anchor indices (`stable_indices`).
+    Calling with points (N, 3) returns them stabilised, (N, 3) float32; after a call,
+    ``rotation_`` (3, 3) and ``translation_`` (3,) hold that frame's R and t
+    (NaN until a pose was first estimated) and ``held_`` says the pose was carried over
+    from an earlier frame because this one's anchors did not fix it.
+    """
+
+    def __init__(self, neutral, stable):
+        n = np.asarray(neutral, dtype=np.float64)
+        _, self.neutral, self.stable = _check_frames(n[None], n, stable)
+        self._target = self.neutral[self.stable][None]
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the held pose, as at construction."""
+        self.rotation_ = np.full((3, 3), np.nan)
+        self.translation_ = np.full(3, np.nan)
+        self.held_ = False
+
+    def __call__(self, points) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64)
+        if p.shape != self.neutral.shape:
+            raise RetargetError(f"points must have shape {self.neutral.shape}; got {p.shape}")
+        src = p[self.stable][None]
+        rot, trans, ok = _rigid_transforms(np.nan_to_num(src), self._target, _usable(src, None))
+        self.held_ = not ok[0]
+        if ok[0]:
+            self.rotation_, self.translation_ = rot[0], trans[0]
+        return (p @ self.rotation_.T + self.translation_).astype(np.float32)
