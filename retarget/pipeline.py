@@ -9,6 +9,12 @@ target feature points, and skin weights W for the target mesh. Every frame:
 gives zero displacement at the neutral pose. The mask is Dutreve's partial retargeting
 (§4, Fig. 3): disabled feature points keep their neutral position. A source point that is
 lost (NaN, a tracker dropout) also keeps its neutral position for that frame.
+
+A source may have fewer points than the target rig (21 face markers driving a 68-joint
+rig): the target points it lacks are NaN rows of the neutral S0. The transform is trained
+on the pairs the source has, and the other joints follow by interpolating the driven
+joints' displacements over the target's neutral points with the same RBF (the dense RBF
+deformer of Zhang et al. §2.1, applied to the joints instead of the vertices).
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.rbf import RBFTransform, as_points
+from retarget.rbf import RBFInterpolant, RBFTransform, as_points
 from retarget.skin import SkinWeights, skin_displacements
 
 DEFAULT_KERNEL = "linear"
@@ -47,15 +53,32 @@ class Retargeter:
         self.mask = mask
 
     def fit(self, source_neutral, target_neutral) -> "Retargeter":
-        """Train on (N, 2|3) neutral source points S0 and (N, 3) neutral target points T0."""
-        s0 = as_points(source_neutral, "source neutral")
+        """Train on (N, 2|3) neutral source points S0 and (N, 3) neutral target points T0.
+
+        NaN rows of S0 are target points the source does not have: their displacements
+        are interpolated from the others' (see the module docstring).
+        """
+        s = np.asarray(source_neutral, dtype=np.float64)
+        if s.ndim != 2 or s.shape[1] not in (2, 3):
+            raise RetargetError(f"source neutral must have shape (N, 2) or (N, 3); got {s.shape}")
         t0 = as_points(target_neutral, "target neutral", dims=(3,))
-        self.source_dims_ = np.asarray(source_neutral).shape[1]
+        if len(s) != len(t0):
+            raise RetargetError(f"source and target must have the same number of feature points; "
+                                f"got {len(s)} and {len(t0)}")
+        driven = np.isfinite(s).all(axis=1)
+        s0 = as_points(s[driven], "source neutral")
+        self.source_dims_ = s.shape[1]
         smoothing = DEFAULT_SMOOTHING[self.source_dims_] if self.smoothing is None else self.smoothing
         self.transform_ = RBFTransform(self.kernel, degree=self.degree,
-                                       smoothing=smoothing).fit(s0, t0)
-        self.target_rest_ = self.transform_.transform(s0)
-        self.mask_ = _as_mask(self.mask, len(s0))
+                                       smoothing=smoothing).fit(s0, t0[driven])
+        rest = np.full((len(s), 3), np.nan)
+        rest[driven] = self.transform_.transform(s0)
+        self.target_rest_ = rest
+        self.driven_ = driven
+        # (U, D) operator: driven joints' displacements -> the undriven joints'
+        self.fill_ = (RBFInterpolant("linear").fit(t0[driven]).operator(t0[~driven])
+                      if not driven.all() else None)
+        self.mask_ = _as_mask(self.mask, len(s))
         return self
 
     def displacements(self, source_frames) -> np.ndarray:
@@ -70,8 +93,11 @@ class Retargeter:
                 f"source frames must have shape (F, {n}, {self.source_dims_}) like the source "
                 f"neutral; got {s.shape}")
         d = self.transform_.transform(s) - self.target_rest_
+        d = np.nan_to_num(d, nan=0.0)
+        if self.fill_ is not None:
+            d[..., ~self.driven_, :] = np.einsum("ud,...dk->...uk", self.fill_, d[..., self.driven_, :])
         d[..., ~self.mask_, :] = 0.0
-        return np.nan_to_num(d, nan=0.0).astype(np.float32)
+        return d.astype(np.float32)
 
 
 def transfer(vertices, weights: SkinWeights, retargeter: Retargeter, source_frames,

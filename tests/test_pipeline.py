@@ -94,3 +94,29 @@ def test_default_smoothing_follows_the_source_dimension(points):
     assert Retargeter().fit(s0, t0).transform_.smoothing == DEFAULT_SMOOTHING[3]
     assert Retargeter().fit(s0[:, :2], t0).transform_.smoothing == DEFAULT_SMOOTHING[2]
     assert Retargeter(smoothing=0.5).fit(s0[:, :2], t0).transform_.smoothing == 0.5
+
+
+def test_a_source_with_fewer_points_drives_every_joint():
+    """21 markers (NaN rows in the neutral for the 47 others) on a 68-joint target: the
+    driven joints move as with the full source, the others follow by interpolation."""
+    from retarget.layouts import get_layout
+    from retarget.sample_face import sample_face
+
+    face = sample_face()
+    lm = np.asarray(face.landmarks68)
+    s0 = face.vertices[lm]
+    t0 = s0 * 1.3 + np.array([1.0, -2.0, 0.5])
+    frame = s0 + face.expressions[list(face.expression_names).index("jawOpen")][lm]
+    full = Retargeter().fit(s0, t0).displacements(frame)
+    driven = np.zeros(68, bool)
+    driven[list(get_layout("dutreve21").ibug68)] = True
+    partial_neutral = np.where(driven[:, None], s0, np.nan)
+    part = Retargeter().fit(partial_neutral, t0).displacements(frame)
+    np.testing.assert_allclose(part[driven], full[driven], atol=1e-5)
+    # the undriven joints move with the expression, and in the same direction as truth
+    moved = np.linalg.norm(full, axis=1) > 0.1
+    assert (moved & ~driven).sum() >= 10
+    cos = (part * full).sum(1) / (np.linalg.norm(part, axis=1) * np.linalg.norm(full, axis=1) + 1e-12)
+    assert np.median(cos[moved & ~driven]) > 0.8
+    # the neutral frame stays at rest everywhere
+    assert np.abs(Retargeter().fit(partial_neutral, t0).displacements(s0)).max() < 1e-5

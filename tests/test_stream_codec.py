@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.stream_codec import (FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES, decode_frame,
+from server.stream_codec import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES, decode_frame,
                                  encode_frame)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,6 +41,26 @@ def test_javascript_decodes_exactly_what_python_encodes(tmp_path):
         assert js["frameIndex"] == i and js["count"] == len(d) and js["flags"] == fl
         assert js["sourceTime"] == t and js["sendTime"] == 1.7e9 + i and js["version"] == 1
         assert js["bits"] == d.ravel().view(np.uint32).tolist()
+        assert js["rotationBits"] is None
+
+
+def test_head_rotation_travels_after_the_displacements(tmp_path):
+    d = np.random.default_rng(3).normal(size=(21, 3)).astype(np.float32)
+    q = np.array([0.1, -0.2, 0.05, 0.97], np.float32)
+    data = encode_frame(d, frame_index=9, source_time=0.3, flags=FLAG_LOST_POINTS, head_rotation=q)
+    assert len(data) == HEADER_BYTES + 21 * 12 + 16
+    frame = decode_frame(data)
+    assert frame.flags == FLAG_LOST_POINTS | FLAG_HEAD_ROTATION
+    np.testing.assert_array_equal(frame.displacements, d)
+    np.testing.assert_array_equal(frame.head_rotation, q)
+    js, = decode_in_node(tmp_path, [data])
+    assert js["flags"] == FLAG_LOST_POINTS | FLAG_HEAD_ROTATION
+    assert js["bits"] == d.ravel().view(np.uint32).tolist()
+    assert js["rotationBits"] == q.view(np.uint32).tolist()
+    # without its 16 bytes the frame is refused by both decoders
+    with pytest.raises(ValueError, match="must be"):
+        decode_frame(data[:-16])
+    assert "must be" in decode_in_node(tmp_path, [data[:-16]])[0]["error"]
 
 
 def test_javascript_refuses_broken_frames_with_its_class_name(tmp_path):
@@ -67,6 +87,8 @@ def test_python_round_trip_and_header_size():
     ({"displacements": np.full((2, 3), np.nan)}, "finite"),
     ({"frame_index": -1}, "uint32"),
     ({"flags": 70000}, "uint16"),
+    ({"flags": FLAG_HEAD_ROTATION}, "no head_rotation"),
+    ({"head_rotation": [0, 0, 1]}, r"shape \(4,\)"),
 ])
 def test_encoder_refuses_bad_frames(kwargs, message):
     args = {"displacements": np.ones((4, 3)), "frame_index": 0, "source_time": 0.0, **kwargs}

@@ -16,8 +16,9 @@ for ( let at = 0; at < bytes.length; ) {
 		const f = decoder.decode( frame );
 		// float32 values travel as their bit patterns so the comparison is exact
 		const bits = Array.from( new Uint32Array( f.displacements.buffer, f.displacements.byteOffset, f.displacements.length ) );
+		const rotationBits = f.headRotation ? Array.from( new Uint32Array( f.headRotation.buffer, f.headRotation.byteOffset, 4 ) ) : null;
 		out.push( { version: f.version, flags: f.flags, frameIndex: f.frameIndex, count: f.count,
-			sourceTime: f.sourceTime, sendTime: f.sendTime, bits } );
+			sourceTime: f.sourceTime, sendTime: f.sendTime, bits, rotationBits } );
 
 	} catch ( error ) {
 
