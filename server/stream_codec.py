@@ -96,3 +96,67 @@ def decode_frame(data: bytes) -> Frame:
     q = (np.frombuffer(data, dtype="<f4", offset=HEADER_BYTES + 12 * n, count=4)
          if flags & FLAG_HEAD_ROTATION else None)
     return Frame(d, index, source_time, send_time, flags, q)
+
+
+# -- source points: the browser's tracker -> the server ------------------------------------
+#
+# One WebSocket binary message per tracked frame, little-endian; its JavaScript twin is
+# `web/static/js/PointsEncoder.js`. Layout (byte offsets):
+#
+#     0   4 bytes  magic b"RTSP"
+#     4   uint16   version (1)
+#     6   uint16   dims D (2 or 3)
+#     8   uint32   frame index
+#     12  uint32   point count N
+#     16  float64  capture time, seconds (the tracker's clock)
+#     24  8 bytes  reserved (zero), so the points start at a multiple of 8
+#     32  N x D float32 source points in the layout's order, NaN for a lost point
+
+POINTS_MAGIC = b"RTSP"
+POINTS_VERSION = 1
+_POINTS_HEADER = struct.Struct("<4sHHIId8x")
+MAX_POINTS = 1024
+
+
+@dataclass(frozen=True)
+class PointsFrame:
+    """A decoded source-points message: points (N, D) float32 and its header fields."""
+
+    points: np.ndarray
+    frame_index: int
+    capture_time: float
+
+
+def encode_points(points, *, frame_index: int, capture_time: float) -> bytes:
+    """Bytes of one source-points message (what the browser sends; used by tests and
+    benchmarks)."""
+    p = np.asarray(points, dtype="<f4")
+    if p.ndim != 2 or p.shape[1] not in (2, 3):
+        raise ValueError(f"points must have shape (N, 2) or (N, 3); got {p.shape}")
+    header = _POINTS_HEADER.pack(POINTS_MAGIC, POINTS_VERSION, p.shape[1], frame_index, len(p),
+                                 float(capture_time))
+    return header + np.ascontiguousarray(p).tobytes()
+
+
+def decode_points(data: bytes) -> PointsFrame:
+    """Parse a source-points message; ValueError naming what is wrong."""
+    if len(data) < _POINTS_HEADER.size:
+        raise ValueError(f"points message is {len(data)} bytes, shorter than its "
+                         f"{_POINTS_HEADER.size}-byte header")
+    magic, version, dims, index, n, t = _POINTS_HEADER.unpack_from(data)
+    if magic != POINTS_MAGIC:
+        raise ValueError(f"not a source-points message (magic {magic!r})")
+    if version != POINTS_VERSION:
+        raise ValueError(f"unsupported source-points version {version}")
+    if dims not in (2, 3) or not 0 < n <= MAX_POINTS:
+        raise ValueError(f"source-points message has {n} points of {dims} coordinates; "
+                         f"expected 1..{MAX_POINTS} points of 2 or 3")
+    size = _POINTS_HEADER.size + 4 * n * dims
+    if len(data) != size:
+        raise ValueError(f"source-points message for {n} x {dims} must be {size} bytes; got {len(data)}")
+    if not np.isfinite(t):
+        raise ValueError("source-points capture time must be finite")
+    p = np.frombuffer(data, dtype="<f4", offset=_POINTS_HEADER.size).reshape(n, dims)
+    if np.isinf(p).any():
+        raise ValueError("source points must be finite or NaN (lost); got an infinity")
+    return PointsFrame(p, index, t)

@@ -1,4 +1,5 @@
-"""The stream's frame encoder (Python) against its decoder (JavaScript, run in node)."""
+"""The stream's frame encoder (Python) against its decoder (JavaScript, run in node), and the
+browser's source-points encoder (JavaScript) against the server's decoder."""
 
 import json
 import shutil
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from server.stream_codec import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES, decode_frame,
-                                 encode_frame)
+                                 decode_points, encode_frame, encode_points)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -101,3 +102,38 @@ def test_python_decoder_refuses_broken_frames():
     for bad, message in ((b"XXXX" + good[4:], "magic"), (good[:-1], "must be 80 bytes"), (good[:8], "shorter")):
         with pytest.raises(ValueError, match=message):
             decode_frame(bad)
+
+
+def encode_in_node(tmp_path, points, dims, frame_index, capture_time):
+    values = [None if np.isnan(v) else float(v) for v in np.asarray(points, np.float32).ravel()]
+    src, out = tmp_path / "points.json", tmp_path / "points.bin"
+    src.write_text(json.dumps({"points": values, "dims": dims, "frameIndex": frame_index,
+                               "captureTime": capture_time}))
+    run = subprocess.run([shutil.which("node"), str(ROOT / "tests" / "js" / "encode_points.mjs"),
+                          str(src), str(out)], capture_output=True, text=True, timeout=60)
+    return run, out
+
+
+def test_python_decodes_exactly_what_javascript_encodes_for_live_points(tmp_path):
+    rng = np.random.default_rng(11)
+    for dims in (2, 3):
+        p = rng.normal(scale=300, size=(68, dims)).astype(np.float32)
+        p[5] = np.nan  # a lost point
+        run, out = encode_in_node(tmp_path, p, dims, 4_000_000_000, 1234.5678)
+        assert run.returncode == 0, run.stdout + run.stderr
+        data = out.read_bytes()
+        assert data == encode_points(p, frame_index=4_000_000_000, capture_time=1234.5678)
+        frame = decode_points(data)
+        np.testing.assert_array_equal(frame.points, p)
+        assert (frame.frame_index, frame.capture_time) == (4_000_000_000, 1234.5678)
+    run, _ = encode_in_node(tmp_path, np.zeros((4, 3)), 4, 0, 0.0)
+    assert run.returncode == 3 and "dims must be 2 or 3" in run.stdout
+
+
+def test_broken_points_messages_are_refused_with_the_reason():
+    good = encode_points(np.ones((21, 3)), frame_index=1, capture_time=0.5)
+    inf = encode_points(np.full((21, 3), np.inf), frame_index=1, capture_time=0.5)
+    for bad, message in ((good[:20], "shorter than"), (b"XXXX" + good[4:], "magic"), (good[:-4], "must be"),
+                         (good[:6] + b"\x04\x00" + good[8:], "of 4 coordinates"), (inf, "infinity")):
+        with pytest.raises(ValueError, match=message):
+            decode_points(bad)
