@@ -213,10 +213,11 @@ class Take:
         missing = [name for name in target.point_names if name not in lookup]
         if missing:
             hints = []
+            lowered = {name.lower(): name for name in self.names}
             for name in missing[:3]:
-                close = difflib.get_close_matches(name, self.names, n=2)
+                close = difflib.get_close_matches(name, list(lowered), n=2)
                 if close:
-                    hints.append(f"{name} ~ {' / '.join(close)}")
+                    hints.append(f"{name} ~ {' / '.join(lowered[c] for c in close)}")
             raise RetargetError(
                 f"the take lacks {len(missing)} of the {target.n_points} points of layout "
                 f"{target.name!r}: {', '.join(missing)}"
@@ -245,9 +246,10 @@ class Take:
             source = Path(source)
         try:
             with np.load(source, allow_pickle=False) as data:
+                lacking = [key for key in ("points", "times", "names", "info") if key not in data]
+                if lacking:
+                    raise RetargetError(f"{label} is not a take file: it lacks {', '.join(lacking)}")
                 arrays = {key: data[key] for key in ("points", "times", "names", "info")}
-        except KeyError as exc:
-            raise RetargetError(f"{label} is not a take file: it lacks {exc}") from None
         except (OSError, ValueError, EOFError) as exc:
             raise RetargetError(f"could not read {label} as a take (.npz): {exc}") from None
         try:
