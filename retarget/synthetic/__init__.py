@@ -1,0 +1,1 @@
+"""Synthetic test material: cameras, a software renderer and marker videos with ground truth."""
