@@ -1,0 +1,525 @@
+"""Tests for retarget.sources.files: every take format read back against the ground truth
+it was written from (CSV, JSON, NPY, TRC, C3D by ezc3d, glTF morph-target and skinned
+animation by pygltflib, OBJ-sequence zips by trimesh), and the errors for bad files."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import numpy as np
+import pygltflib
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from retarget.errors import RetargetError
+from retarget.layouts import IBUG68_TO_MEDIAPIPE468, get_layout
+from retarget.mesh import load_mesh
+from retarget.sample_face import demo_weights, posed_vertices, sample_face
+from retarget.sources.files import read_take, write_take_csv
+from retarget.sources.take import Take
+
+IBUG = get_layout("ibug68")
+DUTREVE = get_layout("dutreve21")
+FACE = sample_face(1)
+N_FRAMES = 10
+# demo frames where something moves, taken every 0.1 s from 3.5 s (jaw, brows)
+WEIGHTS = demo_weights(int(4.5 * 30), 30)[105::3][:N_FRAMES]
+TRUTH = posed_vertices(FACE, WEIGHTS)[:, FACE.landmarks68]          # (F, 68, 3) cm
+
+
+def _truth_take(dims=3) -> Take:
+    return Take(TRUTH[..., :dims], IBUG.point_names, 10.0, layout="ibug68", source="truth")
+
+
+# --- landmark tables ---------------------------------------------------------------------
+
+def test_csv_round_trip_with_lost_points(tmp_path):
+    take = _truth_take()
+    take.points[3, 5] = np.nan
+    path = tmp_path / "take.csv"
+    write_take_csv(take, path)
+    back = read_take(path)
+    assert back.layout == "ibug68" and back.source == "csv"
+    np.testing.assert_array_equal(back.points, take.points)
+    np.testing.assert_allclose(back.frame_times(), take.frame_times())
+    assert back.fps == pytest.approx(10.0)
+    sub = read_take(path.read_bytes(), filename="take.csv", layout="dutreve21")
+    np.testing.assert_array_equal(sub.points, take.points[:, list(DUTREVE.ibug68)])
+
+
+def test_csv_accepts_other_separators_orders_quotes_and_a_bom():
+    text = "\ufeff\"Time\",b.Y,a.x,a.y,b.X\n0.0,1,2,3,4\n0.5,5,6,,8\n"
+    take = read_take(text.encode(), filename="x.csv")
+    assert take.names == ("b", "a") and take.dims == 2
+    np.testing.assert_array_equal(take.points[0], [[4, 1], [2, 3]])
+    assert np.isnan(take.points[1, 1]).all()
+    assert take.fps == 2.0 and not take.meta["fps_assumed"]
+    no_time = read_take(b"p_x,p_y\n1,2\n3,4\n", filename="x.csv")
+    assert no_time.fps == 30.0 and no_time.meta["fps_assumed"]
+    assert read_take(b"p_x,p_y\n1,2\n3,4\n", filename="x.csv", fps=50).fps == 50.0
+
+
+@pytest.mark.parametrize("text, message", [
+    ("frame,a_x,a_y\n0,1,2\n1,1,oops\n", r"row 3, column 'a_y': 'oops' is not a number"),
+    ("a_x,a_y,b_x\n1,2,3\n", r"point 'b' has no y column"),
+    ("a_x,a_y,a_z,b_x,b_y\n1,2,3,4,5\n", r"point 'b' has no z column \(other points have z\)"),
+    ("a_x,a_y\n1,2\n1,2,3\n", "row 3 has 3 cells, the header has 2"),
+    ("a_x,a_y,conf\n1,2,0.9\n", "column 'conf' is neither frame, time nor a coordinate"),
+    ("a_x,a_y,b_x,b_y\n1,2,,\n3,4,nan,nan\n", r"point\(s\) have no position in any frame: b"),
+    ("a_x,a_y\n", "has a header but no frames"),
+    ("", "is empty"),
+    ("a_x,a_y\n1,inf\n", "row 2, column 'a_y' is infinite"),
+    ("time,a_x,a_y\n0.2,1,2\n0.1,1,2\n", "times go backwards at frame 1"),
+])
+def test_csv_errors_name_the_row_column_or_point(text, message):
+    with pytest.raises(RetargetError, match=message):
+        read_take(text.encode(), filename="bad.csv")
+
+
+def test_csv_missing_layout_points_are_listed():
+    take = _truth_take().to_layout("dutreve21")
+    buffer = io.StringIO()
+    write_take_csv(Take(take.points[:, 2:], take.names[2:], 10), buffer)
+    with pytest.raises(RetargetError, match="lacks 2 of the 21 points.*brow_right_outer, brow_right_middle"):
+        read_take(buffer.getvalue().encode(), filename="t.csv", layout="dutreve21")
+
+
+def test_json_names_and_layout_forms():
+    frames = TRUTH.tolist()
+    frames[2][7] = None
+    frames[4][9] = [None, None, None]
+    doc = {"fps": 10, "names": list(IBUG.point_names), "frames": frames, "units": "cm"}
+    take = read_take(json.dumps(doc).encode(), filename="t.json", layout="dutreve21")
+    expected = TRUTH.astype(np.float32).copy()
+    expected[2, 7] = expected[4, 9] = np.nan
+    np.testing.assert_array_equal(take.points, expected[:, list(DUTREVE.ibug68)])
+    assert take.meta["units"] == "cm" and take.fps == 10
+    sub = TRUTH[:, list(DUTREVE.ibug68), :2].tolist()
+    doc = {"layout": "dutreve21", "frames": sub, "times": [0.5 + 0.04 * i for i in range(N_FRAMES)]}
+    take = read_take(json.dumps(doc).encode(), filename="t.json")
+    assert take.layout == "dutreve21" and take.dims == 2
+    np.testing.assert_allclose(take.times, 0.04 * np.arange(N_FRAMES))
+    assert take.fps == pytest.approx(25.0)
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"frames": [[[1, 2]]]}, 'give "names" or "layout"'),
+    ({"names": ["a", "b"], "frames": [[[1, 2], [3, 4]], [[1, 2]]]}, "frame 1 has 1 points, names has 2"),
+    ({"names": ["a", "b"], "frames": [[[1, 2], [3, 4, 5]]]}, r"frame 0, point 'b' must be \[x, y\] or"),
+    ({"names": ["a"], "frames": [[[1, "x"]]]}, "frame 0, point 'a': 'x' is not a number"),
+    ({"names": ["a"], "frames": [[None]]}, "every point is null"),
+    ({"names": ["a"], "frames": [[[1, 2]]], "times": [0, 1]}, "one time per frame"),
+    ([1, 2], 'an object with "frames"'),
+])
+def test_json_errors(doc, message):
+    with pytest.raises(RetargetError, match=message):
+        read_take(json.dumps(doc).encode(), filename="bad.json")
+    with pytest.raises(RetargetError, match="is not JSON"):
+        read_take(b"{", filename="bad.json")
+
+
+def test_npy_of_layout_ibug_and_mediapipe_points():
+    def npy(array):
+        buffer = io.BytesIO()
+        np.save(buffer, array)
+        return buffer.getvalue()
+
+    take = read_take(npy(TRUTH), filename="t.npy", layout="dutreve21", fps=24)
+    np.testing.assert_array_equal(take.points, TRUTH[:, list(DUTREVE.ibug68)].astype(np.float32))
+    assert take.fps == 24 and take.layout == "dutreve21"
+    same = read_take(npy(take.points), filename="t.npy", layout="dutreve21")
+    np.testing.assert_array_equal(same.points, take.points)
+    mesh = np.random.default_rng(0).normal(size=(3, 468, 3))
+    take = read_take(npy(mesh), filename="m.npy", layout="ibug51")
+    expected = mesh[:, [IBUG68_TO_MEDIAPIPE468[i] for i in range(17, 68)]]
+    np.testing.assert_array_equal(take.points, expected.astype(np.float32))
+    with pytest.raises(RetargetError, match="choose its layout"):
+        read_take(npy(TRUTH), filename="t.npy")
+    with pytest.raises(RetargetError, match="has 5 points per frame; layout 'ibug68' has 68"):
+        read_take(npy(np.zeros((2, 5, 3))), filename="t.npy", layout="ibug68")
+    with pytest.raises(RetargetError, match=r"expected an \(F, N, 2\|3\) numeric array"):
+        read_take(npy(np.zeros((2, 68))), filename="t.npy", layout="ibug68")
+    with pytest.raises(RetargetError, match="not a NumPy .npy array"):
+        read_take(b"junk", filename="t.npy", layout="ibug68")
+
+
+def test_npz_take_files_are_read():
+    buffer = io.BytesIO()
+    _truth_take().save(buffer)
+    take = read_take(buffer.getvalue(), filename="t.npz", layout="dutreve21")
+    np.testing.assert_array_equal(take.points, TRUTH[:, list(DUTREVE.ibug68)].astype(np.float32))
+
+
+def test_unsupported_extension_and_missing_file(tmp_path):
+    with pytest.raises(RetargetError, match="unsupported take file type '.bvh'"):
+        read_take(b"", filename="a.bvh")
+    with pytest.raises(RetargetError, match="could not read"):
+        read_take(tmp_path / "none.csv")
+    with pytest.raises(RetargetError, match="fps must be a positive number"):
+        read_take(b"a_x,a_y\n1,2\n", filename="a.csv", fps=-1)
+
+
+# --- motion capture ----------------------------------------------------------------------
+
+def _trc(labels, points, rate=100.0, units="mm", drop=()) -> str:
+    f, n = points.shape[:2]
+    lines = ["PathFileType\t4\t(X/Y/Z)\ttake.trc",
+             "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+             f"{rate}\t{rate}\t{f}\t{n}\t{units}\t{rate}\t1\t{f}",
+             "Frame#\tTime\t" + "\t\t\t".join(labels) + "\t\t",
+             "\t\t" + "\t".join(f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(n)),
+             ""]
+    for i in range(f):
+        cells = [str(i + 1), f"{i / rate:.5f}"]
+        for j in range(n):
+            cells += [""] * 3 if (i, j) in drop else [f"{v:.6f}" for v in points[i, j]]
+        lines.append("\t".join(cells))
+    return "\n".join(lines) + "\n"
+
+
+def test_trc_markers_with_gaps_and_a_mapping():
+    labels = [f"M{i}" for i in range(21)]
+    mm = TRUTH[:, list(DUTREVE.ibug68)] * 10
+    text = _trc(labels, mm, drop={(2, 4), (N_FRAMES - 1, 20)})
+    mapping = dict(zip(labels, DUTREVE.point_names))
+    take = read_take(text.encode(), filename="t.trc", layout="dutreve21", mapping=mapping)
+    expected = mm.astype(np.float32).copy()
+    expected[2, 4] = expected[N_FRAMES - 1, 20] = np.nan
+    np.testing.assert_allclose(take.points, expected, atol=1e-5, equal_nan=True)
+    assert take.fps == 100 and take.meta["units"] == "mm" and take.source == "trc"
+    np.testing.assert_allclose(take.times, np.arange(N_FRAMES) / 100, atol=1e-5)
+    # a row that stops early (the last marker empty, trailing cells left out)
+    short = text.rstrip("\n").rsplit("\n", 1)[0] + "\n" + "\t".join(
+        [str(N_FRAMES), "0.09"] + [f"{v:.6f}" for v in mm[-1, :20].ravel()]) + "\n"
+    take = read_take(short.encode(), filename="t.trc")
+    assert take.names == tuple(labels) and np.isnan(take.points[-1, 20]).all()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("PathFileType", "Path"), "must start with a PathFileType line"),
+    (lambda t: t.replace("\t3\tmm", "\t4\tmm"), "NumMarkers is 4 but line 4 names 3 markers"),
+    (lambda t: t.replace("0.000000", "x0"), r"row 7, column 'A X': 'x0' is not a number"),
+    (lambda t: t.rstrip("\n") + "\t1\t2\t3\n", "has 14 cells; 3 markers take 11"),
+])
+def test_trc_errors(edit, message):
+    points = np.ones((2, 3, 3))
+    points[0, 0, 0] = 0.0
+    text = _trc(["A", "B", "C"], points)
+    with pytest.raises(RetargetError, match=message):
+        read_take(edit(text).encode(), filename="bad.trc")
+
+
+def _c3d_bytes(tmp_path, labels, points, rate=120.0, residual_lost=()):
+    import ezc3d
+
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [rate]
+    c3d["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    if not labels:  # analog data only (an EMG recording, say)
+        c3d["parameters"]["ANALOG"]["RATE"]["value"] = [1000.0]
+        c3d["parameters"]["ANALOG"]["LABELS"]["value"] = ("emg",)
+        c3d["data"]["points"] = np.zeros((4, 0, 5))
+        c3d["data"]["analogs"] = np.zeros((1, 1, 50))
+    else:
+        c3d["parameters"]["POINT"]["LABELS"]["value"] = tuple(labels)
+        f, n = points.shape[:2]
+        data = np.ones((4, n, f))
+        data[:3] = points.transpose(2, 1, 0)
+        c3d["data"]["points"] = data
+        residuals = np.zeros((1, n, f))
+        for frame, point in residual_lost:
+            residuals[0, point, frame] = -1.0
+        c3d["data"]["meta_points"]["residuals"] = residuals
+        c3d["data"]["meta_points"]["camera_masks"] = np.zeros((7, n, f), dtype=bool)
+    path = tmp_path / "take.c3d"
+    c3d.write(str(path))
+    return path.read_bytes()
+
+
+def test_c3d_labels_rate_units_and_lost_markers(tmp_path):
+    mm = TRUTH * 10
+    labels = list(IBUG.point_names)
+    labels[30] = "NOSE"
+    data = _c3d_bytes(tmp_path, labels, mm, residual_lost=[(3, 17), (5, 30)])
+    take = read_take(data, filename="t.c3d", layout="dutreve21", mapping={"NOSE": "nose_tip"})
+    expected = mm.astype(np.float32)[:, list(DUTREVE.ibug68)].copy()
+    expected[3, DUTREVE.index("brow_right_outer")] = np.nan
+    expected[5, DUTREVE.index("nose_tip")] = np.nan
+    np.testing.assert_allclose(take.points, expected, rtol=1e-6, equal_nan=True)
+    assert take.fps == 120 and take.meta["units"] == "mm" and take.source == "c3d"
+    raw = read_take(data, filename="t.c3d")
+    assert raw.names == tuple(labels) and raw.layout is None
+
+
+def test_c3d_without_points_and_repeated_labels(tmp_path):
+    with pytest.raises(RetargetError, match="holds no 3D point data"):
+        read_take(_c3d_bytes(tmp_path, [], None), filename="empty.c3d")
+    take = read_take(_c3d_bytes(tmp_path, ["A", "A", "B"], np.ones((2, 3, 3))), filename="r.c3d")
+    assert take.names == ("A", "A_2", "B")
+    with pytest.raises(RetargetError, match="is not a C3D file"):
+        read_take(b"x" * 600, filename="bad.c3d")
+
+
+# --- animated meshes ---------------------------------------------------------------------
+
+class _GlbBuilder:
+    """A minimal glTF 2.0 writer over pygltflib: one binary buffer, accessors appended."""
+
+    def __init__(self):
+        self.blob = bytearray()
+        self.doc = pygltflib.GLTF2(scene=0, scenes=[pygltflib.Scene(nodes=[])], nodes=[], meshes=[],
+                                   accessors=[], bufferViews=[], buffers=[], animations=[], skins=[])
+
+    def accessor(self, array, kind, component=pygltflib.FLOAT, target=None) -> int:
+        array = np.ascontiguousarray(array, dtype={pygltflib.FLOAT: np.float32,
+                                                   pygltflib.UNSIGNED_INT: np.uint32,
+                                                   pygltflib.UNSIGNED_SHORT: np.uint16}[component])
+        self.blob += b"\0" * (-len(self.blob) % 4)
+        self.doc.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(self.blob),
+                                                         byteLength=array.nbytes, target=target))
+        self.blob += array.tobytes()
+        width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[kind]
+        flat = array.reshape(len(array), -1) if array.ndim > 1 else array[:, None]
+        extra = {}
+        if kind == "VEC3" and component == pygltflib.FLOAT:
+            extra = {"min": flat.min(0).tolist(), "max": flat.max(0).tolist()}
+        self.doc.accessors.append(pygltflib.Accessor(bufferView=len(self.doc.bufferViews) - 1,
+                                                     componentType=component,
+                                                     count=array.size // width, type=kind, **extra))
+        return len(self.doc.accessors) - 1
+
+    def mesh(self, vertices, faces, targets=(), joints=None, weights=None) -> int:
+        attributes = pygltflib.Attributes(POSITION=self.accessor(vertices, "VEC3"))
+        if joints is not None:
+            attributes.JOINTS_0 = self.accessor(joints, "VEC4", pygltflib.UNSIGNED_SHORT)
+            attributes.WEIGHTS_0 = self.accessor(weights, "VEC4")
+        primitive = pygltflib.Primitive(
+            attributes=attributes, indices=self.accessor(faces.ravel(), "SCALAR", pygltflib.UNSIGNED_INT),
+            targets=[{"POSITION": self.accessor(t, "VEC3")} for t in targets] or None)
+        self.doc.meshes.append(pygltflib.Mesh(primitives=[primitive]))
+        return len(self.doc.meshes) - 1
+
+    def node(self, root=True, **kw) -> int:
+        self.doc.nodes.append(pygltflib.Node(**kw))
+        if root:
+            self.doc.scenes[0].nodes.append(len(self.doc.nodes) - 1)
+        return len(self.doc.nodes) - 1
+
+    def animate(self, channels) -> None:
+        """channels: [(node, path, times, values, interpolation)]."""
+        samplers, targets = [], []
+        for node, path, times, values, interpolation in channels:
+            kind = {"translation": "VEC3", "rotation": "VEC4", "scale": "VEC3", "weights": "SCALAR"}[path]
+            samplers.append(pygltflib.AnimationSampler(
+                input=self.accessor(times, "SCALAR"), output=self.accessor(
+                    np.asarray(values).reshape(-1) if kind == "SCALAR" else values, kind),
+                interpolation=interpolation))
+            targets.append(pygltflib.AnimationChannel(
+                sampler=len(samplers) - 1, target=pygltflib.AnimationChannelTarget(node=node, path=path)))
+        self.doc.animations.append(pygltflib.Animation(samplers=samplers, channels=targets, name="performance"))
+
+    def glb(self) -> bytes:
+        self.doc.buffers = [pygltflib.Buffer(byteLength=len(self.blob))]
+        self.doc.set_binary_blob(bytes(self.blob))
+        data = self.doc.save_to_bytes()
+        return b"".join(data) if isinstance(data, list) else bytes(data)
+
+
+KEYS = np.arange(N_FRAMES) / 10.0  # keyframes at 10 fps
+
+
+def _morph_glb(lift_at=None) -> bytes:
+    b = _GlbBuilder()
+    mesh = b.mesh(FACE.vertices, FACE.faces, targets=FACE.expressions)
+    node = b.node(mesh=mesh)
+    channels = [(node, "weights", KEYS, WEIGHTS, "LINEAR")]
+    if lift_at is not None:
+        channels.append((node, "translation", np.array([0.0, lift_at]),
+                         np.array([[0, 0, 0], [0, 1.0, 0]]), "STEP"))
+    b.animate(channels)
+    return b.glb()
+
+
+def test_gltf_morph_target_animation_at_its_keyframes():
+    labelled = {"vertex_indices": FACE.landmarks68.tolist(), "layout": "ibug68"}
+    take = read_take(_morph_glb(), filename="face.glb", labelled_vertices=labelled, layout="dutreve21")
+    assert take.fps == pytest.approx(10.0) and take.n_frames == N_FRAMES and take.source == "gltf"
+    np.testing.assert_allclose(take.points, TRUTH[:, list(DUTREVE.ibug68)], atol=1e-4)
+
+
+def test_gltf_sampled_between_keys_with_step_translation_and_surface_points():
+    data = _morph_glb(lift_at=0.45)
+    # surface points: the landmark vertex's triangle corners, weights 0.5/0.3/0.2
+    tri = np.stack([FACE.faces[np.flatnonzero((FACE.faces == v).any(1))[0]] for v in FACE.landmarks68])
+    bary = np.tile([0.5, 0.3, 0.2], (68, 1))
+    labelled = {"triangles": tri.tolist(), "barycentric": bary.tolist(), "layout": "ibug68"}
+    take = read_take(data, filename="face.glb", labelled_vertices=labelled, fps=30)
+    times = np.arange(28) / 30
+    assert take.n_frames == 28
+    weights = np.stack([np.interp(times, KEYS, WEIGHTS[:, e]) for e in range(WEIGHTS.shape[1])], 1)
+    posed = posed_vertices(FACE, weights)
+    expected = np.einsum("fkjd,kj->fkd", posed[:, tri], bary)
+    expected[times >= 0.45, :, 1] += 1.0
+    np.testing.assert_allclose(take.points, expected, atol=1e-4)
+
+
+def _skinned_glb():
+    """Head (root joint: turn about y, nod translation) and jaw (child joint at a pivot:
+    opening about x); vertices below the mouth follow the jaw by a graded weight."""
+    b = _GlbBuilder()
+    y = FACE.vertices[:, 1]
+    w_jaw = np.clip((-2.0 - y) / 3.0, 0.0, 1.0)
+    joints = np.zeros((len(y), 4), dtype=np.uint16)
+    joints[:, 1] = 1
+    weights = np.zeros((len(y), 4))
+    weights[:, 0], weights[:, 1] = 1 - w_jaw, w_jaw
+    mesh = b.mesh(FACE.vertices, FACE.faces, joints=joints, weights=weights)
+    pivot = np.array([0.0, -3.0, -2.0])
+    b.node(mesh=mesh, skin=0)
+    jaw = b.node(root=False, translation=pivot.tolist())
+    head = b.node(children=[jaw])
+    inverse = np.stack([np.eye(4), np.eye(4)])
+    inverse[1, :3, 3] = -pivot
+    b.doc.skins.append(pygltflib.Skin(joints=[head, jaw], inverseBindMatrices=b.accessor(
+        inverse.transpose(0, 2, 1).reshape(2, 16), "MAT4")))
+    turn = np.radians(25) * np.sin(KEYS * 3)
+    nod = 0.5 * np.sin(KEYS * 5)
+    opening = np.radians(20) * (1 - np.cos(KEYS * 4)) / 2
+    b.animate([
+        (head, "rotation", KEYS, Rotation.from_euler("y", turn[:, None]).as_quat(), "LINEAR"),
+        (head, "translation", KEYS, np.c_[0 * nod, nod, 0 * nod], "LINEAR"),
+        (jaw, "rotation", KEYS, Rotation.from_euler("x", opening[:, None]).as_quat(), "LINEAR"),
+    ])
+
+    def truth(t):
+        a, n, o = (np.interp(t, KEYS, v) for v in (turn, nod, opening))
+        head_m = np.zeros((len(t), 4, 4))
+        head_m[:, :3, :3] = Rotation.from_euler("y", a[:, None]).as_matrix()
+        head_m[:, :3, 3] = np.c_[0 * n, n, 0 * n]
+        head_m[:, 3, 3] = 1
+        jaw_local = np.zeros_like(head_m)
+        jaw_local[:, :3, :3] = Rotation.from_euler("x", o[:, None]).as_matrix()
+        jaw_local[:, :3, 3] = pivot
+        jaw_local[:, 3, 3] = 1
+        jaw_m = head_m @ jaw_local @ inverse[1]
+        v = np.c_[FACE.vertices, np.ones(len(y))]
+        return ((1 - w_jaw)[None, :, None] * np.einsum("fij,vj->fvi", head_m, v)
+                + w_jaw[None, :, None] * np.einsum("fij,vj->fvi", jaw_m, v))[..., :3]
+
+    return b.glb(), truth
+
+
+def test_gltf_skinned_animation_follows_linear_blend_skinning():
+    data, truth = _skinned_glb()
+    labelled = {name: int(v) for name, v in zip(IBUG.point_names, FACE.landmarks68)}
+    take = read_take(data, filename="skinned.glb", labelled_vertices=labelled, fps=20)
+    times = np.arange(19) / 20
+    assert take.layout == "ibug68" and take.n_frames == 19
+    np.testing.assert_allclose(take.points, truth(times)[:, FACE.landmarks68], atol=2e-4)
+    # the chin opens with the jaw and the head turn moves everything
+    assert np.ptp(take.points[:, IBUG.index("chin"), 1]) > 0.5
+
+
+def test_gltf_meshes_count_in_load_mesh_order():
+    b = _GlbBuilder()
+    face = b.node(mesh=b.mesh(FACE.vertices, FACE.faces, targets=FACE.expressions))
+    quad = b.mesh(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]))
+    b.node(mesh=quad, translation=[20.0, 0.0, 0.0])
+    b.animate([(face, "weights", KEYS, WEIGHTS, "LINEAR")])
+    data = b.glb()
+    mesh = load_mesh(data, "glb")
+    # where the app (load_mesh) puts the face's landmark vertices and the quad's corner
+    offset = int(np.flatnonzero(np.all(mesh.vertices == FACE.vertices[0].astype(np.float32), axis=1))[0])
+    corner = int(np.flatnonzero(np.all(mesh.vertices == [21.0, 1.0, 0.0], axis=1))[0])
+    labelled = {"nose_tip": offset + int(FACE.landmarks68[30]), "corner": corner}
+    take = read_take(data, filename="two.glb", labelled_vertices=labelled)
+    np.testing.assert_allclose(take.points[:, 0], TRUTH[:, 30], atol=1e-4)
+    np.testing.assert_allclose(take.points[:, 1], np.tile([21.0, 1.0, 0.0], (N_FRAMES, 1)))
+
+
+def test_gltf_errors():
+    labelled = {"vertex_indices": FACE.landmarks68.tolist(), "layout": "ibug68"}
+    with pytest.raises(RetargetError, match="needs labelled_vertices"):
+        read_take(_morph_glb(), filename="f.glb")
+    with pytest.raises(RetargetError, match="no \"layout\" to name its points"):
+        read_take(_morph_glb(), filename="f.glb", labelled_vertices={"vertex_indices": [1, 2, 3]})
+    with pytest.raises(RetargetError, match="is not a vertex of the mesh"):
+        read_take(_morph_glb(), filename="f.glb", labelled_vertices={"a": 10 ** 7})
+    b = _GlbBuilder()
+    b.node(mesh=b.mesh(FACE.vertices, FACE.faces))
+    with pytest.raises(RetargetError, match="holds no animation"):
+        read_take(b.glb(), filename="still.glb", labelled_vertices=labelled)
+    with pytest.raises(RetargetError, match="could not read 'x.glb' as glTF"):
+        read_take(b"glTF" + b"\0" * 20, filename="x.glb", labelled_vertices=labelled)
+    doc = json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": "face.bin", "byteLength": 4}]})
+    with pytest.raises(RetargetError, match="external file 'face.bin'"):
+        read_take(doc.encode(), filename="x.gltf", labelled_vertices=labelled)
+    # an accessor that claims more data than its buffer holds
+    b = _GlbBuilder()
+    node = b.node(mesh=b.mesh(FACE.vertices, FACE.faces, targets=FACE.expressions))
+    b.animate([(node, "weights", KEYS, WEIGHTS, "LINEAR")])
+    b.doc.accessors[0].count += 10 ** 6
+    with pytest.raises(RetargetError, match="accessor 0 reads past the end of its buffer"):
+        read_take(b.glb(), filename="x.glb", labelled_vertices=labelled)
+
+
+def _obj(vertices, faces) -> bytes:
+    out = io.BytesIO()
+    trimesh.Trimesh(vertices, faces, process=False).export(out, file_type="obj")
+    return out.getvalue()
+
+
+def _obj_zip(frames, faces, names=None, extra=()) -> bytes:
+    out = io.BytesIO()
+    order = np.random.default_rng(0).permutation(len(frames))  # stored out of order
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
+        for i in order:
+            name = names[i] if names else f"seq/face_{i + 1:04d}.obj"
+            archive.writestr(name, _obj(frames[i], faces))
+        for name, data in extra:
+            archive.writestr(name, data)
+    return out.getvalue()
+
+
+def test_obj_sequence_zip_in_frame_number_order():
+    frames = posed_vertices(FACE, WEIGHTS[:6])
+    data = _obj_zip(frames, FACE.faces, extra=[("seq/face.mtl", b"newmtl x\n"), ("__MACOSX/._a.obj", b"junk")])
+    labelled = {name: int(v) for name, v in zip(IBUG.point_names, FACE.landmarks68)}
+    take = read_take(data, filename="seq.zip", labelled_vertices=labelled, layout="dutreve21", fps=24)
+    np.testing.assert_allclose(take.points, TRUTH[:6, list(DUTREVE.ibug68)], atol=1e-5)
+    assert take.fps == 24 and take.source == "obj" and take.meta["n_vertices"] == len(FACE.vertices)
+
+
+def test_obj_sequence_errors_name_the_member():
+    frames = posed_vertices(FACE, WEIGHTS[:3])
+    labelled = {"a": 0}
+    bad = _obj_zip([frames[0], frames[1]], FACE.faces)
+    one_more = np.vstack([frames[2], [[0.0, 0.0, 0.0]]])  # an extra, unused vertex
+    bad = _obj_zip_with(bad, "seq/face_0003.obj", _obj(one_more, FACE.faces))
+    with pytest.raises(RetargetError, match=rf"'seq/face_0003.obj' has {len(FACE.vertices) + 1} vertices, 'seq/face_0001.obj' has {len(FACE.vertices)}"):
+        read_take(bad, filename="s.zip", labelled_vertices=labelled)
+    flipped = _obj_zip_with(_obj_zip(frames[:2], FACE.faces), "seq/face_0003.obj",
+                            _obj(frames[2], FACE.faces[:, ::-1]))
+    with pytest.raises(RetargetError, match="'seq/face_0003.obj' has other faces than 'seq/face_0001.obj'"):
+        read_take(flipped, filename="s.zip", labelled_vertices=labelled)
+    with pytest.raises(RetargetError, match="'x.obj' has no frame number"):
+        read_take(_obj_zip(frames[:1], FACE.faces, names=["x.obj"]), filename="s.zip", labelled_vertices=labelled)
+    with pytest.raises(RetargetError, match="'a/1.obj' and 'b/1.obj' have the same frame number 1"):
+        read_take(_obj_zip(frames[:2], FACE.faces, names=["a/1.obj", "b/1.obj"]), filename="s.zip",
+                  labelled_vertices=labelled)
+    with pytest.raises(RetargetError, match="holds no .obj files"):
+        read_take(_obj_zip([], FACE.faces, extra=[("a.txt", b"x")]), filename="s.zip", labelled_vertices=labelled)
+    with pytest.raises(RetargetError, match="is not a zip archive"):
+        read_take(b"PK junk", filename="s.zip", labelled_vertices=labelled)
+
+
+def _obj_zip_with(data: bytes, name: str, member: bytes) -> bytes:
+    out = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as src, zipfile.ZipFile(out, "w") as dst:
+        for info in src.infolist():
+            dst.writestr(info, src.read(info))
+        dst.writestr(name, member)
+    return out.getvalue()
