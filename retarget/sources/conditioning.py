@@ -1,0 +1,348 @@
+"""Conditioning of source feature points before retargeting: neutral capture, head-motion
+removal, temporal filtering and per-region gain.
+
+Per frame, in this order (Woodward et al. §5 and §5.1):
+
+1. neutral: the rest points S0, captured from the first seconds of the performance
+   ("acquired during the first few seconds of marker motion capture", the face still,
+   head movement allowed), taken from one frame, or given;
+2. head pose (3D sources only): the rigid head motion is removed on the layout's stable
+   points (`retarget.sources.headpose`), so only facial motion reaches the target; the
+   head's rotation is kept in `rotation_` for a consumer that turns the target's head;
+3. filter: none, Woodward's 3-frame temporal mean, or the One Euro filter with per-region
+   parameters (`retarget.sources.filters`);
+4. gain: ``S0 + g_region (S - S0)``, exaggerating or damping a region's motion.
+
+`SourceConditioner` works online (`push` one frame at a time); `condition_take` runs it
+over a whole take, so a recorded take and a live stream are conditioned alike.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
+from retarget.sources.filters import OneEuroFilter, TemporalMean
+from retarget.sources.headpose import HeadMotionRemover, head_neutral, stable_indices
+from retarget.sources.take import Take
+
+__all__ = ["ConditionSettings", "SourceConditioner", "condition_take"]
+
+NEUTRAL_MODES = ("first_seconds", "frame", "given")
+HEAD_POSE_MODES = ("remove", "keep")
+FILTERS = ("none", "mean3", "one_euro")
+DEFAULT_ONE_EURO = {"min_cutoff": 1.0, "beta": 5.0}
+
+# Region keys the settings accept: regions, groups and the point names of every layout.
+_SELECTORS = set(REGIONS) | set(GROUPS) | {p for lay in LAYOUTS.values() for p in lay.point_names}
+
+
+@dataclass
+class ConditionSettings:
+    """How a source is conditioned; JSON-able with `to_dict` / `from_dict`.
+
+    neutral : {"mode": "first_seconds" | "frame" | "given", "seconds": float >= 0,
+        "frame": int >= 0}. "first_seconds": the per-point median of the frames within
+        `seconds` of the first (3D with head pose removal: each registered on the stable
+        points first, `headpose.head_neutral`), frames before the neutral is known give
+        no output; "frame": the `frame`-th frame; "given": the caller passes it.
+    head_pose : "remove" (3D sources: rigid head motion removed, Woodward §5.1) or "keep".
+        2D sources keep it whatever this says.
+    apply_rotation : whether the consumer should turn the target's head by the
+        performer's head rotation (`SourceConditioner.rotation_`); the points are the
+        same either way.
+    filter : "none", "mean3" (Woodward §5, 3-frame mean) or "one_euro".
+    one_euro : {selector: {"min_cutoff": Hz > 0, "beta": >= 0}}, optionally "d_cutoff"
+        (Hz > 0) at the top level. beta is in seconds per face size: speeds are measured
+        in face sizes per second (the RMS distance of the neutral points from their
+        centroid), so one setting suits pixels, cm and mm.
+    gain : {selector: float >= 0}, 1 = as performed.
+
+    A selector is a region, a group (`retarget.layouts.GROUPS`, e.g. "mouth", "all") or
+    a point name; entries apply in the order given, a later one overriding an earlier
+    one for the points both select. Points no entry selects get `DEFAULT_ONE_EURO` and
+    gain 1.
+    """
+
+    neutral: dict = field(default_factory=lambda: {"mode": "first_seconds", "seconds": 0.5, "frame": 0})
+    head_pose: str = "remove"
+    apply_rotation: bool = False
+    filter: str = "none"
+    one_euro: dict = field(default_factory=dict)
+    gain: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.neutral = _neutral(self.neutral)
+        for name, allowed in (("head_pose", HEAD_POSE_MODES), ("filter", FILTERS)):
+            if getattr(self, name) not in allowed:
+                raise RetargetError(
+                    f"settings {name} must be one of {', '.join(allowed)}; got {getattr(self, name)!r}")
+        if not isinstance(self.apply_rotation, bool):
+            raise RetargetError(f"settings apply_rotation must be true or false; got {self.apply_rotation!r}")
+        self.one_euro = _one_euro(self.one_euro)
+        self.gain = _gain(self.gain)
+
+    def to_dict(self) -> dict:
+        """A JSON-able copy."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict | None) -> "ConditionSettings":
+        """Settings from `to_dict`'s form; missing keys take the defaults, unknown keys are
+        refused by name."""
+        if data is None:
+            return cls()
+        if not isinstance(data, dict):
+            raise RetargetError(f"conditioning settings must be an object; got {type(data).__name__}")
+        unknown = sorted(set(data) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise RetargetError(
+                f"unknown conditioning settings: {', '.join(unknown)}; known: "
+                f"{', '.join(cls.__dataclass_fields__)}")
+        return cls(**data)
+
+
+class SourceConditioner:
+    """Online conditioning of one source's frames (see the module docstring).
+
+    layout : the layout the points follow (a name or `Layout`), or None for points with
+        no layout (then only the "all" selector, and no head pose removal).
+    dims : 2 or 3, the source's dimension.
+    settings : `ConditionSettings` (or its dict form); default `ConditionSettings()`.
+    neutral : (N, dims) float, the neutral for mode "given" (refused otherwise).
+
+    `push(points (N, D), t seconds) -> (N, D) float32 | None`: None while the neutral is
+    being captured; lost points (NaN rows) stay NaN. After the capture, ``neutral_``
+    (N, D) float32 holds S0 (in the head frame when head motion is removed) and
+    ``rotation_`` (3, 3) the performer's head rotation relative to the neutral in the
+    latest frame (identity for 2D sources, with head_pose "keep", and before a pose is
+    known). `reset()` starts over, capturing the neutral again unless it was given.
+    """
+
+    def __init__(self, layout, dims: int, settings=None, neutral=None):
+        self.layout = None if layout is None else layout if isinstance(layout, Layout) else get_layout(layout)
+        if dims not in (2, 3):
+            raise RetargetError(f"dims must be 2 or 3; got {dims!r}")
+        self.dims = dims
+        self.settings = settings if isinstance(settings, ConditionSettings) \
+            else ConditionSettings.from_dict(settings)
+        s = self.settings
+        self.removes_head = dims == 3 and s.head_pose == "remove"
+        if self.removes_head and self.layout is None:
+            raise RetargetError("head pose removal needs a layout (it works on the stable points)")
+        self._stable = stable_indices(self.layout) if self.removes_head else None
+        self._n = None if self.layout is None else self.layout.n_points
+        self._given = None
+        if s.neutral["mode"] == "given":
+            if neutral is None:
+                raise RetargetError('neutral mode "given" needs the neutral points')
+            self._given = self._checked(neutral, "neutral")
+            if np.isnan(self._given).any():
+                raise RetargetError(f"the given neutral has lost points: {self._names(np.isnan(self._given[:, 0]))}")
+        elif neutral is not None:
+            raise RetargetError(f'a neutral was given but the neutral mode is {s.neutral["mode"]!r}')
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all state: the neutral is captured again (unless given), filters restart."""
+        self.neutral_ = None
+        self.rotation_ = np.eye(3)
+        self._captured: list[np.ndarray] = []
+        self._t0 = None
+        self._count = 0
+        self._remover = self._filter = self._gain = None
+        if self._given is not None:
+            self._start(self._given)
+
+    def push(self, points, t: float) -> np.ndarray | None:
+        """The conditioned (N, D) float32 points of one frame at time `t` (seconds), or
+        None while the neutral is still being captured."""
+        p = self._checked(points, "points")
+        t = float(t)
+        if not math.isfinite(t):
+            raise RetargetError(f"frame time must be finite; got {t!r}")
+        index, self._count = self._count, self._count + 1
+        if self.neutral_ is None:
+            mode = self.settings.neutral
+            if mode["mode"] == "frame":
+                if index < mode["frame"]:
+                    return None
+                lost = np.isnan(p[:, 0])
+                if lost.any():
+                    raise RetargetError(f"neutral frame {index} has lost points: {self._names(lost)}")
+                self._start(p)
+            else:
+                if self._t0 is None:
+                    self._t0 = t
+                if t <= self._t0 + mode["seconds"]:
+                    self._captured.append(p)
+                    return None
+                self._start(self._captured_neutral())
+        return self._conditioned(p, t)
+
+    def _captured_neutral(self) -> np.ndarray:
+        frames = np.stack(self._captured)
+        self._captured = []
+        lost = np.isnan(frames[..., 0]).all(axis=0)
+        if lost.any():
+            raise RetargetError(
+                f"no neutral for points lost throughout the first {self.settings.neutral['seconds']:g} s: "
+                f"{self._names(lost)}")
+        if self.removes_head:
+            return head_neutral(frames, self._stable)
+        return frames[0] if len(frames) == 1 else np.nanmedian(frames, axis=0).astype(np.float32)
+
+    def _start(self, neutral: np.ndarray) -> None:
+        """Set S0 and build the per-frame steps that depend on it."""
+        self.neutral_ = np.asarray(neutral, dtype=np.float32)
+        if self.removes_head:
+            self._remover = HeadMotionRemover(self.neutral_, self._stable)
+        s = self.settings
+        self._gain = self._per_point(s.gain, 1.0) if s.gain else None
+        if s.filter == "mean3":
+            self._filter = TemporalMean(3)
+        elif s.filter == "one_euro":
+            centred = self.neutral_ - np.nanmean(self.neutral_, axis=0)
+            size = float(np.sqrt(np.nanmean(np.sum(centred**2, axis=1)))) or 1.0
+            params = {k: v for k, v in s.one_euro.items() if k != "d_cutoff"}
+            min_cutoff = self._per_point({k: v["min_cutoff"] for k, v in params.items()},
+                                         DEFAULT_ONE_EURO["min_cutoff"])
+            beta = self._per_point({k: v["beta"] for k, v in params.items()}, DEFAULT_ONE_EURO["beta"])
+            self._filter = OneEuroFilter(min_cutoff, beta / size, s.one_euro.get("d_cutoff", 1.0))
+
+    def _conditioned(self, p: np.ndarray, t: float) -> np.ndarray:
+        if self._remover is not None:
+            p = self._remover(p)
+            rotation = self._remover.rotation_
+            self.rotation_ = rotation.T if np.isfinite(rotation).all() else np.eye(3)
+        if self._filter is not None:
+            p = self._filter(p, t)
+        if self._gain is not None:
+            p = self.neutral_ + self._gain[:, None] * (p - self.neutral_)
+        return np.asarray(p, dtype=np.float32)
+
+    def _per_point(self, entries: dict, default: float) -> np.ndarray:
+        """(N,) float64 values from {selector: value}, later entries overriding."""
+        out = np.full(self._n, default, dtype=np.float64)
+        for selector, value in entries.items():
+            if self.layout is None:
+                if selector != "all":
+                    raise RetargetError(
+                        f"points without a layout take only the selector 'all'; got {selector!r}")
+                out[:] = value
+            else:
+                out[self.layout.region_mask(selector)] = value
+        return out
+
+    def _checked(self, points, what: str) -> np.ndarray:
+        try:
+            p = np.array(points, dtype=np.float32)
+        except (TypeError, ValueError):
+            raise RetargetError(f"{what} must be a numeric (N, {self.dims}) array") from None
+        if self._n is None and p.ndim == 2:
+            self._n = len(p)  # without a layout, the first frame tells N
+        if p.shape != (self._n, self.dims):
+            raise RetargetError(f"{what} must have shape ({self._n}, {self.dims}); got {p.shape}")
+        if np.isinf(p).any():
+            raise RetargetError(f"{what} has infinite coordinates")
+        p[np.isnan(p).any(axis=1)] = np.nan
+        return p
+
+    def _names(self, mask: np.ndarray) -> str:
+        idx = np.flatnonzero(mask)
+        names = [self.layout.point_names[i] if self.layout else f"point {i}" for i in idx[:12]]
+        return ", ".join(names) + (f" and {len(idx) - 12} more" if len(idx) > 12 else "")
+
+
+def condition_take(take: Take, settings=None, neutral=None) -> tuple[Take, np.ndarray]:
+    """(conditioned take, (N, D) float32 neutral): `take` pushed frame by frame through a
+    `SourceConditioner`, the same as a live stream of it.
+
+    The frames that gave no output (the neutral capture) are left out; the take's times
+    start at the first frame kept, and ``meta["conditioned_from_s"]`` says where that
+    was in the original. `RetargetError` if no frame is left.
+    """
+    conditioner = SourceConditioner(take.layout, take.dims, settings, neutral)
+    times = take.frame_times()
+    out, kept = [], []
+    for i in range(take.n_frames):
+        p = conditioner.push(take.points[i], times[i])
+        if p is not None:
+            out.append(p)
+            kept.append(i)
+    if not kept:
+        raise RetargetError(
+            f"the take ({times[-1] - times[0]:.3f} s) ends before its neutral capture does "
+            f"({conditioner.settings.neutral['seconds']:g} s)")
+    meta = dict(take.meta, conditioned_from_s=float(times[kept[0]] - times[0]),
+                conditioning=conditioner.settings.to_dict())
+    result = Take(np.stack(out), take.names, take.fps, times[kept] - times[kept[0]],
+                  take.layout, take.source, meta)
+    return result, conditioner.neutral_.copy()
+
+
+def _neutral(value) -> dict:
+    if not isinstance(value, dict):
+        raise RetargetError(f"settings neutral must be an object; got {value!r}")
+    unknown = sorted(set(value) - {"mode", "seconds", "frame"})
+    if unknown:
+        raise RetargetError(f"settings neutral has unknown keys: {', '.join(unknown)}")
+    out = {"mode": value.get("mode", "first_seconds"), "seconds": value.get("seconds", 0.5),
+           "frame": value.get("frame", 0)}
+    if out["mode"] not in NEUTRAL_MODES:
+        raise RetargetError(f"settings neutral mode must be one of {', '.join(NEUTRAL_MODES)}; got {out['mode']!r}")
+    seconds = out["seconds"]
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) \
+            or not math.isfinite(seconds) or seconds < 0:
+        raise RetargetError(f"settings neutral seconds must be a number >= 0; got {seconds!r}")
+    frame = out["frame"]
+    if isinstance(frame, bool) or not isinstance(frame, int) or frame < 0:
+        raise RetargetError(f"settings neutral frame must be an integer >= 0; got {frame!r}")
+    out["seconds"] = float(seconds)
+    return out
+
+
+def _selector(key, what: str) -> str:
+    if key not in _SELECTORS:
+        raise RetargetError(
+            f"settings {what} selector {key!r} is not a region, group or point name "
+            f"(regions: {', '.join(REGIONS)}; groups: {', '.join(GROUPS)})")
+    return key
+
+
+def _number(value, what: str, positive: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (value <= 0 if positive else value < 0):
+        raise RetargetError(f"settings {what} must be a number {'> 0' if positive else '>= 0'}; got {value!r}")
+    return float(value)
+
+
+def _one_euro(value) -> dict:
+    if not isinstance(value, dict):
+        raise RetargetError(f"settings one_euro must be an object; got {value!r}")
+    out = {}
+    for key, params in value.items():
+        if key == "d_cutoff":
+            out[key] = _number(params, "one_euro d_cutoff", positive=True)
+            continue
+        _selector(key, "one_euro")
+        if not isinstance(params, dict) or set(params) - {"min_cutoff", "beta"}:
+            raise RetargetError(
+                f"settings one_euro[{key!r}] must be {{\"min_cutoff\": Hz, \"beta\": number}}; got {params!r}")
+        out[key] = {
+            "min_cutoff": _number(params.get("min_cutoff", DEFAULT_ONE_EURO["min_cutoff"]),
+                                  f"one_euro[{key!r}] min_cutoff", positive=True),
+            "beta": _number(params.get("beta", DEFAULT_ONE_EURO["beta"]),
+                            f"one_euro[{key!r}] beta", positive=False),
+        }
+    return out
+
+
+def _gain(value) -> dict:
+    if not isinstance(value, dict):
+        raise RetargetError(f"settings gain must be an object; got {value!r}")
+    return {_selector(k, "gain"): _number(v, f"gain[{k!r}]", positive=False) for k, v in value.items()}

@@ -1,0 +1,232 @@
+"""Tests for retarget.sources.conditioning: head motion removal, neutral capture modes,
+filters, per-region gain and one-euro parameters, settings validation, and that a take
+conditioned offline equals the same frames pushed one by one."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from retarget.errors import RetargetError
+from retarget.layouts import get_layout
+from retarget.sample_face import EXPRESSION_NAMES, demo_weights, posed_vertices, sample_face
+from retarget.sources.conditioning import ConditionSettings, SourceConditioner, condition_take
+from retarget.sources.filters import temporal_mean
+from retarget.sources.take import Take
+
+IBUG = get_layout("ibug68")
+FACE = sample_face(1)
+NEUTRAL = FACE.vertices[FACE.landmarks68]                          # (68, 3) cm
+# an expression that leaves the stable points (nose, eye corners) still to 0.03 mm
+STILL_ANCHORS = np.zeros(len(EXPRESSION_NAMES))
+for name in ("jawOpen", "eyeBlink_L", "mouthFrown_L", "mouthFrown_R", "cheekPuff"):
+    STILL_ANCHORS[EXPRESSION_NAMES.index(name)] = 1.0
+EXPRESSION = posed_vertices(FACE, STILL_ANCHORS)[FACE.landmarks68]
+KEEP = {"neutral": {"mode": "frame", "frame": 0}, "head_pose": "keep"}
+
+
+def _moved(points, rotvec, shift):
+    rotation = Rotation.from_rotvec(rotvec).as_matrix()
+    return points @ rotation.T + np.asarray(shift), rotation
+
+
+def _performance(frames=60, fps=30.0, seed=0):
+    """(F, 68, 3) demo expressions and the same under a smooth rigid head motion."""
+    face = posed_vertices(FACE, demo_weights(frames, fps))[:, FACE.landmarks68]
+    t = np.arange(frames) / fps
+    rotvecs = np.c_[0.2 * np.sin(2 * t), 0.3 * np.sin(1.3 * t + 1), 0.1 * np.sin(t)]
+    moved = np.stack([_moved(face[i], rotvecs[i], [np.sin(t[i]), 0.5, -2 * t[i]])[0] for i in range(frames)])
+    return face, moved
+
+
+def test_rigid_head_motion_is_removed_and_reported_as_rotation():
+    conditioner = SourceConditioner("ibug68", 3, {"neutral": {"mode": "frame", "frame": 0}})
+    first = conditioner.push(NEUTRAL, 0.0)
+    np.testing.assert_allclose(first, NEUTRAL, atol=1e-5)
+    for i, (rotvec, shift) in enumerate([([0.3, -0.2, 0.1], [2.0, -1.0, 5.0]), ([0, 0.6, 0], [0, 0, -3.0])]):
+        moved, rotation = _moved(EXPRESSION, rotvec, shift)
+        out = conditioner.push(moved, 0.1 * (i + 1))
+        assert np.abs(moved - EXPRESSION).max() > 1.0                 # centimetres of head motion ...
+        np.testing.assert_allclose(out, EXPRESSION, atol=0.01)        # ... gone to 0.1 mm
+        np.testing.assert_allclose(conditioner.rotation_, rotation, atol=1e-3)
+    keep = SourceConditioner("ibug68", 3, KEEP)
+    keep.push(NEUTRAL, 0.0)
+    np.testing.assert_allclose(keep.push(moved, 0.1), moved, atol=1e-5)
+    np.testing.assert_array_equal(keep.rotation_, np.eye(3))
+
+
+def test_first_seconds_neutral_is_captured_while_the_head_moves():
+    # 0.5 s of a still face under head motion, then expressions under head motion
+    still = np.stack([_moved(NEUTRAL, [0.1 * np.sin(i), 0.2 * np.cos(i) - 0.2, 0], [i * 0.1, 0, 0])[0]
+                      for i in range(16)])
+    face, moved = _performance(frames=40)
+    frames = np.concatenate([still, moved])
+    take = Take(frames, IBUG.point_names, 30.0, layout="ibug68")
+    out, neutral = condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.5}})
+    # t <= 0.5 s: frames 0..15 are the capture; the output starts at frame 16
+    assert out.n_frames == 40 and out.meta["conditioned_from_s"] == pytest.approx(16 / 30)
+    # the neutral is the still face, in the first frame's head frame
+    np.testing.assert_allclose(neutral, still[0], atol=1e-3)
+    # each output frame is the expression face in that same head frame: compare shapes
+    # by aligning the truth once, on the first frame's pose
+    rotation0 = Rotation.from_rotvec([0, 0.2 * np.cos(0) - 0.2, 0]).as_matrix()
+    expected = face @ rotation0.T
+    error = (out.points - out.points.mean(1, keepdims=True)) - (expected - expected.mean(1, keepdims=True))
+    assert np.median(np.abs(error)) < 0.01 and np.abs(error).max() < 0.5
+
+
+def test_keep_mode_neutral_is_the_takes_neutral_and_frame_mode_waits_for_its_frame():
+    _, moved = _performance(frames=30)
+    take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
+    out, neutral = condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.2},
+                                         "head_pose": "keep"})
+    np.testing.assert_allclose(neutral, take.neutral(seconds=0.2), atol=1e-6)
+    np.testing.assert_array_equal(out.points, take.points[7:])     # t <= 0.2 s is frames 0..6
+    conditioner = SourceConditioner("ibug68", 3, {"neutral": {"mode": "frame", "frame": 3}, "head_pose": "keep"})
+    outputs = [conditioner.push(moved[i], i / 30) for i in range(6)]
+    assert outputs[:3] == [None] * 3 and conditioner.neutral_ is not None
+    np.testing.assert_array_equal(conditioner.neutral_, moved[3].astype(np.float32))
+    conditioner.reset()
+    assert conditioner.neutral_ is None and conditioner.push(moved[0], 0.0) is None
+
+
+def test_given_neutral():
+    conditioner = SourceConditioner("ibug68", 3, {"neutral": {"mode": "given"}}, neutral=NEUTRAL)
+    moved, _ = _moved(EXPRESSION, [0.1, 0.2, 0.3], [1, 2, 3])
+    np.testing.assert_allclose(conditioner.push(moved, 0.0), EXPRESSION, atol=0.01)
+    with pytest.raises(RetargetError, match='neutral mode "given" needs the neutral points'):
+        SourceConditioner("ibug68", 3, {"neutral": {"mode": "given"}})
+    with pytest.raises(RetargetError, match="a neutral was given but the neutral mode is 'first_seconds'"):
+        SourceConditioner("ibug68", 3, None, neutral=NEUTRAL)
+
+
+def test_gain_scales_only_its_regions_motion():
+    face, _ = _performance(frames=40)
+    take = Take(face, IBUG.point_names, 30.0, layout="ibug68")
+    plain, s0 = condition_take(take, KEEP)
+    gained, _ = condition_take(take, {**KEEP, "gain": {"all": 0.5, "mouth": 2.0, "nose_tip": 0.0}})
+    mouth = IBUG.region_mask("mouth")
+    nose = IBUG.index("nose_tip")
+    rest = ~mouth
+    rest[nose] = False
+    np.testing.assert_allclose(gained.points[:, mouth], s0[mouth] + 2.0 * (plain.points[:, mouth] - s0[mouth]), atol=1e-5)
+    np.testing.assert_allclose(gained.points[:, rest], s0[rest] + 0.5 * (plain.points[:, rest] - s0[rest]), atol=1e-5)
+    np.testing.assert_allclose(gained.points[:, nose], np.broadcast_to(s0[nose], (40, 3)), atol=1e-6)
+    assert np.abs(plain.points[:, mouth] - s0[mouth]).max() > 0.3  # the mouth did move
+
+
+def test_filters_run_after_head_removal():
+    face, moved = _performance(frames=30)
+    rng = np.random.default_rng(1)
+    noisy = moved + rng.normal(scale=0.02, size=moved.shape)
+    take = Take(noisy, IBUG.point_names, 30.0, layout="ibug68")
+    stabilised, _ = condition_take(take, {"neutral": {"mode": "frame", "frame": 0}})
+    averaged, _ = condition_take(take, {"neutral": {"mode": "frame", "frame": 0}, "filter": "mean3"})
+    np.testing.assert_allclose(averaged.points, temporal_mean(stabilised.points), atol=1e-5)
+
+
+def test_one_euro_per_region_and_unit_free_beta():
+    face, _ = _performance(frames=150)  # the brows rise at 3.7 s
+    rng = np.random.default_rng(2)
+    noisy = face + rng.normal(scale=0.02, size=face.shape)
+    settings = {**KEEP, "filter": "one_euro",
+                "one_euro": {"all": {"min_cutoff": 1e5, "beta": 0.0}, "brows": {"min_cutoff": 0.3, "beta": 0.0}}}
+    take = Take(noisy, IBUG.point_names, 30.0, layout="ibug68")
+    out, _ = condition_take(take, settings)
+    brows = IBUG.region_mask("brows")
+    np.testing.assert_allclose(out.points[:, ~brows], noisy[:, ~brows], atol=2e-3)  # a 100 kHz cutoff passes all
+    lag = np.abs(out.points[:, brows] - face[:, brows]).max()
+    assert lag > 0.1                                                                  # a 0.3 Hz one lags
+    # beta is per face size: the same settings on the take in mm give the result in mm
+    speedy = {**KEEP, "filter": "one_euro", "one_euro": {"all": {"min_cutoff": 0.5, "beta": 8.0}}}
+    cm, _ = condition_take(take, speedy)
+    mm, _ = condition_take(Take(noisy * 10, IBUG.point_names, 30.0, layout="ibug68"), speedy)
+    np.testing.assert_allclose(mm.points, 10 * cm.points, rtol=1e-4, atol=1e-3)
+
+
+def test_offline_equals_pushing_every_frame():
+    _, moved = _performance(frames=45)
+    moved[10:14, 5] = np.nan
+    take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
+    settings = {"neutral": {"mode": "first_seconds", "seconds": 0.3}, "filter": "one_euro",
+                "one_euro": {"mouth": {"min_cutoff": 2.0, "beta": 3.0}}, "gain": {"brows": 1.5}}
+    out, neutral = condition_take(take, settings)
+    conditioner = SourceConditioner("ibug68", 3, ConditionSettings.from_dict(settings))
+    pushed = [conditioner.push(p, t) for p, t in zip(take.points, take.frame_times())]
+    kept = [p for p in pushed if p is not None]
+    np.testing.assert_array_equal(np.stack(kept), out.points)
+    np.testing.assert_array_equal(conditioner.neutral_, neutral)
+    # t <= 0.3 s is the capture (frames 0..9): the point lost in frames 10-13 is lost in 0-3
+    assert out.n_frames == 35
+    assert np.isnan(out.points[:4, 5]).all() and np.isfinite(out.points[4:, 5]).all()
+
+
+def test_two_dimensional_sources_keep_their_head_pose():
+    face, _ = _performance(frames=10)
+    conditioner = SourceConditioner("ibug68", 2, {"neutral": {"mode": "frame", "frame": 0}})
+    for i in range(10):
+        out = conditioner.push(face[i, :, :2] + 3.0, i / 30)
+    np.testing.assert_allclose(out, face[9, :, :2] + 3.0, atol=1e-5)
+    np.testing.assert_array_equal(conditioner.rotation_, np.eye(3))
+
+
+def test_points_without_a_layout_take_the_all_selector():
+    points = np.random.default_rng(3).normal(size=(5, 4, 3))
+    take = Take(points, ("a", "b", "c", "d"), 30.0)
+    out, s0 = condition_take(take, {**KEEP, "gain": {"all": 2.0}})
+    np.testing.assert_allclose(out.points, s0 + 2 * (points - s0), atol=1e-5)
+    with pytest.raises(RetargetError, match="only the selector 'all'; got 'mouth'"):
+        condition_take(take, {**KEEP, "gain": {"mouth": 2.0}})
+    with pytest.raises(RetargetError, match="head pose removal needs a layout"):
+        condition_take(take, {"neutral": {"mode": "frame", "frame": 0}})
+
+
+def test_capture_errors_name_points_and_spans():
+    _, moved = _performance(frames=20)
+    moved[:8, IBUG.index("chin")] = np.nan
+    take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
+    with pytest.raises(RetargetError, match="lost throughout the first 0.2 s: chin"):
+        condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.2}})
+    with pytest.raises(RetargetError, match="neutral frame 2 has lost points: chin"):
+        condition_take(take, {"neutral": {"mode": "frame", "frame": 2}})
+    with pytest.raises(RetargetError, match="ends before its neutral capture does"):
+        condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 5.0}})
+    conditioner = SourceConditioner("ibug68", 3)
+    with pytest.raises(RetargetError, match=r"points must have shape \(68, 3\); got \(68, 2\)"):
+        conditioner.push(np.zeros((68, 2)), 0.0)
+    with pytest.raises(RetargetError, match="dims must be 2 or 3"):
+        SourceConditioner("ibug68", 4)
+
+
+def test_settings_round_trip_through_json_and_defaults():
+    settings = ConditionSettings(neutral={"mode": "frame", "frame": 4}, head_pose="keep", apply_rotation=True,
+                                 filter="one_euro", one_euro={"mouth": {"min_cutoff": 2, "beta": 1}, "d_cutoff": 2},
+                                 gain={"brows": 1.5})
+    back = ConditionSettings.from_dict(json.loads(json.dumps(settings.to_dict())))
+    assert back == settings and back.neutral == {"mode": "frame", "seconds": 0.5, "frame": 4}
+    default = ConditionSettings.from_dict({})
+    assert default == ConditionSettings() and default.head_pose == "remove" and default.filter == "none"
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"colour": 1}, "unknown conditioning settings: colour"),
+    ({"neutral": {"mode": "later"}}, "neutral mode must be one of first_seconds, frame, given"),
+    ({"neutral": {"seconds": -1}}, "neutral seconds must be a number >= 0"),
+    ({"neutral": {"frame": 1.5}}, "neutral frame must be an integer >= 0"),
+    ({"neutral": {"when": 0}}, "neutral has unknown keys: when"),
+    ({"head_pose": "fix"}, "head_pose must be one of remove, keep"),
+    ({"filter": "kalman"}, "filter must be one of none, mean3, one_euro"),
+    ({"apply_rotation": "yes"}, "apply_rotation must be true or false"),
+    ({"gain": {"lips": 2}}, "gain selector 'lips' is not a region, group or point name"),
+    ({"gain": {"mouth": -1}}, r"gain\['mouth'\] must be a number >= 0"),
+    ({"one_euro": {"mouth": {"min_cutoff": 0}}}, r"one_euro\['mouth'\] min_cutoff must be a number > 0"),
+    ({"one_euro": {"mouth": {"speed": 1}}}, r"one_euro\['mouth'\] must be"),
+    ({"one_euro": {"d_cutoff": 0}}, "one_euro d_cutoff must be a number > 0"),
+    ([1], "conditioning settings must be an object"),
+])
+def test_bad_settings_are_refused_by_name(data, message):
+    with pytest.raises(RetargetError, match=message):
+        ConditionSettings.from_dict(data)
