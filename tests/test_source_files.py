@@ -291,14 +291,26 @@ class _GlbBuilder:
                                                      count=array.size // width, type=kind, **extra))
         return len(self.doc.accessors) - 1
 
-    def mesh(self, vertices, faces, targets=(), joints=None, weights=None) -> int:
+    def sparse_vec3(self, array) -> int:
+        """An accessor without a buffer view: zeros but for the rows that are not."""
+        rows = np.flatnonzero(np.any(array != 0, axis=1)).astype(np.uint32)
+        indices, values = self.accessor(rows, "SCALAR", pygltflib.UNSIGNED_INT), self.accessor(array[rows], "VEC3")
+        self.doc.accessors.append(pygltflib.Accessor(
+            componentType=pygltflib.FLOAT, count=len(array), type="VEC3",
+            sparse=pygltflib.Sparse(count=len(rows), indices=pygltflib.AccessorSparseIndices(
+                bufferView=self.doc.accessors[indices].bufferView, componentType=pygltflib.UNSIGNED_INT),
+                values=pygltflib.AccessorSparseValues(bufferView=self.doc.accessors[values].bufferView))))
+        return len(self.doc.accessors) - 1
+
+    def mesh(self, vertices, faces, targets=(), joints=None, weights=None, sparse=False) -> int:
         attributes = pygltflib.Attributes(POSITION=self.accessor(vertices, "VEC3"))
         if joints is not None:
             attributes.JOINTS_0 = self.accessor(joints, "VEC4", pygltflib.UNSIGNED_SHORT)
             attributes.WEIGHTS_0 = self.accessor(weights, "VEC4")
         primitive = pygltflib.Primitive(
             attributes=attributes, indices=self.accessor(faces.ravel(), "SCALAR", pygltflib.UNSIGNED_INT),
-            targets=[{"POSITION": self.accessor(t, "VEC3")} for t in targets] or None)
+            targets=[{"POSITION": self.sparse_vec3(t) if sparse else self.accessor(t, "VEC3")}
+                     for t in targets] or None)
         self.doc.meshes.append(pygltflib.Mesh(primitives=[primitive]))
         return len(self.doc.meshes) - 1
 
@@ -320,6 +332,13 @@ class _GlbBuilder:
             targets.append(pygltflib.AnimationChannel(
                 sampler=len(samplers) - 1, target=pygltflib.AnimationChannelTarget(node=node, path=path)))
         self.doc.animations.append(pygltflib.Animation(samplers=samplers, channels=targets, name="performance"))
+
+    def gltf(self) -> bytes:
+        """The document as .gltf JSON with its buffer as a data URI."""
+        self.doc.buffers = [pygltflib.Buffer(byteLength=len(self.blob))]
+        self.doc.set_binary_blob(bytes(self.blob))
+        self.doc.convert_buffers(pygltflib.BufferFormat.DATAURI)
+        return self.doc.gltf_to_json().encode()
 
     def glb(self) -> bytes:
         self.doc.buffers = [pygltflib.Buffer(byteLength=len(self.blob))]
@@ -364,6 +383,24 @@ def test_gltf_sampled_between_keys_with_step_translation_and_surface_points():
     expected = np.einsum("fkjd,kj->fkd", posed[:, tri], bary)
     expected[times >= 0.45, :, 1] += 1.0
     np.testing.assert_allclose(take.points, expected, atol=1e-4)
+
+
+def test_gltf_json_with_a_data_uri_sparse_targets_and_cubic_spline_weights():
+    b = _GlbBuilder()
+    node = b.node(mesh=b.mesh(FACE.vertices, FACE.faces, targets=FACE.expressions, sparse=True))
+    # CUBICSPLINE keys hold (in-tangent, value, out-tangent); zero tangents give smoothstep
+    cubic = np.stack([np.zeros_like(WEIGHTS), WEIGHTS, np.zeros_like(WEIGHTS)], axis=1)
+    b.animate([(node, "weights", KEYS, cubic, "CUBICSPLINE")])
+    labelled = {"vertex_indices": FACE.landmarks68.tolist(), "layout": "ibug68"}
+    take = read_take(b.gltf(), filename="face.gltf", labelled_vertices=labelled, fps=40)
+    times = np.arange(37) / 40
+    k = np.minimum((times * 10).astype(int), N_FRAMES - 2)
+    u = times * 10 - k
+    h = (3 * u**2 - 2 * u**3)[:, None]
+    weights = (1 - h) * WEIGHTS[k] + h * WEIGHTS[k + 1]
+    np.testing.assert_allclose(take.points, posed_vertices(FACE, weights)[:, FACE.landmarks68], atol=1e-4)
+    linear = np.stack([np.interp(times, KEYS, WEIGHTS[:, e]) for e in range(WEIGHTS.shape[1])], 1)
+    assert np.abs(weights - linear).max() > 0.05  # the test tells cubic from linear
 
 
 def _skinned_glb():

@@ -96,6 +96,7 @@ MAX_ARCHIVE_BYTES = 2 << 30
 MAX_ACCESSOR_ELEMENTS = 1 << 26
 """Most elements a glTF accessor without a buffer view may declare (it allocates zeros)."""
 
+_MAX_NUMBER_CHARS = 64  # longer cells cannot be numbers worth reading
 _AXIS_COLUMN = re.compile(r"^(.+?)[_.: ]([xyzXYZ])$")
 _FRAME_COLUMNS = ("frame", "frame#", "frame_index", "index")
 _TIME_COLUMNS = ("time", "time_s", "timestamp", "t")
@@ -220,10 +221,21 @@ def _fps(fps, file_fps, times) -> tuple[float, bool]:
     return DEFAULT_FPS, True
 
 
-def _numeric(cells: np.ndarray, label: str, row_of, column_of) -> np.ndarray:
-    """(R, C) float64 from string cells; empty or "nan" cells become NaN. A cell that
-    is not a number raises naming its row and column (via `row_of(i)`, `column_of(j)`)."""
-    cells = np.char.strip(cells.astype(str))
+def _numeric(rows: list[list[str]], label: str, row_of, column_of) -> np.ndarray:
+    """(R, C) float64 from rows of string cells; empty or "nan" cells become NaN. A cell
+    that is not a number raises naming its row and column (via `row_of(i)`, `column_of(j)`)."""
+
+    def refuse(i, j, cell):
+        raise RetargetError(
+            f"{label}: row {row_of(i)}, column {column_of(j)}: {cell.strip()[:40]!r} is not a number")
+
+    # a numpy string array is as wide as its longest cell: bound that before making it
+    longest = max((len(cell) for row in rows for cell in row), default=0)
+    if longest > _MAX_NUMBER_CHARS:
+        i, j = next((i, j) for i, row in enumerate(rows) for j, cell in enumerate(row)
+                    if len(cell) > _MAX_NUMBER_CHARS)
+        refuse(i, j, rows[i][j])
+    cells = np.char.strip(np.array(rows, dtype=f"U{max(longest, 1)}"))
     cells[cells == ""] = "nan"
     try:
         values = cells.astype(np.float64)
@@ -232,9 +244,7 @@ def _numeric(cells: np.ndarray, label: str, row_of, column_of) -> np.ndarray:
             try:
                 float(cell)
             except ValueError:
-                raise RetargetError(
-                    f"{label}: row {row_of(i)}, column {column_of(j)}: {cell[:40]!r} is not a number"
-                ) from None
+                refuse(i, j, cell)
         raise
     bad = np.argwhere(np.isinf(values))
     if len(bad):
@@ -291,7 +301,7 @@ def _read_csv(text: str, label: str, fps, layout) -> Take:
             raise RetargetError(
                 f"{label}: point {point!r} has no {'/'.join(missing)} column"
                 + (" (other points have z)" if missing == ["z"] else ""))
-    values = _numeric(np.array(rows, dtype=str), label,
+    values = _numeric(rows, label,
                       lambda i: lines[i], lambda j: repr(header[j]))
     names = tuple(axes)
     columns = [axes[p][a] for p in names for a in wanted]
@@ -439,7 +449,7 @@ def _read_trc(text: str, label: str, fps, layout) -> Take:
     if not rows:
         raise RetargetError(f"{label} has no frames")
     columns = ["Frame#", "Time"] + [f"{m} {a}" for m in markers for a in "XYZ"]
-    values = _numeric(np.array(rows, dtype=str), label,
+    values = _numeric(rows, label,
                       lambda i: numbers[i], lambda j: repr(columns[j]))
     times = values[:, 1]
     times = None if np.isnan(times).any() else times - times[0]
