@@ -489,6 +489,8 @@ def test_gltf_errors():
     b.node(mesh=b.mesh(FACE.vertices, FACE.faces))
     with pytest.raises(RetargetError, match="holds no animation"):
         read_take(b.glb(), filename="still.glb", labelled_vertices=labelled)
+    with pytest.raises(RetargetError, match=r"lasts 0.9 s, \d+ frames at 1e\+06 fps; at most 200000"):
+        read_take(_morph_glb(), filename="f.glb", labelled_vertices=labelled, fps=1e6)
     with pytest.raises(RetargetError, match="could not read 'x.glb' as glTF"):
         read_take(b"glTF" + b"\0" * 20, filename="x.glb", labelled_vertices=labelled)
     doc = json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": "face.bin", "byteLength": 4}]})

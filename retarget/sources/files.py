@@ -96,6 +96,9 @@ MAX_ARCHIVE_BYTES = 2 << 30
 MAX_ACCESSOR_ELEMENTS = 1 << 26
 """Most elements a glTF accessor without a buffer view may declare (it allocates zeros)."""
 
+MAX_SAMPLED_FRAMES = 200_000
+"""Most frames a glTF animation is sampled into (an hour and more at 30 fps)."""
+
 _MAX_NUMBER_CHARS = 64  # longer cells cannot be numbers worth reading
 _AXIS_COLUMN = re.compile(r"^(.+?)[_.: ]([xyzXYZ])$")
 _FRAME_COLUMNS = ("frame", "frame#", "frame_index", "index")
@@ -111,7 +114,8 @@ def read_take(source, *, filename: str | None = None, layout: str | None = None,
     filename : the file's name; its extension picks the reader (default: the path's).
     layout : a layout name to select and order the points by (`Take.to_layout`).
     mapping : {file label: layout point name} for labels that are not point names.
-    fps : the frame rate; default the file's, else inferred from its times, else 30.
+    fps : the nominal frame rate, overriding the file's; default the file's rate, else
+        inferred from its times, else `DEFAULT_FPS`. For glTF, the sampling rate.
     labelled_vertices : for animated meshes (glTF, OBJ zip), which vertices are points.
     """
     data, label, folder = _source(source, filename)
@@ -121,12 +125,15 @@ def read_take(source, *, filename: str | None = None, layout: str | None = None,
         raise RetargetError(
             f"{label}: unsupported take file type {Path(name).suffix or '(none)'!r}; "
             f"supported: {', '.join('.' + k for k in TAKE_FORMATS)}")
-    if fps is not None and (not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0):
+    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float))
+                            or not math.isfinite(fps) or fps <= 0):
         raise RetargetError(f"fps must be a positive number, got {fps!r}")
     if kind == "npy":
         take = _read_npy(data, label, layout, fps)
     elif kind == "npz":
         take = Take.load(data)
+        if fps is not None:
+            take = Take(take.points, take.names, fps, take.times, take.layout, take.source, take.meta)
     elif kind in ("glb", "gltf"):
         take = _read_gltf(data, label, kind, folder, labelled_vertices, layout, fps)
     elif kind == "zip":
@@ -186,7 +193,10 @@ def _text(data: bytes, label: str) -> str:
 def _finished(take: Take, label: str, layout, mapping) -> Take:
     """The take selected to `layout` (or renamed by `mapping`), lost-throughout refused."""
     if layout is not None:
-        take = take.to_layout(layout, mapping)
+        try:
+            take = take.to_layout(layout, mapping)
+        except RetargetError as exc:
+            raise RetargetError(f"{label}: {exc}") from None
     else:
         if mapping:
             unknown = [k for k in mapping if k not in take.names]
@@ -362,13 +372,16 @@ def _read_json(text: str, label: str, fps, layout) -> Take:
             for d, v in enumerate(point):
                 if v is None:
                     continue
-                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or abs(v) > 1e300:
                     raise RetargetError(
                         f"{label}: frame {f}, point {names[p]!r}: {v!r:.40} is not a number")
                 points[f, p, d] = v
     times = doc.get("times")
     if times is not None:
-        times = np.asarray(times, dtype=np.float64) if isinstance(times, list) else None
+        try:
+            times = np.asarray(times, dtype=np.float64) if isinstance(times, list) else None
+        except (TypeError, ValueError, OverflowError):
+            raise RetargetError(f'{label}: "times" must be a list of numbers (seconds)') from None
         if times is None or times.shape != (len(frames),):
             raise RetargetError(f'{label}: "times" must list one time per frame ({len(frames)})')
         times = times - times[0]
@@ -776,7 +789,12 @@ def _read_gltf(data, label, kind, folder, labelled, layout, fps) -> Take:
         fps, assumed = (float(1.0 / steps[0]), False) if even else (DEFAULT_FPS, True)
     else:
         assumed = False
-    times = start + np.arange(int(math.floor((stop - start) * fps + 1e-6)) + 1) / fps
+    count = math.floor((stop - start) * fps + 1e-3) + 1  # key times are often float32
+    if count > MAX_SAMPLED_FRAMES:
+        raise RetargetError(
+            f"{label}: the animation lasts {stop - start:.6g} s, {count} frames at {fps:g} fps; "
+            f"at most {MAX_SAMPLED_FRAMES} are sampled")
+    times = start + np.arange(count) / fps
 
     static = _node_transforms(gltf, nodes, [], np.zeros(1))[0]
     order = _load_mesh_order(data, kind, folder, instances, static, gltf, label)
