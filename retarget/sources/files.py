@@ -3,8 +3,10 @@
 `read_take` dispatches on the file name's extension; every reader returns a `Take` and
 refuses bad input with a `RetargetError` that names the file and, where it applies, the
 row, column, frame, label or member file. Size limits on the upload are the caller's;
-this module bounds what a file can make it allocate beyond its own size (zip members,
-accessor counts) and reads no file a glTF names outside its own folder.
+this module bounds what a file can make it allocate beyond its own size
+(`MAX_ARCHIVE_BYTES` unpacked from a zip, `MAX_ACCESSOR_ELEMENTS`, `MAX_SAMPLED_FRAMES`,
+table cells no longer than a number) and reads no file a glTF names outside its own
+folder. C3D files are parsed by ezc3d, in-process, after a header check.
 
 Accepted files
 --------------
