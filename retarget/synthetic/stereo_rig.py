@@ -1,0 +1,216 @@
+"""A synthetic stereo webcam rig with known truth: colour-marker videos and calibration views.
+
+Woodward et al., §3: two webcams (640 x 480) about 1 m from the performer, calibrated on a
+target of known geometry, filming coloured stickers. Here both cameras are
+`retarget.synthetic.camera.Camera`s in **millimetres** (the built-in face, in cm, is
+scaled by 10), `distance` from the face along its viewing axis, `baseline` apart side by
+side and verged on the face. The performance and its truth come from
+`retarget.synthetic.marker_video.render_marker_video` (style "color"); the calibration
+views from `retarget.synthetic.render.render_checkerboard`.
+
+Naming follows stereo practice: the "left" camera is the one on the left as seen from
+behind the cameras, which is on the subject's left (world +x); 3D results of
+`retarget.sources.stereo` are in its frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from retarget.errors import RetargetError
+from retarget.sample_face import sample_face
+from retarget.sources.color_markers import layout_marker_colors
+from retarget.sources.stereo import StereoCalibration
+from retarget.synthetic.camera import Camera, look_at
+from retarget.synthetic.marker_video import GroundTruth, marker_vertices, render_marker_video
+from retarget.synthetic.render import MARKER_COLORS, render_checkerboard, render_face
+
+__all__ = [
+    "FACE_CENTRE",
+    "MM_PER_CM",
+    "stereo_cameras",
+    "rig_calibration",
+    "checkerboard_views",
+    "render_stereo_video",
+    "still_frames",
+]
+
+MM_PER_CM = 10.0
+"""World units (mm) per unit of the built-in face (cm)."""
+
+FACE_CENTRE = np.array([0.0, 10.0, 80.0])
+"""mm: the point the cameras verge on, between the eyes and the mouth near the nose."""
+
+
+def stereo_cameras(
+    distance: float = 1000.0,
+    baseline: float = 150.0,
+    fov_deg: float = 20.0,
+    size: tuple[int, int] = (640, 480),
+    dist: np.ndarray | None = None,
+) -> tuple[Camera, Camera]:
+    """(left, right) cameras `distance` mm in front of the face, `baseline` mm apart.
+
+    Both look at `FACE_CENTRE` (verged), upright; `fov_deg` is the vertical field of view
+    (20 degrees frames the head at 1 m: about 1360 px focal length at 640 x 480).
+    dist : optional (5,) OpenCV distortion for both.
+    """
+    if not distance > 0 or not baseline > 0:
+        raise RetargetError(f"distance and baseline must be > 0 mm, got {distance!r} and {baseline!r}")
+    eye = FACE_CENTRE + [0.0, 0.0, float(distance)]
+    half = np.array([0.5 * baseline, 0.0, 0.0])
+    left = look_at(eye + half, FACE_CENTRE, (0.0, 1.0, 0.0), fov_deg, size, dist)
+    right = look_at(eye - half, FACE_CENTRE, (0.0, 1.0, 0.0), fov_deg, size, dist)
+    return left, right
+
+
+def rig_calibration(left: Camera, right: Camera) -> StereoCalibration:
+    """The exact `StereoCalibration` of two cameras (what a perfect calibration finds).
+
+    R, T take left camera coordinates to right ones; E = [T]x R and F = K2^-T E K1^-1.
+    """
+    if left.size != right.size:
+        raise RetargetError(f"the rig's cameras differ in size: {left.size} and {right.size}")
+    rot = right.R @ left.R.T
+    trans = right.t - rot @ left.t
+    cross = np.array([[0.0, -trans[2], trans[1]], [trans[2], 0.0, -trans[0]],
+                      [-trans[1], trans[0], 0.0]])
+    essential = cross @ rot
+    fundamental = np.linalg.inv(right.K).T @ essential @ np.linalg.inv(left.K)
+    zero = np.zeros(5)
+    return StereoCalibration(
+        left.K, zero if left.dist is None else left.dist, right.K,
+        zero if right.dist is None else right.dist, rot, trans, essential, fundamental,
+        left.size, 0.0, {"source": "rig_calibration (exact)"})
+
+
+def checkerboard_views(
+    left: Camera,
+    right: Camera,
+    n_views: int = 20,
+    *,
+    rows: int = 6,
+    cols: int = 9,
+    square: float = 25.0,
+    max_tilt: float = 40.0,
+    seed: int = 0,
+) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Rendered view pairs of a checkerboard held in front of the rig, for calibration.
+
+    The board (`rows` x `cols` inner corners, `square` mm) is placed at random, tilted
+    up to `max_tilt` degrees about each in-plane axis, 0.75-1.15 times the rig's distance
+    from it and spread over the shared field of view; a pose is kept only when every
+    corner lies 10 px inside both images. Returns the left images, the right images
+    (each (H, W, 3) uint8 BGR) and the corners' true world positions (V, rows * cols, 3)
+    float64, mm.
+    """
+    rng = np.random.default_rng(seed)
+    centre = 0.5 * (left.center + right.center)
+    axis = FACE_CENTRE - centre
+    reach = np.linalg.norm(axis)
+    axis /= reach
+    up = np.array([0.0, 1.0, 0.0])
+    side = np.cross(axis, up)
+    half_h = 0.5 * left.size[1] / left.K[1, 1]  # tan of half the vertical field of view
+    board = np.array([(cols - 1) * square, (rows - 1) * square]) / 2
+    lefts, rights, corners = [], [], []
+    for _ in range(200 * n_views):
+        if len(lefts) == n_views:
+            break
+        depth = reach * rng.uniform(0.75, 1.15)
+        spread = half_h * depth * np.array([left.size[0] / left.size[1], 1.0]) * 0.7
+        offset = rng.uniform(-1, 1, 2) * spread
+        origin = centre + depth * axis + offset[0] * side + offset[1] * up
+        tilt = Rotation.from_euler("xyz", [*rng.uniform(-max_tilt, max_tilt, 2),
+                                           rng.uniform(-15, 15)], degrees=True).as_matrix()
+        # Board x along the image's x (world -x), y down the image, facing the cameras.
+        facing = np.stack([-side, -up, -axis], 1) @ tilt
+        t = origin - facing[:, :2] @ board
+        pts = _board_points(rows, cols, square) @ facing.T + t
+        if not all(_inside(cam.project(pts), cam.size, 10.0) for cam in (left, right)):
+            continue
+        for cam, out in ((left, lefts), (right, rights)):
+            out.append(render_checkerboard(cam, (facing, t), rows, cols, square).image)
+        corners.append(pts)
+    if len(lefts) < n_views:
+        raise RetargetError(f"checkerboard_views: found only {len(lefts)} board poses visible to both cameras")
+    return lefts, rights, np.stack(corners)
+
+
+def _board_points(rows: int, cols: int, square: float) -> np.ndarray:
+    j, i = np.meshgrid(np.arange(cols), np.arange(rows))
+    return np.stack([j.ravel() * square, i.ravel() * square, np.zeros(rows * cols)], 1)
+
+
+def _inside(px: np.ndarray, size: tuple[int, int], margin: float) -> bool:
+    return bool(np.all(np.isfinite(px)) and np.all(px >= margin)
+                and np.all(px <= np.array(size) - 1 - margin))
+
+
+def render_stereo_video(
+    path: str | Path,
+    *,
+    n_frames: int,
+    fps: float = 30.0,
+    cameras: tuple[Camera, Camera] | None = None,
+    layout: str = "dutreve21",
+    head_motion: bool | tuple[np.ndarray, np.ndarray] = True,
+    marker_radius: float = 0.4,
+    noise: float = 2.0,
+    start: float = 0.0,
+    seed: int = 0,
+) -> GroundTruth:
+    """A colour-marker performance filmed by the rig: two videos and their truth.
+
+    path : video path (suffix in `retarget.synthetic.marker_video.CODECS`; ``.mkv`` is
+        lossless); the videos are ``<stem>_left<suffix>`` and ``<stem>_right<suffix>``,
+        the truth ``<stem>.npz``. Truth is in world mm (``points3d``), with the cameras.
+    cameras : (left, right); default `stereo_cameras()`.
+    layout : the points carrying stickers, coloured by `layout_marker_colors`.
+    marker_radius : sticker radius in cm on the face (0.4: 8 mm stickers).
+    head_motion, noise, start, seed : as `render_marker_video` (head motion in cm).
+    """
+    left, right = cameras if cameras is not None else stereo_cameras()
+    colors = np.array([MARKER_COLORS[c] for c in layout_marker_colors(layout)], dtype=np.float64)
+    return render_marker_video(
+        path, n_frames=n_frames, fps=fps, cameras={"left": left, "right": right},
+        style="color", layout=layout, head_motion=head_motion, seed=seed, start=start,
+        scale=MM_PER_CM, marker_radius=marker_radius, colors=colors, noise=noise,
+    )
+
+
+def still_frames(
+    n_frames: int,
+    *,
+    cameras: tuple[Camera, Camera] | None = None,
+    layout: str = "dutreve21",
+    marker_radius: float = 0.4,
+    noise: float = 2.0,
+    seed: int = 0,
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Stereo frames of the neutral face held still, differing only by sensor noise.
+
+    The material of Woodward's jitter figure (§5: the spread of still markers' positions,
+    before and after the temporal mean). Returns `n_frames` (left, right) BGR image pairs
+    and the markers' true positions (N, 3) float64 in world mm.
+    noise : Gaussian sensor noise, grey levels; other parameters as `render_stereo_video`.
+    """
+    if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
+        raise RetargetError(f"n_frames must be a positive integer, got {n_frames!r}")
+    left, right = cameras if cameras is not None else stereo_cameras()
+    face = sample_face(1)
+    world = face.vertices * MM_PER_CM
+    verts = marker_vertices(face, layout)
+    colors = np.array([MARKER_COLORS[c] for c in layout_marker_colors(layout)], dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    # The scene does not change: render it once and add fresh noise per frame (which
+    # differs from rendering each frame with noise only by one more rounding).
+    clean = [render_face(cam, world, face.faces, verts, style="color",
+                         marker_radius=marker_radius * MM_PER_CM, marker_colors=colors).image
+             for cam in (left, right)]
+    frames = [tuple(np.clip(np.rint(img + rng.normal(0.0, noise, img.shape)), 0, 255).astype(np.uint8)
+                    for img in clean) for _ in range(n_frames)]
+    return frames, world[verts]
