@@ -1,0 +1,280 @@
+"""Markerless face tracking of a video file: MediaPipe's 468-point face mesh, run by the
+browser client's own tracker (``web/static/js/tracking/``) in a headless Chromium.
+
+One tracker serves the web app's webcam and video files and this module, so the command
+line and the browser find the same landmarks; and the Python environment needs no
+MediaPipe wheel (the PyPI one pins numpy < 2 and brings a second OpenCV).
+
+How a video is tracked
+----------------------
+Python decodes the video (`retarget.sources.video.VideoReader`, OpenCV) and hands the
+page one frame at a time as a JPEG (quality 95); the page (``web/static/track.html``)
+tracks it while it fetches the next one, and posts back the layout's points. Nothing
+listens on a port: the page, its modules, the face-mesh package and the frames are all
+answered through Playwright's request interception (``page.route``) on a made-up origin.
+
+Decoding here rather than in the page: Chromium's <video> has no frame-exact stepping
+(every seek decodes from the previous key frame: 75 ms a frame on average on a 480 x 480
+H.264 file with a key frame every 250 frames; pausing playback on each frame costs a frame
+period, 33 ms at 30 fps), while OpenCV decodes a frame in about 1 ms and the JPEG hand-over
+costs about 10 ms, hidden behind the tracking of the previous frame. OpenCV also gives the
+exact frame count and rate, precise errors for broken files, and any codec FFmpeg reads,
+whatever the browser build plays. The web app's own video path
+(``web/static/js/tracking/videoTake.js``) decodes in the page, on the user's file.
+
+Points are in pixels, **x right, y up, z toward the camera**, origin at the image's
+bottom-left corner, z in the same pixel scale as x (MediaPipe's normalised landmarks times
+the frame width; y flipped), so a take from here and one from the marker trackers share
+their x, y conventions.
+"""
+
+from __future__ import annotations
+
+import mimetypes
+import re
+import time
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.layouts import LAYOUTS, Layout, get_layout
+from retarget.sources.take import Take
+
+__all__ = ["track_video_markerless", "TRACKER"]
+
+TRACKER = "@mediapipe/face_mesh 0.4.1633559619"
+"""The face tracker the page runs (web/package.json pins it)."""
+
+_WEB = Path(__file__).resolve().parents[2] / "web"
+_ORIGIN = "http://retarget.localhost"  # never resolved: every request is intercepted
+_CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
+_JPEG_QUALITY = 95
+_PAGE_TIMEOUT_MS = 120_000  # browser start and model load on a busy machine
+_FRAME = re.compile(r"/frames/(\d+)")
+_POINTS = re.compile(r"/points/(\d+)")
+_TYPES = {".js": "text/javascript", ".html": "text/html", ".wasm": "application/wasm"}
+
+
+def track_video_markerless(
+    path,
+    *,
+    layout: str | Layout,
+    progress=None,
+    max_frames: int | None = None,
+    chromium: str | None = "/usr/bin/chromium",
+) -> Take:
+    """Track the face in a video file with the browser's face-mesh tracker.
+
+    path : a video file OpenCV can decode.
+    layout : a layout name (`retarget.layouts.LAYOUTS`) or a `Layout`; its `mediapipe468`
+        indices pick its points out of the 468 landmarks.
+    progress : optional ``progress(done, total)`` called after each tracked frame; total is
+        the expected frame count (`max_frames` or the header's), None when unknown.
+    max_frames : track at most this many frames from the start.
+    chromium : the Chromium executable, or None for Playwright's own build
+        (``playwright install chromium``).
+
+    Returns a `Take`: points (F, N, 3) float32, pixels (x right, y up, z toward the
+    camera; see the module docstring), a frame without a face all NaN; source
+    "markerless"; meta: width, height, units, tracker, frames_with_face, face_share
+    (their share of the frames), fps_tracked (frames per second of decoding, hand-over
+    and tracking, browser start and model load excluded: those are startup_s), truncated
+    (fewer decodable frames than the header said), fps_from_header (False: the container
+    gave no rate and `fps` is `retarget.sources.video.DEFAULT_FPS`). A video in which no face is ever
+    found is returned all NaN with face_share 0, and a `RuntimeWarning` says so.
+
+    Raises `RetargetError` for a missing or undecodable video, a bad `max_frames`, a
+    missing Playwright, Chromium or npm package, or a tracker failure (the page's error).
+    Uses Playwright's sync API: call it from a thread without a running asyncio loop.
+    """
+    lay = layout if isinstance(layout, Layout) else get_layout(layout)
+    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
+                                   or max_frames < 1):
+        raise RetargetError(f"max_frames must be a positive integer or None, got {max_frames!r}")
+    _check_web_files()
+    sync_playwright, playwright_error = _playwright()
+    if chromium is not None and not Path(chromium).is_file():
+        raise RetargetError(
+            f"Chromium not found at {chromium!r}: install it (Debian/Ubuntu: apt-get install "
+            f"chromium), pass chromium=<its path>, or chromium=None for Playwright's own "
+            f"(playwright install chromium)")
+
+    from retarget.sources.video import VideoReader
+
+    with VideoReader(path) as reader:
+        width, height = reader.size
+        fps = float(reader.fps)
+        fps_known = bool(reader.fps_known)
+        expected = reader.n_frames or None
+        if max_frames is not None:
+            expected = min(expected, int(max_frames)) if expected else int(max_frames)
+        feed = _FrameFeed(reader, lay.n_points, int(max_frames) if max_frames else None,
+                          expected, progress)
+        start = time.perf_counter()
+        with sync_playwright() as p:
+            try:
+                browser = p.chromium.launch(executable_path=chromium, args=_CHROMIUM_ARGS)
+            except playwright_error as exc:
+                raise RetargetError(f"could not start Chromium ({chromium or 'Playwright build'}): "
+                                    f"{_first_line(exc)}") from None
+            try:
+                page = browser.new_page()
+                page.set_default_timeout(_PAGE_TIMEOUT_MS)
+                page.route(f"{_ORIGIN}/**", feed.answer)
+                page.route(re.compile(r"^(?!" + re.escape(_ORIGIN) + r"/).*"),
+                           lambda route: route.abort())  # nothing leaves the machine
+                page.goto(f"{_ORIGIN}/static/track.html")
+                page.wait_for_function("() => window.retargetTracking")
+                page.evaluate("() => window.retargetTracking.tracker.init().then(() => null)")
+                startup = time.perf_counter() - start
+                tracking = time.perf_counter()
+                count = page.evaluate("(indices) => window.retargetTracking.trackServedFrames(indices)",
+                                      list(lay.mediapipe468))
+                seconds = time.perf_counter() - tracking
+            except playwright_error as exc:
+                feed.raise_failure()
+                raise RetargetError(f"markerless tracking of {str(path)!r} failed in the browser: "
+                                    f"{_first_line(exc)}") from None
+            finally:
+                browser.close()
+        feed.raise_failure()
+        truncated = bool(getattr(reader, "truncated", False))
+
+    if count == 0:
+        raise RetargetError(f"{str(path)!r}: no frame could be decoded")
+    points = feed.points[:count]
+    faces = int(np.isfinite(points[:, 0, 0]).sum())
+    if faces == 0:
+        warnings.warn(f"markerless: no face found in any of the {count} frames of {str(path)!r}",
+                      RuntimeWarning, stacklevel=2)
+    meta = {
+        "width": int(width), "height": int(height),
+        "units": "px; x right, y up (origin bottom-left), z toward the camera in the scale of x",
+        "tracker": TRACKER,
+        "frames_with_face": faces,
+        "face_share": faces / count,
+        "fps_tracked": count / seconds if seconds > 0 else None,
+        "startup_s": round(startup, 3),
+        "truncated": truncated,
+        "fps_from_header": fps_known,
+    }
+    return Take(points=points, names=lay.point_names, fps=fps,
+                layout=lay.name if LAYOUTS.get(lay.name) == lay else None,
+                source="markerless", meta=meta)
+
+
+class _FrameFeed:
+    """The page's requests answered from this process: the tracker's files, the video's
+    frames in order, and the points the page posts back.
+
+    Playwright calls `answer` on this thread while `page.evaluate` waits, so an exception
+    here would only stall the page: it is kept, the page gets a 500, and
+    `raise_failure` raises it after the evaluate returns."""
+
+    def __init__(self, reader, n_points: int, max_frames: int | None, expected: int | None,
+                 progress) -> None:
+        self.frames = iter(reader)
+        self.next_index = 0
+        self.max_frames = max_frames
+        self.expected = expected
+        self.progress = progress
+        self.n_points = n_points
+        self.points = np.full((min(expected or 256, 4096), n_points, 3), np.nan, dtype=np.float32)
+        self.done = 0
+        self.failure: BaseException | None = None
+
+    def answer(self, route) -> None:
+        try:
+            self._answer(route)
+        except BaseException as exc:  # noqa: BLE001 - kept and re-raised by raise_failure
+            if self.failure is None:
+                self.failure = exc
+            route.fulfill(status=500, body=f"{type(exc).__name__}: {exc}")
+
+    def raise_failure(self) -> None:
+        if self.failure is not None:
+            raise self.failure
+
+    def _answer(self, route) -> None:
+        request = route.request
+        path = request.url[len(_ORIGIN):].split("?")[0]
+        if (m := _FRAME.fullmatch(path)) and request.method == "GET":
+            route.fulfill(**self._frame(int(m.group(1))))
+        elif (m := _POINTS.fullmatch(path)) and request.method == "POST":
+            self._store(int(m.group(1)), request.post_data_buffer or b"")
+            route.fulfill(status=204)
+        elif (file := _static_file(path)) is not None:
+            kind = _TYPES.get(file.suffix) or mimetypes.guess_type(file.name)[0] or "application/octet-stream"
+            route.fulfill(body=file.read_bytes(), content_type=kind)
+        else:
+            route.fulfill(status=404, body=f"not found: {path}")
+
+    def _frame(self, index: int) -> dict:
+        if index != self.next_index:
+            raise RetargetError(f"the page asked for frame {index}, frame {self.next_index} is next")
+        if self.max_frames is not None and index >= self.max_frames:
+            return {"status": 204}
+        item = next(self.frames, None)
+        if item is None:
+            return {"status": 204}
+        _, bgr = item
+        self.next_index += 1
+        ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, _JPEG_QUALITY])
+        if not ok:
+            raise RetargetError(f"frame {index} could not be encoded for the page")
+        return {"body": jpeg.tobytes(), "content_type": "image/jpeg"}
+
+    def _store(self, index: int, body: bytes) -> None:
+        if index >= len(self.points):
+            grown = np.full((max(2 * len(self.points), index + 1), self.n_points, 3), np.nan, np.float32)
+            grown[:len(self.points)] = self.points
+            self.points = grown
+        if body:
+            values = np.frombuffer(body, dtype="<f4")
+            if values.size != self.n_points * 3:
+                raise RetargetError(f"the page sent {values.size} values for frame {index}, "
+                                    f"expected {self.n_points * 3}")
+            self.points[index] = values.reshape(self.n_points, 3)
+        self.done += 1
+        if self.progress is not None:
+            self.progress(self.done, self.expected)
+
+
+def _static_file(path: str) -> Path | None:
+    """The file behind a page URL path, only inside the folders the page may read."""
+    for prefix, folder in (("/static/", _WEB / "static"),
+                           ("/vendor/@mediapipe/face_mesh/", _WEB / "node_modules" / "@mediapipe" / "face_mesh")):
+        if path.startswith(prefix):
+            file = (folder / path[len(prefix):]).resolve()
+            if file.is_relative_to(folder.resolve()) and file.is_file():
+                return file
+    return None
+
+
+def _check_web_files() -> None:
+    page = _WEB / "static" / "track.html"
+    package = _WEB / "node_modules" / "@mediapipe" / "face_mesh" / "face_mesh.js"
+    if not page.is_file():
+        raise RetargetError(f"markerless tracking needs the browser client's files; {page} is missing")
+    if not package.is_file():
+        raise RetargetError(f"markerless tracking needs the npm package @mediapipe/face_mesh; "
+                            f"{package} is missing: run npm ci --prefix {_WEB}")
+
+
+def _playwright():
+    try:
+        from playwright.sync_api import Error, sync_playwright
+    except ImportError:
+        raise RetargetError(
+            "markerless tracking runs the face tracker in a headless Chromium through "
+            "Playwright, which is not installed: pip install 'retarget[markerless]', then "
+            "apt-get install chromium (or playwright install chromium)") from None
+    return sync_playwright, Error
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
