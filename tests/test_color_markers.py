@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from retarget.errors import RetargetError
+from retarget.layouts import get_layout
+from retarget.sample_face import sample_face
 from retarget.sources.color_markers import (
     MARKER_COLORS,
     Blobs,
@@ -17,8 +19,6 @@ from retarget.sources.color_markers import (
     color_mask,
     layout_marker_colors,
 )
-from retarget.layouts import get_layout
-from retarget.sample_face import sample_face
 
 BGR = {"green": (40, 200, 40), "blue": (230, 80, 30), "magenta": (220, 40, 220),
        "cyan": (230, 220, 30), "yellow": (30, 220, 230)}

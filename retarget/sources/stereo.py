@@ -601,8 +601,8 @@ def track_stereo_frames(
                 f"stereo frame {i}: left is {left_img.shape[1]}x{left_img.shape[0]}, right "
                 f"{right_img.shape[1]}x{right_img.shape[0]}"
             )
-        blobs = [color_blobs(left_img, palette), color_blobs(right_img, palette)]
         if i == 0:
+            blobs = [color_blobs(left_img, palette), color_blobs(right_img, palette)]
             if assignment is None:
                 start_l, start_r, found_at_start, _ = identified_markers(
                     calibration, blobs[0], blobs[1], layout, colors, max_epipolar=max_epipolar)
@@ -610,7 +610,7 @@ def track_stereo_frames(
                 start_l, start_r = (np.asarray(a, dtype=np.float64) for a in assignment)
             px = [t.fit(b, s).positions_ for t, b, s in zip(templates, blobs, (start_l, start_r))]
         else:
-            px = [t(b) for t, b in zip(templates, blobs)]
+            px = [t(_blobs_near(img, t, palette)) for t, img in zip(templates, (left_img, right_img))]
         xyz = calibration.triangulate(px[0], px[1])
         swapped = calibration.epipolar_distances(px[0], px[1]) > max_epipolar
         xyz[swapped] = np.nan
@@ -631,6 +631,24 @@ def track_stereo_frames(
         points = temporal_mean(points, temporal_window)
     return Take(points.astype(np.float32), layout.point_names, fps, layout=layout.name,
                 source="stereo", meta=meta)
+
+
+def _blobs_near(image: np.ndarray, template: MarkerTemplate, palette: Sequence[str]) -> Blobs:
+    """Candidates in the part of the image the template's markers can have reached.
+
+    Woodward §5, Algorithm 1, step 2: once the template is set up only the regions
+    around the markers are searched. The region is the box round every marker's last
+    position (lost ones included), widened by the template's gate and a sticker's size.
+    """
+    margin = template.max_jump + 16.0
+    h, w = image.shape[:2]
+    lo = np.maximum(np.floor(template.position_.min(axis=0) - margin), 0).astype(int)
+    hi = np.minimum(np.ceil(template.position_.max(axis=0) + margin) + 1, [w, h]).astype(int)
+    if np.any(hi - lo < 3):  # every marker's last position lies off the image
+        return Blobs(np.zeros((0, 2), np.float32), np.zeros(0, np.int64),
+                     np.zeros(0, np.int32), tuple(palette))
+    found = color_blobs(np.ascontiguousarray(image[lo[1]:hi[1], lo[0]:hi[0]]), palette)
+    return Blobs(found.centroids + lo.astype(np.float32), found.colors, found.areas, found.names)
 
 
 def _head_stabilised(points: np.ndarray, anchors: np.ndarray, remove: bool):
