@@ -122,6 +122,10 @@ def test_a_manual_assignment_gives_the_same_track(video):
         track_marker_video(path, assignment=clicked[:5])
     with pytest.raises(RetargetError, match=r"no ring marker within"):
         track_marker_video(path, assignment=clicked + [0, 40])
+    twice = clicked.copy()
+    twice[1] = twice[0]
+    with pytest.raises(RetargetError, match=r"point\(s\) \[1\] .* another point already took"):
+        track_marker_video(path, assignment=twice)
 
 
 def test_occluded_markers_are_lost_then_found_again(video, frames, tmp_path):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -138,12 +139,15 @@ def detect_ring_markers(gray: np.ndarray) -> np.ndarray:
 def reference_points(layout: str) -> np.ndarray:
     """(N, 2) float64 the layout's points on the built-in face seen from the front, in
     image orientation: x toward the subject's left (the viewer's right), y down; cm."""
+    return _frontal68()[list(get_layout(layout).ibug68)]
+
+
+@lru_cache(maxsize=1)
+def _frontal68() -> np.ndarray:
     from retarget.sample_face import sample_face
 
-    lay = get_layout(layout)
     face = sample_face(1)
-    xy = face.vertices[face.landmarks68[list(lay.ibug68)], :2]
-    return xy * [1.0, -1.0]
+    return face.vertices[face.landmarks68, :2] * [1.0, -1.0]
 
 
 def assign_markers(detected: np.ndarray, reference: np.ndarray, *, gate: float = 0.75) -> np.ndarray:
@@ -205,6 +209,8 @@ def assign_markers(detected: np.ndarray, reference: np.ndarray, *, gate: float =
                 break
         if (match >= 0).sum() >= 3 and total < best_cost:
             best_cost, best = total, match
+        if (match >= 0).all() and total < 0.2 * limit * len(ref):
+            break                       # every point matched closely: no need to look on
     return best
 
 
@@ -245,6 +251,11 @@ class MarkerTracker:
             raise RetargetError(
                 f"no ring marker within two ring radii of point(s) {np.flatnonzero(far).tolist()} "
                 f"at {pts[far].round(1).tolist()} in the first frame")
+        twins = [i for i in range(len(pts)) if (near[:i] == near[i]).any()]
+        if twins:
+            raise RetargetError(
+                f"point(s) {twins} at {pts[twins].round(1).tolist()} snap to a marker another "
+                f"point already took in the first frame")
         self.ratio_ = blobs.ratio[near].copy()
         self.size_ = g.shape[::-1]
         centres, self.shape_, dot_c, ring_c = _centred(g, blobs.centres[near], blobs.shape[near], self.ratio_)
@@ -281,6 +292,7 @@ class MarkerTracker:
             keep = ok & self._contrasty(live, dot_c, ring_c) & self._inside(centres, shape, self.ratio_[live])
             new[live[keep]] = centres[keep]
             self.shape_[live[keep]] = shape[keep]
+        new = self._apart(new)
         found = np.isfinite(new).all(1)
         if (~found).any():
             new = self._reacquired(g, new)
@@ -309,6 +321,17 @@ class MarkerTracker:
         x, y = centres[:, 0], centres[:, 1]
         with np.errstate(invalid="ignore"):
             return (x - rx >= -0.5) & (x + rx <= w - 0.5) & (y - ry >= -0.5) & (y + ry <= h - 0.5)
+
+    def _apart(self, new: np.ndarray) -> np.ndarray:
+        """new (N, 2) with both points of any pair closer than a ring radius lost: one of
+        them followed the other's marker, and which one is not known here."""
+        d = np.linalg.norm(new[:, None] - new[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        ring = self.ratio_ * _equivalent_radius(self.shape_)
+        with np.errstate(invalid="ignore"):
+            clash = (d < np.maximum(ring[:, None], ring[None])).any(1)
+        new[clash] = np.nan
+        return new
 
     def _reacquired(self, g: np.ndarray, new: np.ndarray) -> np.ndarray:
         """new (N, 2) with lost markers filled from a detection near where the tracked ones
