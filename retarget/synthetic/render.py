@@ -3,7 +3,7 @@
 Nothing here aims at realism beyond what the trackers need: a z-buffered, Lambert-shaded
 mesh (Gouraud normals, perspective-correct interpolation), and markers drawn as flat discs
 on the mesh's tangent plane at chosen vertices, supersampled so that the centroid of a
-drawn marker is the projection of its vertex to well under 0.05 px. Two marker styles:
+drawn marker is the projection of its vertex to a few hundredths of a pixel. Two styles:
 
 - ``"ring"``: a white dot inside a black ring, the markers of Dutreve et al. 2008, §5
   ("white markers ... we draw black circles on them" to raise their contrast);
@@ -303,9 +303,9 @@ def _draw_markers(image, depth, camera, centres, normals, style, radius, dot_rad
 
     Each marker is a disc on the tangent plane at its centre (N, 3) with normal (N, 3);
     every pixel of its footprint is sampled `supersample`^2 times, and a sample is drawn
-    where its ray meets the disc no further than a fixed tolerance behind the z-buffer
-    (a flat sticker on a slightly concave patch dips under the surface by a fraction of
-    its radius; a real occluder is much further in front).
+    where its ray meets the disc no more than one marker radius behind the z-buffer (a
+    flat sticker on a curved patch, such as the slope under the lower lip, dips under
+    the surface by up to about that; a real occluder is centimetres in front).
     Markers facing away are not drawn.
     Returns (coverage (N,) float64, facing (N,) bool: cos of the viewing angle > 0.3).
     """
