@@ -143,8 +143,6 @@ def track_video_markerless(
         feed.raise_failure()
         truncated = bool(getattr(reader, "truncated", False))
 
-    if count == 0:
-        raise RetargetError(f"{str(path)!r}: no frame could be decoded")
     points = feed.points[:count]
     faces = int(np.isfinite(points[:, 0, 0]).sum())
     if faces == 0:
@@ -171,8 +169,9 @@ class _FrameFeed:
     frames in order, and the points the page posts back.
 
     Playwright calls `answer` on this thread while `page.evaluate` waits, so an exception
-    here would only stall the page: it is kept, the page gets a 500, and
-    `raise_failure` raises it after the evaluate returns."""
+    here (a failing `progress`, Ctrl-C) would only stall the page: it is kept, the page gets
+    a 500 for this and every later request, which ends its loop, and `raise_failure`
+    raises it once the evaluate returns."""
 
     def __init__(self, reader, n_points: int, max_frames: int | None, expected: int | None,
                  progress) -> None:
@@ -187,6 +186,9 @@ class _FrameFeed:
         self.failure: BaseException | None = None
 
     def answer(self, route) -> None:
+        if self.failure is not None:  # stop the page at its next request
+            route.fulfill(status=500, body=f"stopped: {type(self.failure).__name__}")
+            return
         try:
             self._answer(route)
         except BaseException as exc:  # noqa: BLE001 - kept and re-raised by raise_failure
