@@ -107,7 +107,8 @@ def main(argv=None) -> int:
     p.add_argument("--views", type=int, default=16, help="checkerboard view pairs per calibration")
     p.add_argument("--frames", type=int, default=90, help="frames of the tracked take")
     p.add_argument("--still", type=int, default=60, help="frames of the still-face jitter clip")
-    p.add_argument("--jitter-noise", type=float, default=6.0, help="sensor noise of the jitter clip, grey levels")
+    p.add_argument("--jitter-noise", type=float, default=6.0,
+                   help="sensor noise of the jitter clip, grey levels")
     p.add_argument("--repeats", type=int, default=3, help="seeds; figures are medians over them")
     args = p.parse_args(argv)
     cv2.setNumThreads(1)

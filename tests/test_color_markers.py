@@ -43,7 +43,8 @@ def _image(centres, colors, radius=3.5, size=(320, 240), noise=2.0, seed=0, cuts
         inside = (px[win] - cx) ** 2 + (py[win] - cy) ** 2 <= radius**2
         big[win][inside] = np.array(BGR[name], np.float32) * shade[win][inside][:, None]
     for x0, x1, y0, y1 in cuts:
-        big[int((y0 + 0.5) * SUPER):int((y1 + 0.5) * SUPER), int((x0 + 0.5) * SUPER):int((x1 + 0.5) * SUPER)] = SKIN
+        rows = slice(int((y0 + 0.5) * SUPER), int((y1 + 0.5) * SUPER))
+        big[rows, int((x0 + 0.5) * SUPER):int((x1 + 0.5) * SUPER)] = SKIN
     img = cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA)
     img += np.random.default_rng(seed).normal(0.0, noise, img.shape)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
@@ -56,7 +57,8 @@ def _nearest(found, truth):
 
 def test_blobs_have_sub_pixel_centroids_and_the_right_colours():
     rng = np.random.default_rng(3)
-    centres = np.stack([np.linspace(30, 290, 12), rng.uniform(30, 210, 12)], 1) + rng.uniform(-0.5, 0.5, (12, 2))
+    centres = np.stack([np.linspace(30, 290, 12), rng.uniform(30, 210, 12)], 1)
+    centres += rng.uniform(-0.5, 0.5, (12, 2))  # sub-pixel positions
     names = [("green", "blue", "magenta", "cyan", "yellow")[i % 5] for i in range(12)]
     blobs = color_blobs(_image(centres, names), ("green", "blue", "magenta", "cyan", "yellow"))
     assert len(blobs) == 12

@@ -71,7 +71,8 @@ def test_calibration_from_rendered_checkerboards_finds_the_rig():
 
 def test_calibration_without_the_pattern_is_refused(tmp_path):
     gray = np.full((240, 320), 128, np.uint8)
-    with pytest.raises(RetargetError, match=r"found in both images of 0 of 3 pairs.*pair 0: not found in left and right"):
+    with pytest.raises(RetargetError,
+                       match=r"found in both images of 0 of 3 pairs.*pair 0: not found in left and right"):
         calibrate_stereo([gray] * 3, [gray] * 3, BOARD)
     with pytest.raises(RetargetError, match="3 left images but 2 right"):
         calibrate_stereo([gray] * 3, [gray] * 2, BOARD)
@@ -201,8 +202,9 @@ def test_markers_lost_in_one_camera_are_held_then_nan(clip, rig):
     assert np.isfinite(p[:5]).all() and np.isnan(p[5:8]).all() and np.isfinite(p[8:]).all()
     # Held frames pair the left camera's new position with the right one's last.
     for i in (3, 4):
-        left_px = cv2.projectPoints(p[i].astype(np.float64), np.zeros(3), np.zeros(3), cal.K1, cal.d1)[0]
-        right_px = cv2.projectPoints(p[i].astype(np.float64), cv2.Rodrigues(cal.R)[0], cal.T, cal.K2, cal.d2)[0]
+        point = p[i].astype(np.float64)
+        left_px = cv2.projectPoints(point, np.zeros(3), np.zeros(3), cal.K1, cal.d1)[0]
+        right_px = cv2.projectPoints(point, cv2.Rodrigues(cal.R)[0], cal.T, cal.K2, cal.d2)[0]
         assert np.linalg.norm(left_px.ravel() - clip.points2d[i, 0, k]) < 1.0
         assert np.linalg.norm(right_px.ravel() - clip.points2d[2, 1, k]) < 1.0
     truth = rig[0].to_camera(clip.points3d[8, k])

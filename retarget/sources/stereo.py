@@ -28,7 +28,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from retarget.errors import RetargetError
-from retarget.layouts import Layout, get_layout
+from retarget.layouts import LAYOUTS, Layout, get_layout
 from retarget.sources.color_markers import Blobs, MarkerTemplate, color_blobs, layout_marker_colors
 from retarget.sources.filters import temporal_mean
 from retarget.sources.headpose import head_neutral, remove_head_motion, rigid_transform, stable_indices
@@ -204,12 +204,13 @@ class StereoCalibration:
         return out
 
     def epipolar_distances(self, left, right) -> np.ndarray:
-        """(N,) or (M, P) float64 symmetric epipolar distance of pixel pairs, px.
+        """(...) float64 symmetric epipolar distance of pixel pairs, px.
 
-        left : (N, 2) and right : (N, 2) pixels give one distance per pair; with
-        ``outer=True``-like shapes (M, 1, 2) and (1, P, 2) they broadcast. The distance is
-        the mean of each point's distance to the other's epipolar line, in undistorted
-        pixels of its own camera (the essential matrix applied to undistorted rays).
+        left, right : (..., 2) pixels that broadcast against each other: (N, 2) and
+        (N, 2) give one distance per pair, (M, 1, 2) and (1, P, 2) every combination.
+        The distance is the mean of each point's distance to the other's epipolar line,
+        in undistorted pixels of its own camera (the essential matrix applied to
+        undistorted rays, scaled by the focal length).
         """
         left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
         xl = self.undistorted(left.reshape(-1, 2), 0).reshape(left.shape)
@@ -364,7 +365,8 @@ def calibrate_stereo(left_images: Sequence, right_images: Sequence, pattern, *,
                 )
         pa, pb = find_pattern(ga, pattern), find_pattern(gb, pattern)
         if pa is None or pb is None:
-            skipped.append({"pair": i, "missing_in": [s for s, p in (("left", pa), ("right", pb)) if p is None]})
+            missing = [side for side, p in (("left", pa), ("right", pb)) if p is None]
+            skipped.append({"pair": i, "missing_in": missing})
             continue
         if kind != "acircles" and np.dot(pa[-1] - pa[0], pb[-1] - pb[0]) < 0:
             # The detectors started from opposite ends of a symmetric pattern; two
@@ -587,7 +589,9 @@ def track_stereo_frames(
     layout = layout if isinstance(layout, Layout) else get_layout(layout)
     colors = tuple(colors) if colors is not None else layout_marker_colors(layout)
     if len(colors) != layout.n_points:
-        raise RetargetError(f"colors must give {layout.n_points} colours for layout {layout.name!r}; got {len(colors)}")
+        raise RetargetError(
+            f"colors must give {layout.n_points} colours for layout {layout.name!r}; got {len(colors)}"
+        )
     if head_motion not in ("remove", "keep"):
         raise RetargetError(f"head_motion must be 'remove' or 'keep'; got {head_motion!r}")
     anchor_idx = _anchor_indices(anchors, layout)
@@ -629,8 +633,8 @@ def track_stereo_frames(
     points, meta["head_pose"] = _head_stabilised(points, anchor_idx, head_motion == "remove")
     if temporal_window > 1:
         points = temporal_mean(points, temporal_window)
-    return Take(points.astype(np.float32), layout.point_names, fps, layout=layout.name,
-                source="stereo", meta=meta)
+    return Take(points.astype(np.float32), layout.point_names, fps,
+                layout=layout.name if layout.name in LAYOUTS else None, source="stereo", meta=meta)
 
 
 def _blobs_near(image: np.ndarray, template: MarkerTemplate, palette: Sequence[str]) -> Blobs:

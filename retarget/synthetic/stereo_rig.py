@@ -136,7 +136,8 @@ def checkerboard_views(
             out.append(render_checkerboard(cam, (facing, t), rows, cols, square).image)
         corners.append(pts)
     if len(lefts) < n_views:
-        raise RetargetError(f"checkerboard_views: found only {len(lefts)} board poses visible to both cameras")
+        raise RetargetError(
+            f"checkerboard_views: found only {len(lefts)} board poses visible to both cameras")
     return lefts, rights, np.stack(corners)
 
 
