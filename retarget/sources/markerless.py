@@ -13,13 +13,15 @@ tracks it while it fetches the next one, and posts back the layout's points. Not
 listens on a port: the page, its modules, the face-mesh package and the frames are all
 answered through Playwright's request interception (``page.route``) on a made-up origin.
 
-Decoding here rather than in the page: Chromium's <video> has no frame-exact stepping
-(every seek decodes from the previous key frame: 75 ms a frame on average on a 480 x 480
-H.264 file with a key frame every 250 frames; pausing playback on each frame costs a frame
-period, 33 ms at 30 fps), while OpenCV decodes a frame in about 1 ms and the JPEG hand-over
-costs about 10 ms, hidden behind the tracking of the previous frame. OpenCV also gives the
-exact frame count and rate, precise errors for broken files, and any codec FFmpeg reads,
-whatever the browser build plays. The web app's own video path
+Decoding here rather than in the page, for robustness first: OpenCV reads any codec its
+FFmpeg reads (Chromium plays neither OpenCV's own mp4v MP4 nor MJPG AVI, and a build
+without proprietary codecs no H.264), gives the frame count and rate from the container
+(a <video> states neither), and `VideoReader` names the file and the problem when it is
+broken. And for speed: a <video> has no frame-exact stepping (a seek decodes from the previous key
+frame: 54 ms a frame over the first 150 frames of a 480 x 480 H.264 file with a key frame
+every 250 frames; pausing playback on each frame waits about a frame period, 28 ms at
+30 fps), while OpenCV decodes a frame in under 1 ms and the JPEG hand-over costs about
+10 ms (``bench/markerless.py``). The web app's own video path
 (``web/static/js/tracking/videoTake.js``) decodes in the page, on the user's file.
 
 Points are in pixels, **x right, y up, z toward the camera**, origin at the image's

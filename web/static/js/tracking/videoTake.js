@@ -8,10 +8,11 @@ import { FaceMeshTracker, FACE_MESH_POINTS } from './FaceMeshTracker.js';
  * Stepping: the video plays at normal speed and pauses in each requestVideoFrameCallback
  * while that frame is tracked; a frame that playback skipped anyway (the page was too busy
  * to pause in time) is fetched by seeking to its middle, t + 0.5 / fps. Seeking alone
- * would do, but Chromium decodes from the previous key frame on every seek: 75 ms a frame
- * on average on a 480 x 480 H.264 file with a key frame every 250 frames, against one
- * frame period (33 ms at 30 fps) for the paused playback. Without
- * requestVideoFrameCallback every frame is sought.
+ * would do, but Chromium decodes from the previous key frame on every seek: on a 480 x 480
+ * H.264 file with a key frame every 250 frames, 54 ms a frame over the first 150 frames
+ * and 130-150 ms far from a key frame, against 28 ms (about one frame period at 30 fps)
+ * for the paused playback (bench/markerless.py). Without requestVideoFrameCallback every
+ * frame is sought.
  */
 
 const STANDARD_FPS = [ 23.976, 24, 25, 29.97, 30, 48, 50, 59.94, 60, 90, 100, 119.88, 120 ];
@@ -46,6 +47,7 @@ export async function trackVideo( fileOrUrl, { layoutIndices = null, fps = null,
 	onProgress = null, signal = null, tracker = null } = {} ) {
 
 	signal?.throwIfAborted();
+	if ( ! ( maxFrames >= 1 ) ) throw new Error( `trackVideo: maxFrames must be at least 1, got ${ maxFrames }.` );
 	const ownTracker = tracker === null;
 	tracker = tracker ?? new FaceMeshTracker();
 	const blob = await videoBlob( fileOrUrl, signal );
