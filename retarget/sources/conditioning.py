@@ -258,31 +258,53 @@ class SourceConditioner:
         return ", ".join(names) + (f" and {len(idx) - 12} more" if len(idx) > 12 else "")
 
 
-def condition_take(take: Take, settings=None, neutral=None) -> tuple[Take, np.ndarray]:
+def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: bool = False):
     """(conditioned take, (N, D) float32 neutral): `take` pushed frame by frame through a
     `SourceConditioner`, the same as a live stream of it.
 
     The frames that gave no output (the neutral capture) are left out; the take's times
     start at the first frame kept, and ``meta["conditioned_from_s"]`` says where that
     was in the original. `RetargetError` if no frame is left.
+
+    Points that are lost in every frame (a 21-marker take read into a 68-point layout)
+    are left out of the conditioning, which runs on the sub-layout of the others
+    (`Layout.select`), and come back as NaN rows of the result and of the neutral.
+
+    with_rotations : also return the (F, 3, 3) head rotations (``rotation_``) of the kept
+        frames, for a player that turns the target's head.
     """
-    conditioner = SourceConditioner(take.layout, take.dims, settings, neutral)
+    present = ~np.isnan(take.points[..., 0]).all(axis=0)
+    layout = get_layout(take.layout) if take.layout else None
+    points = take.points
+    if layout is not None and not present.all() and present.any():
+        layout, points = layout.select(present), points[:, present]
+        if neutral is not None:
+            neutral = np.asarray(neutral)[present]
+    conditioner = SourceConditioner(layout, take.dims, settings, neutral)
     times = take.frame_times()
-    out, kept = [], []
+    out, kept, rotations = [], [], []
     for i in range(take.n_frames):
-        p = conditioner.push(take.points[i], times[i])
+        p = conditioner.push(points[i], times[i])
         if p is not None:
             out.append(p)
             kept.append(i)
+            rotations.append(conditioner.rotation_)
     if not kept:
         raise RetargetError(
             f"the take ({times[-1] - times[0]:.3f} s) ends before its neutral capture does "
             f"({conditioner.settings.neutral['seconds']:g} s)")
+    conditioned = np.full((len(kept), take.n_points, take.dims), np.nan, np.float32)
+    neutral_out = np.full((take.n_points, take.dims), np.nan, np.float32)
+    rows = present if points is not take.points else slice(None)
+    conditioned[:, rows] = np.stack(out)
+    neutral_out[rows] = conditioner.neutral_
     meta = dict(take.meta, conditioned_from_s=float(times[kept[0]] - times[0]),
                 conditioning=conditioner.settings.to_dict())
-    result = Take(np.stack(out), take.names, take.fps, times[kept] - times[kept[0]],
+    result = Take(conditioned, take.names, take.fps, times[kept] - times[kept[0]],
                   take.layout, take.source, meta)
-    return result, conditioner.neutral_.copy()
+    if with_rotations:
+        return result, neutral_out, np.stack(rotations)
+    return result, neutral_out
 
 
 def _neutral(value) -> dict:

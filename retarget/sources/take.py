@@ -195,11 +195,15 @@ class Take:
         times = None if self.times is None else t[rows] - t[rows[0]]
         return replace(self, points=self.points[rows], times=times, meta=dict(self.meta))
 
-    def to_layout(self, layout: str, mapping: dict[str, str] | None = None) -> "Take":
+    def to_layout(self, layout: str, mapping: dict[str, str] | None = None, *,
+                  partial: bool = False) -> "Take":
         """This take's points selected and reordered to `layout`'s point order.
 
         mapping : {source label: layout point name} for labels that are not the point
             names themselves; points not mapped are looked up by their own name.
+        partial : layout points the take does not hold become NaN (never present) rows,
+            which the retargeter fills from the others (`retarget.pipeline`); at least one
+            point must match.
         Raises `RetargetError` listing the layout points the take does not hold.
         """
         target = get_layout(layout)
@@ -211,6 +215,12 @@ class Take:
                 target.index(point)  # raises, with close matches
             lookup[point] = lookup[label]
         missing = [name for name in target.point_names if name not in lookup]
+        if partial and len(missing) < target.n_points:
+            points = np.full((self.n_frames, target.n_points, self.dims), np.nan, np.float32)
+            present = [i for i, name in enumerate(target.point_names) if name in lookup]
+            points[:, present] = self.points[:, [lookup[target.point_names[i]] for i in present]]
+            return replace(self, points=points, names=target.point_names, layout=target.name,
+                           meta=dict(self.meta), times=None if self.times is None else self.times.copy())
         if missing:
             hints = []
             lowered = {name.lower(): name for name in self.names}
