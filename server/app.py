@@ -19,9 +19,9 @@ from retarget.errors import RetargetError
 from server.deps import Limits
 from server.jobs import JobRegistry
 from server.hub import StreamHub
-from server.routers import info, landmarks, layouts, meshes, projects, rigs, stream
+from server.routers import info, landmarks, layouts, meshes, projects, rigs, stream, takes
 from server.sample import ensure_sample_project
-from server.store import ProjectNotFound, ProjectStore, StaleRig
+from server.store import ProjectNotFound, ProjectStore, StaleRig, TakeNotFound
 from server.web import mount_web
 
 __all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "UVICORN_OPTIONS", "create_app"]
@@ -47,7 +47,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     """
     app = FastAPI(title="retarget", version=__version__, docs_url=None, redoc_url=None,
                   description="Facial animation retargeting from feature points: projects, "
-                  "meshes, landmarks and rigs.")
+                  "meshes, landmarks, rigs, takes and the live stream.")
     app.state.store = ProjectStore(data_dir)
     app.state.jobs = JobRegistry()
     app.state.hub = StreamHub()  # live streams: viewers, sources, regions per project
@@ -61,14 +61,15 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
         return JSONResponse({"detail": str(exc)}, 422)
 
     @app.exception_handler(ProjectNotFound)
-    async def _not_found(request: Request, exc: ProjectNotFound) -> JSONResponse:
+    @app.exception_handler(TakeNotFound)
+    async def _not_found(request: Request, exc: LookupError) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status.HTTP_404_NOT_FOUND)
 
     @app.exception_handler(StaleRig)
     async def _stale(request: Request, exc: StaleRig) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status.HTTP_409_CONFLICT)
 
-    for module in (projects, meshes, landmarks, rigs, stream, layouts, info):
+    for module in (projects, meshes, landmarks, rigs, takes, stream, layouts, info):
         app.include_router(module.router)
     mount_web(app)
     return app

@@ -6,6 +6,7 @@ Layout on disk::
     <data_dir>/projects/<id>/mesh-r<R>.<ext>     the upload's bytes exactly as uploaded
     <data_dir>/projects/<id>/landmarks-r<R>.json
     <data_dir>/projects/<id>/rig-r<R>-<hex>.npz  `retarget.skin.SkinWeights.save`
+    <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
 
 R is the project revision the file was written for. The index is the source of truth:
 its row names the current file of each kind, and a file counts only once the row says
@@ -15,6 +16,11 @@ then one SQLite transaction points the row at it, then the replaced files are de
 A crash at any step leaves the old or the new state whole (never a new mesh with the
 old mesh's landmarks); files no row names are swept when the store opens, and a new
 `ProjectStore` on the same folder finds everything a previous one committed.
+
+Takes (recorded performances) belong to the project, not to its mesh: they are source
+points, so a new mesh or new landmarks keep them. A take's file is written once; renaming
+and trimming change only its row (trimming is non-destructive: the row keeps the span
+in seconds and `take()` applies it).
 
 Project ids come from `secrets.token_urlsafe(16)` and every id is matched against
 `ID_PATTERN` before it is joined to a path; uploaded file names never reach the
@@ -37,8 +43,10 @@ from pathlib import Path
 
 from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
+from retarget.sources.take import Take
 
-__all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig"]
+__all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig",
+           "TAKE_ID_PATTERN", "TakeNotFound"]
 
 ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
 """What `secrets.token_urlsafe(16)` returns: 22 URL-safe base64 characters."""
@@ -49,6 +57,10 @@ MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf")
 _FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file")
 _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
+
+TAKE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{16}")
+"""What `secrets.token_urlsafe(12)` returns: a take id."""
+_TAKE_FILE = re.compile(r"take-[A-Za-z0-9_-]{16}\.npz")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS projects (
@@ -70,6 +82,23 @@ CREATE TABLE IF NOT EXISTS projects (
     rig_file      TEXT
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS takes (
+    id         TEXT PRIMARY KEY,
+    project_id TEXT NOT NULL,
+    name       TEXT NOT NULL,
+    created    TEXT NOT NULL,
+    source     TEXT NOT NULL,       -- what made it: markers, markerless, csv, c3d, live ...
+    layout     TEXT,                -- layout of its point names, NULL = its own labels
+    fps        REAL NOT NULL,
+    n_frames   INTEGER NOT NULL,
+    n_points   INTEGER NOT NULL,
+    dims       INTEGER NOT NULL,
+    duration   REAL NOT NULL,       -- seconds, untrimmed
+    trim_start REAL NOT NULL DEFAULT 0,
+    trim_stop  REAL,                -- NULL = to the end
+    file       TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS takes_project ON takes(project_id);
 """
 
 
@@ -79,6 +108,14 @@ class ProjectNotFound(LookupError):
     def __init__(self, project_id: str):
         super().__init__(f"no project with id {project_id!r}")
         self.project_id = project_id
+
+
+class TakeNotFound(LookupError):
+    """No take with this id in the project (or the id is malformed)."""
+
+    def __init__(self, take_id: str):
+        super().__init__(f"no take with id {take_id!r} in this project")
+        self.take_id = take_id
 
 
 class StaleRig(RuntimeError):
@@ -138,6 +175,10 @@ class ProjectStore:
         self.data_dir = Path(data_dir)
         self.projects_dir = self.data_dir / "projects"
         self.projects_dir.mkdir(parents=True, exist_ok=True)
+        # uploads waiting for a job (a video being tracked); a restart ends those jobs
+        self.scratch_dir = self.data_dir / "scratch"
+        shutil.rmtree(self.scratch_dir, ignore_errors=True)
+        self.scratch_dir.mkdir()
         self._lock = threading.RLock()
         self._db = sqlite3.connect(
             self.data_dir / "index.sqlite", check_same_thread=False, isolation_level=None
@@ -176,8 +217,11 @@ class ProjectStore:
             if row is None:
                 return
             keep = {row[column] for column in _FILE_COLUMNS}
+            keep.update(r["file"] for r in self._db.execute(
+                "SELECT file FROM takes WHERE project_id = ?", (project_id,)))
             for path in folder.iterdir() if folder.is_dir() else ():
-                if path.is_file() and path.name not in keep and _FILE_PATTERN.fullmatch(path.name):
+                if path.is_file() and path.name not in keep and (
+                        _FILE_PATTERN.fullmatch(path.name) or _TAKE_FILE.fullmatch(path.name)):
                     path.unlink(missing_ok=True)
 
     def _sweep_all(self) -> None:
@@ -209,6 +253,13 @@ class ProjectStore:
     def close(self) -> None:
         with self._lock:
             self._db.close()
+
+    def scratch_file(self, extension: str) -> Path:
+        """A fresh, unguessable path in the scratch folder with an allow-listed
+        `extension` (the caller deletes it when done)."""
+        if not re.fullmatch(r"[a-z0-9]{1,5}", extension):
+            raise ValueError(f"bad scratch file extension {extension!r}")
+        return self.scratch_dir / f"{secrets.token_urlsafe(16)}.{extension}"
 
     def folder(self, project_id: str) -> Path:
         """The project's folder; raises `ProjectNotFound` for a malformed id, before
@@ -306,6 +357,7 @@ class ProjectStore:
         folder = self.folder(project_id)
         with self._transaction() as db:
             self._row(project_id)
+            db.execute("DELETE FROM takes WHERE project_id = ?", (project_id,))
             db.execute("DELETE FROM projects WHERE id = ?", (project_id,))
         # after the commit: a crash here leaves an orphan folder, never a dangling row
         shutil.rmtree(folder, ignore_errors=True)
@@ -411,3 +463,80 @@ class ProjectStore:
             if row["rig_method"] is None:
                 return None
             return SkinWeights.load(self.folder(project_id) / row["rig_file"])
+
+    # -- takes --------------------------------------------------------------------------
+
+    @staticmethod
+    def _take_info(row: sqlite3.Row) -> dict:
+        stop = row["duration"] if row["trim_stop"] is None else row["trim_stop"]
+        return {
+            "id": row["id"], "name": row["name"], "created": row["created"],
+            "source": row["source"], "layout": row["layout"], "fps": row["fps"],
+            "n_frames": row["n_frames"], "n_points": row["n_points"], "dims": row["dims"],
+            "duration": row["duration"], "trim": [row["trim_start"], stop],
+        }
+
+    def _take_row(self, project_id: str, take_id: str) -> sqlite3.Row:
+        self._row(project_id)
+        if not isinstance(take_id, str) or not TAKE_ID_PATTERN.fullmatch(take_id):
+            raise TakeNotFound(take_id)
+        row = self._db.execute("SELECT * FROM takes WHERE id = ? AND project_id = ?",
+                               (take_id, project_id)).fetchone()
+        if row is None:
+            raise TakeNotFound(take_id)
+        return row
+
+    def put_take(self, project_id: str, take: Take, *, name: str) -> dict:
+        """Store a new take (an already validated `Take`); answers its info."""
+        folder = self.folder(project_id)
+        take_id = secrets.token_urlsafe(12)
+        file = f"take-{take_id}.npz"
+        times = take.frame_times()
+        duration = float(times[-1] - times[0]) if len(times) else 0.0
+        with self._transaction() as db:
+            self._row(project_id)
+            write_atomic(folder / file, writer=take.save)
+            db.execute(
+                "INSERT INTO takes (id, project_id, name, created, source, layout, fps, n_frames, "
+                "n_points, dims, duration, file) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (take_id, project_id, name[:255], _now(), take.source or "", take.layout,
+                 float(take.fps), take.n_frames, take.n_points, take.dims, duration, file))
+        return self.take_info(project_id, take_id)
+
+    def takes(self, project_id: str) -> list[dict]:
+        """The project's takes, oldest first."""
+        with self._lock:
+            self._row(project_id)
+            rows = self._db.execute("SELECT * FROM takes WHERE project_id = ? ORDER BY created, id",
+                                    (project_id,)).fetchall()
+        return [self._take_info(r) for r in rows]
+
+    def take_info(self, project_id: str, take_id: str) -> dict:
+        with self._lock:
+            return self._take_info(self._take_row(project_id, take_id))
+
+    def take(self, project_id: str, take_id: str, *, trimmed: bool = True) -> Take:
+        """The stored take, trimmed to its row's span unless `trimmed` is False."""
+        with self._lock:
+            row = self._take_row(project_id, take_id)
+            take = Take.load(self.folder(project_id) / row["file"])
+        if trimmed and (row["trim_start"] > 0 or row["trim_stop"] is not None):
+            take = take.trimmed(row["trim_start"], row["trim_stop"])
+        return take
+
+    def update_take(self, project_id: str, take_id: str, *, name: str | None = None,
+                    trim: tuple[float, float | None] | None = None) -> dict:
+        """Rename and/or set the trimmed span (seconds from the take's first frame; an
+        already validated span)."""
+        with self._transaction() as db:
+            row = self._take_row(project_id, take_id)
+            start, stop = (row["trim_start"], row["trim_stop"]) if trim is None else trim
+            db.execute("UPDATE takes SET name = ?, trim_start = ?, trim_stop = ? WHERE id = ?",
+                       (row["name"] if name is None else name[:255], start, stop, take_id))
+        return self.take_info(project_id, take_id)
+
+    def delete_take(self, project_id: str, take_id: str) -> None:
+        with self._transaction() as db:
+            row = self._take_row(project_id, take_id)
+            db.execute("DELETE FROM takes WHERE id = ?", (take_id,))
+        (self.folder(project_id) / row["file"]).unlink(missing_ok=True)  # after the commit

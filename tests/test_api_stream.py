@@ -39,7 +39,7 @@ def frames(ws, n: int):
 def test_hello_then_demo_frames_arrive_and_move(app, sample_id):
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
         hello = ws.receive_json()
-        assert hello == {"type": "hello", "project": sample_id, "n_points": 68, "layout": "ibug68", "fps": None}
+        assert hello == {"type": "hello", "project": sample_id, "n_points": 68, "layout": "ibug68", "source": None}
         ws.send_json({"type": "start", "source": "demo", "fps": 120})
         got = frames(ws, 12)
         assert all(f.displacements.shape == (68, 3) and np.isfinite(f.displacements).all() for f in got)
@@ -149,7 +149,7 @@ def test_the_last_viewer_leaving_stops_the_source(app, sample_id):
             a.send_json({"type": "start", "fps": 120})
             frames(a, 2)
         with client.websocket_connect(f"/api/projects/{sample_id}/stream") as c:
-            assert c.receive_json()["fps"] is None  # the departed viewers' source is gone
+            assert c.receive_json()["source"] is None  # the departed viewers' source is gone
         deadline = time.monotonic() + 5.0
         while hub.viewer_count(sample_id) and time.monotonic() < deadline:
             time.sleep(0.01)

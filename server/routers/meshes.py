@@ -46,17 +46,17 @@ MEDIA_TYPES = {
 _CHUNK = 1 << 20
 
 
-def upload_extension(filename: str | None) -> str:
+def upload_extension(filename: str | None, allowed=MESH_EXTENSIONS) -> str:
     """The allow-listed, lower-case extension of an uploaded file name (which is used
-    for nothing else); 415 when there is none or it is not allowed."""
+    for nothing else); 415 when there is none or it is not in `allowed`."""
     base = (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
     ext = os.path.splitext(base)[1].lower().lstrip(".")
-    if ext not in MESH_EXTENSIONS:
+    if ext not in allowed:
         shown = f"'.{ext}'" if ext else "no extension"
         raise HTTPException(
             status.HTTP_415_UNSUPPORTED_MEDIA_TYPE,
             f"file name {filename!r} has {shown}; upload one of: "
-            + ", ".join(f".{e}" for e in MESH_EXTENSIONS),
+            + ", ".join(f".{e}" for e in allowed),
         )
     return ext
 

@@ -1,19 +1,32 @@
 """The live stream: ``WS /api/projects/{id}/stream``.
 
 On connect the server sends a JSON hello ``{"type": "hello", "project", "n_points",
-"layout", "fps"}``, then binary frames (`server.stream_codec`) whenever the project's
-source publishes. Control messages are JSON text:
+"layout", "source"}`` (source: the running source's description or null), then binary
+frames (`server.stream_codec`) whenever the project's source publishes. Control messages
+are JSON text:
 
 - ``{"type": "start", "source": "demo", "fps": 60}``: start (or restart) the built-in demo
   performance for the project (`server.sources.DemoSource`);
-- ``{"type": "stop"}``: stop it; every viewer then gets a neutral frame (flag bit 0, zero
-  displacements) that puts the face back at rest;
+- ``{"type": "start", "source": "take", "take": <take id>, "loop": true, "settings": {...}}``:
+  replay a stored take (`server.sources.TakeSource`); settings are
+  `retarget.sources.conditioning.ConditionSettings` (neutral, head pose, filter, gain);
+- ``{"type": "start", "source": "live", "dims": 3, "settings": {...}}``: points tracked by
+  this viewer follow as binary source-points messages (`stream_codec.decode_points`,
+  N = the layout's points) and are retargeted as they arrive (`server.sources.LiveSource`);
+- ``{"type": "settings", "settings": {...}}``: change the running take or live source's
+  conditioning (a live source keeps its captured neutral unless the neutral mode changes);
+- ``{"type": "neutral"}``: a live source captures its neutral again from the next frames;
+- ``{"type": "record"}`` / ``{"type": "record_stop", "name": "..."}``: record the live
+  source's raw points; stopping stores them as a take and answers ``{"type": "recorded",
+  "take": {...}}``;
+- ``{"type": "stop"}``: stop the source; every viewer then gets a neutral frame (flag bit 0,
+  zero displacements) that puts the face back at rest;
 - ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
   regions, groups or points move (empty or null: all);
 - ``{"type": "ping", "t": <client time>}``: answered ``{"type": "pong", "t", "server_time"}``.
 
-A malformed control message is answered ``{"type": "error", "detail"}`` and the stream goes
-on. An unknown project, or one without landmarks, is closed with code 1008 and a reason.
+A malformed control message (or a points message that does not fit) is answered
+``{"type": "error", "detail"}`` and the stream goes on. An unknown project, or one without landmarks, is closed with code 1008 and a reason.
 Each viewer runs a receiver and a sender coroutine in one task group; the sender always
 sends the newest frame of the viewer's one-slot mailbox (`server.hub`), so a slow viewer
 drops stale frames instead of queueing them. The source, its fps and its regions belong
@@ -35,9 +48,10 @@ from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
-from server.sources import DemoSource
-from server.stream_codec import FLAG_NEUTRAL, encode_frame
-from server.store import ProjectNotFound
+from retarget.sources.conditioning import ConditionSettings
+from server.sources import DemoSource, LiveSource, TakeSource
+from server.stream_codec import FLAG_NEUTRAL, decode_points, encode_frame
+from server.store import ProjectNotFound, TakeNotFound
 
 router = APIRouter(tags=["stream"])
 POLICY_VIOLATION = 1008
@@ -55,14 +69,14 @@ async def stream(websocket: WebSocket, project_id: str, store: StoreDep, hub: Hu
         return
     source = hub.source(project_id)
     await websocket.send_json({"type": "hello", "project": project_id, "n_points": len(target_points),
-                               "layout": layout, "fps": source.fps if source else None})
+                               "layout": layout, "source": source.describe() if source else None})
     box = hub.subscribe(project_id)
     sending = asyncio.Lock()  # the two coroutines share one socket
     try:
         async with asyncio.TaskGroup() as group:
             sender = group.create_task(_send_frames(websocket, box, sending))
-            group.create_task(_receive_controls(websocket, sending, hub, project_id, target_points,
-                                                layout, on_disconnect=sender.cancel))
+            group.create_task(_receive_controls(websocket, sending, hub, store, project_id,
+                                                target_points, layout, on_disconnect=sender.cancel))
     finally:
         hub.unsubscribe(project_id, box)
 
@@ -87,7 +101,7 @@ async def _send_frames(websocket: WebSocket, box: Mailbox, sending: asyncio.Lock
         return  # the receiver sees the disconnect and ends the task group
 
 
-async def _receive_controls(websocket, sending, hub, project_id, target_points, layout, *,
+async def _receive_controls(websocket, sending, hub, store, project_id, target_points, layout, *,
                             on_disconnect) -> None:
     while True:
         message = await websocket.receive()
@@ -95,17 +109,66 @@ async def _receive_controls(websocket, sending, hub, project_id, target_points, 
             on_disconnect()
             return
         try:
-            reply = await _control(message.get("text"), hub, project_id, target_points, layout)
-        except (ValueError, RetargetError) as exc:
+            if message.get("bytes") is not None:
+                reply = _points(message["bytes"], hub, project_id)
+            else:
+                reply = await _control(message.get("text"), hub, store, project_id, target_points, layout)
+        except (ValueError, RetargetError, TakeNotFound) as exc:
             reply = {"type": "error", "detail": str(exc)}
         if reply is not None and websocket.client_state == WebSocketState.CONNECTED:
             async with sending:
                 await websocket.send_json(reply)
 
 
-async def _control(text, hub: StreamHub, project_id, target_points, layout) -> dict | None:
+def _points(data: bytes, hub: StreamHub, project_id) -> dict | None:
+    """A tracked frame for the project's live source."""
+    source = hub.source(project_id)
+    if not isinstance(source, LiveSource):
+        raise ValueError('binary messages are tracked points for a live source; send '
+                         '{"type": "start", "source": "live"} first')
+    frame = decode_points(data)
+    source.push(frame.points, frame.capture_time, frame.frame_index)
+    return None
+
+
+def _settings(msg: dict) -> ConditionSettings:
+    settings = msg.get("settings") or {}
+    if not isinstance(settings, dict):
+        raise ValueError('"settings" must be an object (see ConditionSettings)')
+    return ConditionSettings.from_dict(settings)
+
+
+def _fps(msg: dict, default: float) -> float:
+    fps = msg.get("fps", default)
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)):
+        raise ValueError(f'"fps" must be a number of frames per second; got {fps!r}')
+    return float(fps)
+
+
+async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
+    kind = msg.get("source", "demo")
+    if kind == "demo":
+        return await asyncio.to_thread(DemoSource, target_points, layout, _fps(msg, DEFAULT_FPS))
+    if kind == "take":
+        take_id = msg.get("take")
+        if not isinstance(take_id, str):
+            raise ValueError('"take" must be the id of one of the project\'s takes')
+        settings = _settings(msg)
+
+        def load():
+            take = store.take(project_id, take_id)
+            return TakeSource(target_points, layout, take, settings, loop=msg.get("loop", True) is not False,
+                              take_id=take_id)
+        return await asyncio.to_thread(load)
+    if kind == "live":
+        dims = msg.get("dims", 3)
+        return LiveSource(target_points, layout, _settings(msg), dims=dims, fps=_fps(msg, 30.0))
+    raise ValueError(f"unknown source {kind!r}; available: 'demo', 'take', 'live'")
+
+
+async def _control(text, hub: StreamHub, store, project_id, target_points, layout) -> dict | None:
     if text is None:
-        raise ValueError("control messages are JSON text; binary messages are not accepted")
+        raise ValueError("control messages are JSON text")
     try:
         msg = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -116,14 +179,32 @@ async def _control(text, hub: StreamHub, project_id, target_points, layout) -> d
     if kind == "ping":
         return {"type": "pong", "t": msg.get("t"), "server_time": time.time()}
     if kind == "start":
-        if msg.get("source", "demo") != "demo":
-            raise ValueError(f"unknown source {msg.get('source')!r}; available: 'demo'")
-        fps = msg.get("fps", DEFAULT_FPS)
-        if isinstance(fps, bool) or not isinstance(fps, (int, float)):
-            raise ValueError(f'"fps" must be a number of frames per second; got {fps!r}')
-        source = await asyncio.to_thread(DemoSource, target_points, layout, float(fps))
+        source = await _start(msg, hub, store, project_id, target_points, layout)
         hub.start_source(project_id, source)
-        return {"type": "started", "source": "demo", "fps": source.fps}
+        return {"type": "started", **source.describe()}
+    source = hub.source(project_id)
+    if kind in ("settings", "neutral", "record", "record_stop"):
+        wanted = LiveSource if kind != "settings" else (LiveSource, TakeSource)
+        if not isinstance(source, wanted):
+            raise ValueError(f'"{kind}" applies to a running '
+                             f'{"live" if kind != "settings" else "take or live"} source; none is running')
+    if kind == "settings":
+        settings = _settings(msg)
+        await asyncio.to_thread(source.set_settings, settings)
+        return {"type": "settings", "settings": settings.to_dict()}
+    if kind == "neutral":
+        source.recapture()
+        return {"type": "neutral"}
+    if kind == "record":
+        source.start_recording()
+        return {"type": "recording"}
+    if kind == "record_stop":
+        name = msg.get("name") or "live take"
+        if not isinstance(name, str):
+            raise ValueError('"name" must be a string')
+        take = source.stop_recording()
+        info = await asyncio.to_thread(store.put_take, project_id, take, name=name.strip()[:200] or "live take")
+        return {"type": "recorded", "take": info}
     if kind == "stop":
         hub.stop_source(project_id)
         # every viewer puts its face back at rest
