@@ -14,6 +14,13 @@ Subcommands (``retarget <command> --help`` for the details):
     the error against the known answer. Needs no files.
 ``layouts``
     The landmark layouts and the names ``--mask`` accepts.
+``track``
+    A performance video -> (F, N, 3) source points per frame: ring markers (Dutreve §5,
+    one camera, z = 0), a colour-marker stereo pair (Woodward §5) or markerless face-mesh
+    tracking (the web app's browser tracker, run in a headless Chromium).
+``calibrate``
+    A stereo camera pair's calibration from checkerboard or circle-grid views, for
+    ``track --method stereo``.
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
 a missing or unreadable file, arrays that do not agree) is one line
@@ -404,6 +411,104 @@ def _cmd_rig(args) -> int:
     return 0
 
 
+def _cmd_track(args) -> int:
+    out = Path(args.out)
+    _require_parent(out)
+    _require_file(args.video, "video")
+    take_out = Path(args.take) if args.take else None
+    if take_out is not None:
+        _require_parent(take_out)
+    layout = args.layout or ("ibug68" if args.method == "markerless" else "dutreve21")
+    if args.method == "stereo":
+        if not (args.right and args.calibration):
+            raise RetargetError("--method stereo needs --right RIGHT_VIDEO and --calibration CALIB.npz")
+        _require_file(args.right, "right video")
+        _require_file(args.calibration, "stereo calibration")
+    elif args.right or args.calibration:
+        raise RetargetError(f"--right and --calibration are for --method stereo, not {args.method}")
+    start = time.perf_counter()
+    with _bar(100, f"tracking ({args.method})", "%", args.quiet) as advance:
+        def progress(done: int, total: int) -> None:  # the trackers count frames
+            if total:
+                advance(done / total)
+
+        if args.method == "markers":
+            from retarget.sources.markers import track_marker_video
+            take = track_marker_video(args.video, layout=layout, progress=progress)
+        elif args.method == "markerless":
+            from retarget.sources.markerless import track_video_markerless
+            take = track_video_markerless(args.video, layout=layout, progress=progress,
+                                          max_frames=args.max_frames)
+        else:
+            from retarget.sources.stereo import StereoCalibration, track_stereo_videos
+            take = track_stereo_videos(args.video, args.right, StereoCalibration.load(args.calibration),
+                                       layout=layout, progress=progress)
+    seconds = time.perf_counter() - start
+    points = take.points
+    if take.dims == 2:  # image points: z = 0 (Dutreve §4)
+        points = np.concatenate([points, np.zeros_like(points[..., :1])], axis=-1)
+    _write_npy(out, np.ascontiguousarray(points, dtype=np.float32))
+    if take_out is not None:
+        try:
+            with open(take_out, "wb") as f:
+                take.save(f)
+        except OSError as exc:
+            raise RetargetError(f"could not write {str(take_out)!r}: {exc}") from exc
+    found = np.isfinite(take.points).all(axis=2)
+    print(f"tracked {take.n_frames} frames of {take.n_points} points ({take.layout or 'own labels'}) "
+          f"in {seconds:.2f} s: {take.n_frames / max(seconds, 1e-9):.1f} fps; "
+          f"all points found in {100 * found.all(axis=1).mean():.1f} % of frames, "
+          f"none in {100 * (~found.any(axis=1)).mean():.1f} % -> {out}")
+    return 0
+
+
+def _cmd_calibrate(args) -> int:
+    from retarget.sources.stereo import calibrate_stereo
+
+    out = Path(args.out)
+    _require_parent(out)
+    left, right = _views(args.left, "left"), _views(args.right, "right")
+    pattern = (args.pattern, args.cols, args.rows, args.square)
+    calibration = calibrate_stereo(left, right, pattern)
+    try:
+        calibration.save(out)
+    except OSError as exc:
+        raise RetargetError(f"could not write {str(out)!r}: {exc}") from exc
+    skipped = calibration.meta.get("skipped") or []
+    print(f"stereo calibration from {len(left) - len(skipped)} of {len(left)} view pairs: "
+          f"reprojection RMS {calibration.rms:.3f} px, baseline {calibration.baseline:.1f} "
+          f"(pattern units) -> {out}")
+    return 0
+
+
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+def _views(path: str, side: str) -> list:
+    """The calibration views of one camera: the images of a folder (sorted by name) or
+    the frames of a video, BGR uint8."""
+    import cv2
+
+    from retarget.sources.video import VideoReader
+
+    p = Path(path)
+    if p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in _IMAGE_SUFFIXES)
+        if not files:
+            raise RetargetError(f"{side} calibration folder {path!r} holds no images "
+                                f"({', '.join(_IMAGE_SUFFIXES)})")
+        images = []
+        for f in files:
+            image = cv2.imread(str(f))
+            if image is None:
+                raise RetargetError(f"{side} calibration view {str(f)!r} is not a readable image")
+            images.append(image)
+        return images
+    _require_file(path, f"{side} calibration views")
+    with VideoReader(path) as reader:
+        return [frame for _, frame in reader]
+
+
 def _cmd_demo(args) -> int:
     from retarget.sample_face import demo_weights, posed_vertices, sample_face
 
@@ -607,6 +712,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--deformer", choices=list(METHODS), default=DEFAULT_METHOD, metavar="NAME",
                    help=f"one of {methods} (default: {DEFAULT_METHOD})")
     p.set_defaults(run=_cmd_demo)
+
+    p = commands.add_parser(
+        "track", parents=[quiet], help="track a performance video into source points",
+        description="Track a video into (F, N, 3) float32 source points in a layout's order "
+        "(NaN rows where a point or the face is lost; z = 0 for one-camera markers) and print "
+        "the frames per second.")
+    p.add_argument("video", metavar="VIDEO", help="the video (the left one for stereo)")
+    p.add_argument("--method", choices=["markerless", "markers", "stereo"], required=True,
+                   help="markerless: face-mesh tracking (needs the 'markerless' extra and "
+                   "Chromium); markers: white dots with a black ring, one camera; stereo: "
+                   "coloured markers seen by a calibrated pair")
+    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
+                   help="points to produce (default: dutreve21 for markers and stereo, ibug68 for markerless)")
+    p.add_argument("--right", metavar="VIDEO", help="stereo: the right camera's video")
+    p.add_argument("--calibration", metavar="CALIB.npz", help="stereo: from 'retarget calibrate'")
+    p.add_argument("--max-frames", type=_positive_int, metavar="F",
+                   help="markerless: track only the first F frames")
+    p.add_argument("--out", required=True, metavar="FRAMES.npy", help="(F, N, 3) float32 points")
+    p.add_argument("--take", metavar="TAKE.npz",
+                   help="also write the take (points, times, names) for upload to the web app")
+    p.set_defaults(run=_cmd_track)
+
+    p = commands.add_parser(
+        "calibrate", parents=[quiet], help="calibrate a stereo camera pair",
+        description="Calibrate a stereo pair from views of a calibration pattern (each side a "
+        "folder of images or a video) for 'retarget track --method stereo'.")
+    p.add_argument("left", metavar="LEFT", help="left camera: folder of images or a video")
+    p.add_argument("right", metavar="RIGHT", help="right camera: the same views, same order")
+    p.add_argument("--pattern", choices=["checkerboard", "circles"], default="checkerboard",
+                   help="checkerboard (inner corners) or symmetric circle grid")
+    p.add_argument("--cols", type=_positive_int, required=True, help="pattern columns (inner corners or circles)")
+    p.add_argument("--rows", type=_positive_int, required=True, help="pattern rows")
+    p.add_argument("--square", type=_positive_float, required=True, metavar="SIZE",
+                   help="square (or circle spacing) size; the units of the 3D points, e.g. mm")
+    p.add_argument("--out", required=True, metavar="CALIB.npz", help="the calibration, written here")
+    p.set_defaults(run=_cmd_calibrate)
 
     p = commands.add_parser("layouts", help="list the landmark layouts and their regions",
                             description="List the landmark layouts, their point counts and "
