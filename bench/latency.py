@@ -6,7 +6,7 @@ in the page, in the real app in a real browser.
 Runs `retarget serve` (subprocess, temp data dir, free port) and Debian's Chromium
 through Playwright (headless; WebGL2 through SwiftShader unless --gpu), opens the app
 on the built-in sample project (8,430 vertices, dense 68-joint biharmonic rig), presses
-*Start demo* and records, for every frame the page receives, in the page:
+*Play* (the built-in demo source) and records, for every frame the page receives, in the page:
 
     applied  = when the app's frame handler has put the displacements in the skinning
                texture (what the app's own latency readout shows)

@@ -75,7 +75,7 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
                            " return p.value >= p.max; }")
 
     # the demo performance moves the face: frames arrive and the face's pixels change
-    page.click("#start-demo")
+    page.click("#play")
     page.wait_for_function("() => window.app.stream && window.app.stream.stats.frames > 30",
                            timeout=30_000)
     clip = face_clip(page, targets)
@@ -95,7 +95,7 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
     # finds the project, its landmarks and its rig
     server.restart()
     page.wait_for_function("() => window.app.stream.state === 'open'", timeout=30_000)
-    page.click("#stop-demo")
+    page.click("#stop")
     page.reload()
     page.wait_for_function("() => window.app && window.app.projectId")
     page.evaluate("() => window.app.ready")

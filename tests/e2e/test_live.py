@@ -37,7 +37,7 @@ def test_region_toggles_restrict_the_motion_live_and_stop_rests(server, page):
     sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
     open_project(page, server, sample["id"])
     page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
-    page.click("#start-demo")
+    page.click("#play")
     page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=30_000)
     page.evaluate(_RECORD)
     layout = get_layout(sample["landmarks"]["layout"])
@@ -63,7 +63,7 @@ def test_region_toggles_restrict_the_motion_live_and_stop_rests(server, page):
     assert np.abs(again[:, ~mouth]).max() > 1e-3
 
     # stop: the face comes back to rest
-    page.click("#stop-demo")
+    page.click("#stop")
     page.wait_for_function("() => window.received.length > 0 && "
                            "window.received[window.received.length - 1].every(v => v === 0)",
                            timeout=10_000)

@@ -10,7 +10,7 @@ const LATENCY_FRAMES = 300;
  * The live stream of a project's target feature displacements (WS /api/projects/{id}/stream).
  *
  * Events:
- * - 'hello'   detail: the server's hello JSON ({type, project, n_points, layout, fps});
+ * - 'hello'   detail: the server's hello JSON ({type, project, n_points, layout, source});
  * - 'frame'   detail: a decoded frame (StreamDecoder.decode; its displacements view the
  *             message's bytes);
  * - 'message' detail: any other JSON the server sends (started, stopped, mask, pong, error);
@@ -42,7 +42,7 @@ export class StreamClient extends EventTarget {
 		this._attempts = 0; // connections lost since the last hello
 		this._reconnectTimer = null;
 		this._queue = []; // controls sent before the socket opened, other than start and mask
-		this._replayed = { mask: null, start: null }; // the last ones sent, for a reconnect
+		this._replayed = { mask: null, start: null, settings: null }; // the last ones sent, for a reconnect
 
 		this._frames = 0;
 		this._arrivals = []; // performance.now() of the frames received in the last second, ms
@@ -68,7 +68,7 @@ export class StreamClient extends EventTarget {
 		this._closed = true;
 		clearTimeout( this._reconnectTimer );
 		this._queue.length = 0;
-		this._replayed = { mask: null, start: null };
+		this._replayed = { mask: null, start: null, settings: null };
 		const socket = this._socket;
 		this._socket = null;
 		if ( socket !== null ) {
@@ -96,8 +96,9 @@ export class StreamClient extends EventTarget {
 		}
 
 		const text = JSON.stringify( message );
-		const replayed = message.type === 'start' || message.type === 'mask';
+		const replayed = message.type in this._replayed;
 		if ( replayed ) this._replayed[ message.type ] = text;
+		if ( message.type === 'start' || message.type === 'stop' ) this._replayed.settings = null;
 		if ( message.type === 'stop' ) this._replayed.start = null;
 
 		if ( this._socket !== null && this._socket.readyState === WebSocket.OPEN ) {
@@ -109,6 +110,20 @@ export class StreamClient extends EventTarget {
 			this._queue.push( text ); // start and mask go out with the replay on open
 
 		}
+
+	}
+
+	/**
+	 * Send one binary source-points message (PointsEncoder) if the socket is open. Tracked
+	 * frames are perishable: while (re)connecting they are dropped, not queued.
+	 * @param {ArrayBuffer} buffer
+	 * @returns {boolean} whether it was sent
+	 */
+	sendPoints( buffer ) {
+
+		if ( this._socket === null || this._socket.readyState !== WebSocket.OPEN ) return false;
+		this._socket.send( buffer );
+		return true;
 
 	}
 
@@ -159,7 +174,8 @@ export class StreamClient extends EventTarget {
 
 		this._setState( 'open' );
 		// mask first, so the first frames after a start are already masked
-		for ( const text of [ this._replayed.mask, this._replayed.start, ...this._queue ] ) {
+		const { mask, start, settings } = this._replayed;
+		for ( const text of [ mask, start, settings, ...this._queue ] ) {
 
 			if ( text !== null ) this._socket.send( text );
 

@@ -175,54 +175,91 @@ export const api = {
 	},
 
 	/**
-	 * Upload a mesh file (multipart field "file") with progress; XHR because fetch
-	 * reports no upload progress.
+	 * Upload a mesh file with progress.
 	 * @param {string} id
 	 * @param {File} file
 	 * @param {(fraction: number) => void} onProgress - 0..1 of the bytes sent
 	 * @returns {Promise<object>} the updated project
 	 */
-	uploadMesh( id, file, onProgress ) {
+	uploadMesh: ( id, file, onProgress ) => upload( 'PUT', `/api/projects/${ id }/mesh`, file, {}, onProgress ),
 
-		return new Promise( ( resolve, reject ) => {
+	/** @returns {Promise<Array<object>>} takes {id, name, source, layout, fps, n_frames, n_points, dims, duration, trim}, oldest first */
+	takes: ( id ) => request( 'GET', `/api/projects/${ id }/takes` ),
 
-			const xhr = new XMLHttpRequest();
-			xhr.open( 'PUT', `/api/projects/${ id }/mesh` );
-			xhr.responseType = 'text';
-			xhr.upload.onprogress = ( event ) => {
+	/**
+	 * Upload a take file (csv, json, npy, trc, c3d, glb, gltf, zip) with progress.
+	 * @param {Object<string, string>} fields - optional form fields: name, fps, layout, mapping, labelled_vertices.
+	 * @returns {Promise<object>} the stored take's info
+	 */
+	uploadTake: ( id, file, fields, onProgress ) => upload( 'POST', `/api/projects/${ id }/takes`, file, fields, onProgress ),
 
-				if ( event.lengthComputable ) onProgress( event.loaded / event.total );
+	/**
+	 * Upload a marker video; the server tracks it in a job.
+	 * @param {Object<string, string>} fields - method ('markers'), layout, name.
+	 * @returns {Promise<object>} the job
+	 */
+	trackVideo: ( id, file, fields, onProgress ) => upload( 'POST', `/api/projects/${ id }/takes/track`, file, fields, onProgress ),
 
-			};
+	/** @param {{name?: string, trim?: [number, number|null]}} patch */
+	patchTake: ( id, takeId, patch ) => request( 'PATCH', `/api/projects/${ id }/takes/${ takeId }`, { json: patch } ),
 
-			xhr.onload = () => {
+	deleteTake: ( id, takeId ) => request( 'DELETE', `/api/projects/${ id }/takes/${ takeId }` ),
 
-				let body = null;
-				try {
-
-					body = JSON.parse( xhr.responseText );
-
-				} catch {
-
-					// not JSON: reported by status below
-
-				}
-
-				if ( xhr.status >= 200 && xhr.status < 300 ) resolve( body );
-				else reject( new ApiError( xhr.status, detailOf( body, `upload of ${ file.name } failed: ${ xhr.statusText }` ) ) );
-
-			};
-
-			// the server closes early on an oversized body, which browsers may report as a
-			// network error rather than the 413 it sent
-			xhr.onerror = () => reject( new ApiError( 0, `upload of ${ file.name } failed: the connection was closed (is the file over the server's size limit?)` ) );
-			xhr.onabort = () => reject( new ApiError( 0, `upload of ${ file.name } was cancelled` ) );
-			const form = new FormData();
-			form.append( 'file', file, file.name );
-			xhr.send( form );
-
-		} );
-
-	},
+	/** URL of the trimmed take's (F, N, D) float32 .npy */
+	takePointsUrl: ( id, takeId ) => `/api/projects/${ id }/takes/${ takeId }/points`,
 
 };
+
+/**
+ * A multipart upload (field "file" plus `fields`) with progress; XHR because fetch reports
+ * no upload progress.
+ * @returns {Promise<object>} the JSON answer
+ */
+function upload( method, url, file, fields, onProgress ) {
+
+	return new Promise( ( resolve, reject ) => {
+
+		const xhr = new XMLHttpRequest();
+		xhr.open( method, url );
+		xhr.responseType = 'text';
+		xhr.upload.onprogress = ( event ) => {
+
+			if ( event.lengthComputable && onProgress ) onProgress( event.loaded / event.total );
+
+		};
+
+		xhr.onload = () => {
+
+			let body = null;
+			try {
+
+				body = JSON.parse( xhr.responseText );
+
+			} catch {
+
+				// not JSON: reported by status below
+
+			}
+
+			if ( xhr.status >= 200 && xhr.status < 300 ) resolve( body );
+			else reject( new ApiError( xhr.status, detailOf( body, `upload of ${ file.name } failed: ${ xhr.statusText }` ) ) );
+
+		};
+
+		// the server closes early on an oversized body, which browsers may report as a
+		// network error rather than the 413 it sent
+		xhr.onerror = () => reject( new ApiError( 0, `upload of ${ file.name } failed: the connection was closed (is the file over the server's size limit?)` ) );
+		xhr.onabort = () => reject( new ApiError( 0, `upload of ${ file.name } was cancelled` ) );
+		const form = new FormData();
+		form.append( 'file', file, file.name );
+		for ( const [ key, value ] of Object.entries( fields ?? {} ) ) {
+
+			if ( value !== undefined && value !== null && value !== '' ) form.append( key, String( value ) );
+
+		}
+
+		xhr.send( form );
+
+	} );
+
+}

@@ -5,6 +5,7 @@ import { LayoutGuide } from './LayoutGuide.js';
 import { regionColor } from './palette.js';
 import { SkinnedFace } from './SkinnedFace.js';
 import { StreamClient } from './StreamClient.js';
+import { SourcePanel } from './SourcePanel.js';
 import { Viewer } from './Viewer.js';
 
 const JOB_POLL_MS = 150;
@@ -44,6 +45,14 @@ class App {
 		this._rigJob = null;
 		this._draftTimer = 0;
 		this._streaming = false;
+		this.sources = new SourcePanel( this );
+
+	}
+
+	/** Whether a source is playing on the stream. */
+	get streaming() {
+
+		return this._streaming;
 
 	}
 
@@ -159,6 +168,7 @@ class App {
 			if ( ticket !== this._open ) return false;
 			this._updateLive();
 			if ( project.landmarks ) this._connectStream();
+			await this.sources.setProject( project );
 			return true;
 
 		} catch ( error ) {
@@ -194,6 +204,7 @@ class App {
 		}
 
 		this._streaming = false;
+		this.sources.stopWebcam();
 		this.picker.setMesh( null );
 		this.picker.setDisplacements( null );
 		if ( this.face ) {
@@ -691,6 +702,7 @@ class App {
 			if ( stream !== this.stream || ! this.face ) return;
 			const frame = event.detail;
 			this.face.setDisplacements( frame.displacements );
+			this._turnHead( frame.headRotation );
 			this.picker.setDisplacements( frame.displacements );
 			stream.markApplied( frame );
 
@@ -702,6 +714,7 @@ class App {
 			if ( message.type === 'started' ) this._setStreaming( true );
 			else if ( message.type === 'stopped' ) this._setStreaming( false );
 			else if ( message.type === 'error' ) this.errors.show( `Live stream: ${ message.detail }` );
+			else this.sources.onMessage( message );
 
 		} );
 		stream.connect();
@@ -725,40 +738,65 @@ class App {
 		const note = $( 'live-note' );
 		note.textContent = missing || ( this.picker.dirty && this.project?.landmarks ? 'The stream drives the saved landmarks; save to use your edits.' : '' );
 		note.className = 'note' + ( missing ? ' warn' : '' );
-		$( 'start-demo' ).title = missing || 'Play the built-in demo performance on this face';
-		$( 'stop-demo' ).disabled = ! this._streaming;
+		$( 'play' ).title = missing || 'Play the chosen performance source on this face';
+		$( 'stop' ).disabled = ! this._streaming;
 
 	}
 
 	_setStreaming( on ) {
 
 		this._streaming = on;
-		$( 'start-demo' ).textContent = on ? '↻ Restart demo' : '▶ Start demo';
-		$( 'stop-demo' ).disabled = ! on;
-		if ( ! on ) $( 'fps' ).textContent = '–';
+		$( 'play' ).textContent = on ? '↻ Restart' : '▶ Play';
+		$( 'stop' ).disabled = ! on;
+		if ( ! on ) {
+
+			$( 'fps' ).textContent = '–';
+			this._turnHead( null );
+			this.sources.onStopped();
+
+		}
 
 	}
 
-	_startDemo() {
+	async _play() {
 
 		const missing = this._liveMissing();
 		if ( missing ) {
 
-			this.errors.show( `Cannot start the demo: ${ missing }` );
+			this.errors.show( `Cannot play: ${ missing }` );
 			return;
 
 		}
 
 		if ( ! this.stream ) this._connectStream();
+		const start = await this.sources.startMessage();
 		this._sendMask();
-		this.stream.send( { type: 'start', source: 'demo', fps: 60 } );
+		this.stream.send( start );
 
 	}
 
-	_stopDemo() {
+	_stop() {
 
 		this.stream?.send( { type: 'stop' } );
+		this.sources.stopWebcam();
 		this._setStreaming( false );
+
+	}
+
+	/**
+	 * Turn the face by the performer's head rotation (a source's head pose, when the
+	 * conditioning applies it), about the centre of its rest bounding sphere.
+	 * @param {Float32Array|null} q - quaternion x, y, z, w; null puts the face back.
+	 */
+	_turnHead( q ) {
+
+		const mesh = this.face?.mesh;
+		if ( ! mesh ) return;
+		if ( q ) mesh.quaternion.set( q[ 0 ], q[ 1 ], q[ 2 ], q[ 3 ] );
+		else mesh.quaternion.identity();
+		if ( ! mesh.geometry.boundingSphere ) mesh.geometry.computeBoundingSphere();
+		const centre = mesh.geometry.boundingSphere.center;
+		mesh.position.copy( centre ).applyQuaternion( mesh.quaternion ).negate().add( centre );
 
 	}
 
@@ -901,8 +939,8 @@ class App {
 
 		} );
 
-		$( 'start-demo' ).addEventListener( 'click', guard( () => this._startDemo() ) );
-		$( 'stop-demo' ).addEventListener( 'click', () => this._stopDemo() );
+		$( 'play' ).addEventListener( 'click', guard( () => this._play() ) );
+		$( 'stop' ).addEventListener( 'click', () => this._stop() );
 		$( 'regions' ).addEventListener( 'change', () => this._sendMask() );
 
 		window.addEventListener( 'keydown', guard( ( event ) => this._key( event ) ) );

@@ -1,0 +1,464 @@
+import { api } from './api.js';
+import { PointsEncoder } from './PointsEncoder.js';
+import { trackVideo } from './tracking/videoTake.js';
+
+/**
+ * The performance panel: which source drives the face (the built-in demo, the webcam
+ * tracked in this page, or a recorded take), the project's takes (import, track a video,
+ * rename, trim, download, delete), recording, and the conditioning settings sent with
+ * every start (`retarget.sources.conditioning.ConditionSettings`: neutral, head pose,
+ * jitter filter and gain per region).
+ *
+ * Markerless tracking runs here, in the page (tracking/); marker videos are tracked by
+ * the server in a job whose progress feeds the bar. The panel holds no maths: the server
+ * conditions and retargets whatever the page sends.
+ */
+
+const $ = ( id ) => document.getElementById( id );
+const TAKE_EXTENSIONS = [ 'csv', 'json', 'npy', 'trc', 'c3d', 'glb', 'gltf', 'zip' ];
+const JOB_POLL_MS = 250;
+
+export class SourcePanel {
+
+	/**
+	 * @param {object} app - the page's App: {projectId, project, stream, errors, layouts,
+	 *   connectStream(), liveMissing()}.
+	 */
+	constructor( app ) {
+
+		this.app = app;
+		this.takes = [];
+		this.selectedTake = null;
+		this.webcam = null; // {stop()} while the webcam runs
+		this.recording = false;
+		this._bind();
+
+	}
+
+	/** The conditioning settings of the form, as ConditionSettings JSON. */
+	settings() {
+
+		const regions = {};
+		const gain = {};
+		for ( const row of $( 'gain-table' ).querySelectorAll( 'tr[data-region]' ) ) {
+
+			const region = row.dataset.region;
+			gain[ region ] = Number( row.querySelector( '.gain' ).value );
+			regions[ region ] = { min_cutoff: Number( row.querySelector( '.cutoff' ).value ), beta: Number( $( 'oe-beta' ).value ) };
+
+		}
+
+		const mode = $( 'neutral-mode' ).value;
+		const value = Number( $( 'neutral-value' ).value );
+		return {
+			neutral: mode === 'frame' ? { mode, frame: Math.max( 0, Math.round( value ) ) } : { mode, seconds: Math.max( 0, value ) },
+			head_pose: $( 'head-remove' ).checked ? 'remove' : 'keep',
+			apply_rotation: $( 'head-apply' ).checked,
+			filter: $( 'filter' ).value,
+			one_euro: regions,
+			gain,
+		};
+
+	}
+
+	/** The project changed (or its landmarks): list its takes, rebuild the region rows. */
+	async setProject( project ) {
+
+		this.stopWebcam();
+		this.takes = [];
+		this.selectedTake = null;
+		this._regionRows( project?.landmarks?.layout || 'ibug68' );
+		this._renderTakes();
+		if ( ! project ) return;
+		await this.refreshTakes();
+
+	}
+
+	async refreshTakes() {
+
+		const id = this.app.projectId;
+		const takes = await api.takes( id );
+		if ( id !== this.app.projectId ) return;
+		this.takes = takes;
+		if ( ! takes.some( ( t ) => t.id === this.selectedTake ) ) this.selectedTake = takes.length ? takes[ takes.length - 1 ].id : null;
+		this._renderTakes();
+
+	}
+
+	/** The start message for the selected source, or null after showing why it cannot start. */
+	async startMessage() {
+
+		const kind = $( 'source-select' ).value;
+		if ( kind === 'demo' ) return { type: 'start', source: 'demo', fps: 60 };
+		if ( kind === 'take' ) {
+
+			if ( ! this.selectedTake ) throw new Error( 'No take selected: import a file, track a video or record one first.' );
+			return { type: 'start', source: 'take', take: this.selectedTake, loop: $( 'take-loop' ).checked, settings: this.settings() };
+
+		}
+
+		await this.startWebcam();
+		return { type: 'start', source: 'live', dims: 3, fps: 30, settings: this.settings() };
+
+	}
+
+	/** A stream message the page did not handle itself. */
+	onMessage( message ) {
+
+		if ( message.type === 'recorded' ) {
+
+			this._note( `Recorded "${ message.take.name }": ${ message.take.n_frames } frames, ${ message.take.duration.toFixed( 1 ) } s.` );
+			this.selectedTake = message.take.id;
+			this.refreshTakes();
+
+		} else if ( message.type === 'recording' ) {
+
+			this._setRecording( true );
+
+		}
+
+	}
+
+	/** The stream stopped (Stop, a reconnect, another project). */
+	onStopped() {
+
+		this._setRecording( false );
+
+	}
+
+	// webcam
+
+	async startWebcam() {
+
+		if ( this.webcam ) return;
+		const { startWebcam } = await import( './tracking/webcam.js' );
+		const layout = this._layout();
+		const encoder = new PointsEncoder();
+		const video = $( 'webcam-video' );
+		$( 'webcam-box' ).hidden = false;
+		let index = 0;
+		this.webcam = await startWebcam( video, {
+			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
+			onFrame: ( { points, time } ) => {
+
+				this.app.stream?.sendPoints( encoder.encode( points, 3, index ++, time ) );
+
+			},
+		} );
+
+	}
+
+	stopWebcam() {
+
+		this.webcam?.stop();
+		this.webcam = null;
+		$( 'webcam-box' ).hidden = true;
+		this._setRecording( false );
+
+	}
+
+	// takes
+
+	async importTake( file ) {
+
+		const ext = file.name.split( '.' ).pop().toLowerCase();
+		if ( ! TAKE_EXTENSIONS.includes( ext ) ) throw new Error( `${ file.name }: a take is read from ${ TAKE_EXTENSIONS.map( ( e ) => '.' + e ).join( ', ' ) }.` );
+		const fields = ext === 'npy' ? { layout: this._layout().name } : {};
+		const info = await this._withProgress( `Uploading ${ file.name }…`, ( progress ) => api.uploadTake( this.app.projectId, file, fields, progress ) );
+		this._note( `Imported "${ info.name }": ${ info.n_frames } frames of ${ info.n_points } points (${ info.source }).` );
+		this.selectedTake = info.id;
+		$( 'source-select' ).value = 'take';
+		await this.refreshTakes();
+
+	}
+
+	async trackVideoFile( file ) {
+
+		const method = $( 'video-method' ).value;
+		if ( method === 'markers' ) return this._trackOnServer( file );
+		const layout = this._layout();
+		const controller = new AbortController();
+		this._abort = controller;
+		const result = await this._withProgress( `Tracking ${ file.name } in this page…`, ( progress ) => trackVideo( file, {
+			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
+			signal: controller.signal,
+			onProgress: ( { done, total, faces } ) => {
+
+				progress( done / total );
+				this._note( `Tracking ${ file.name }: frame ${ done } / ${ total }, a face in ${ faces }.` );
+
+			},
+		} ) );
+		if ( result.faces === 0 ) throw new Error( `No face was found in ${ file.name } (${ result.n_frames } frames): nothing to keep.` );
+		const npy = new File( [ npyBytes( result.points, [ result.n_frames, result.n_points, 3 ] ) ], file.name.replace( /\.[^.]*$/, '' ) + '.npy' );
+		const info = await api.uploadTake( this.app.projectId, npy, { layout: layout.name, fps: result.fps, name: file.name.replace( /\.[^.]*$/, '' ) } );
+		this._note( `Tracked "${ info.name }": ${ result.n_frames } frames at ${ ( result.n_frames / result.seconds ).toFixed( 1 ) } fps, a face in ${ ( 100 * result.faces / result.n_frames ).toFixed( 0 ) } %.` );
+		this.selectedTake = info.id;
+		$( 'source-select' ).value = 'take';
+		await this.refreshTakes();
+
+	}
+
+	async _trackOnServer( file ) {
+
+		const id = this.app.projectId;
+		const job = await this._withProgress( `Uploading ${ file.name }…`, ( progress ) => api.trackVideo( id, file, { method: 'markers', layout: 'dutreve21' }, progress ) );
+		const bar = $( 'source-progress' );
+		bar.hidden = false;
+		try {
+
+			for ( ;; ) {
+
+				const state = await api.job( job.id );
+				bar.value = state.progress;
+				this._note( `Tracking the markers of ${ file.name } on the server: ${ ( 100 * state.progress ).toFixed( 0 ) } %` );
+				if ( state.state === 'failed' ) throw new Error( `Marker tracking failed: ${ state.detail }` );
+				if ( state.state === 'done' ) {
+
+					const { take } = JSON.parse( state.detail );
+					this.selectedTake = take;
+					break;
+
+				}
+
+				await new Promise( ( resolve ) => setTimeout( resolve, JOB_POLL_MS ) );
+
+			}
+
+		} finally {
+
+			bar.hidden = true;
+
+		}
+
+		this._note( `Tracked the markers of ${ file.name }.` );
+		$( 'source-select' ).value = 'take';
+		if ( id === this.app.projectId ) await this.refreshTakes();
+
+	}
+
+	async _rename( take ) {
+
+		const name = window.prompt( 'Take name', take.name );
+		if ( name === null || ! name.trim() ) return;
+		await api.patchTake( this.app.projectId, take.id, { name: name.trim() } );
+		await this.refreshTakes();
+
+	}
+
+	async _trim( take, start, stop ) {
+
+		await api.patchTake( this.app.projectId, take.id, { trim: [ start, stop >= take.duration ? null : stop ] } );
+		await this.refreshTakes();
+
+	}
+
+	async _delete( take ) {
+
+		if ( ! window.confirm( `Delete the take "${ take.name }"? This cannot be undone.` ) ) return;
+		await api.deleteTake( this.app.projectId, take.id );
+		await this.refreshTakes();
+
+	}
+
+	_renderTakes() {
+
+		const list = $( 'take-list' );
+		list.replaceChildren();
+		$( 'takes-empty' ).hidden = this.takes.length > 0;
+		for ( const take of this.takes ) {
+
+			const li = document.createElement( 'li' );
+			li.dataset.take = take.id;
+			li.className = take.id === this.selectedTake ? 'selected' : '';
+			const [ start, stop ] = take.trim;
+			li.innerHTML = `<label class="take-name"><input type="radio" name="take"></label>
+				<span class="muted take-meta"></span>
+				<span class="take-tools">
+					<input class="trim-start" type="number" min="0" step="0.1" title="Trim: start (s)">
+					<input class="trim-stop" type="number" min="0" step="0.1" title="Trim: stop (s)">
+					<button class="quiet rename" title="Rename">✎</button>
+					<a class="button quiet download" title="Download the points (.npy)">⤓</a>
+					<button class="quiet delete" title="Delete">🗑</button>
+				</span>`;
+			const radio = li.querySelector( 'input[type=radio]' );
+			radio.checked = take.id === this.selectedTake;
+			radio.after( document.createTextNode( ' ' + take.name ) );
+			radio.addEventListener( 'change', () => {
+
+				this.selectedTake = take.id;
+				$( 'source-select' ).value = 'take';
+				this._renderTakes();
+
+			} );
+			li.querySelector( '.take-meta' ).textContent = `${ take.source || 'file' } · ${ take.n_points } pts ${ take.dims }D · ${ ( stop - start ).toFixed( 1 ) } / ${ take.duration.toFixed( 1 ) } s`;
+			const startInput = li.querySelector( '.trim-start' ), stopInput = li.querySelector( '.trim-stop' );
+			startInput.value = start.toFixed( 2 );
+			stopInput.value = stop.toFixed( 2 );
+			startInput.max = stopInput.max = take.duration.toFixed( 3 );
+			const trim = () => this._guard( () => this._trim( take, Number( startInput.value ), Number( stopInput.value ) ) );
+			startInput.addEventListener( 'change', trim );
+			stopInput.addEventListener( 'change', trim );
+			li.querySelector( '.rename' ).addEventListener( 'click', () => this._guard( () => this._rename( take ) ) );
+			li.querySelector( '.delete' ).addEventListener( 'click', () => this._guard( () => this._delete( take ) ) );
+			const download = li.querySelector( '.download' );
+			download.href = api.takePointsUrl( this.app.projectId, take.id );
+			download.download = `${ take.name }.npy`;
+			list.append( li );
+
+		}
+
+	}
+
+	_regionRows( layoutName ) {
+
+		const layout = this.app.layouts?.find( ( l ) => l.name === layoutName );
+		const regions = layout ? [ ...new Set( layout.points.map( ( p ) => p.region ) ) ] : [];
+		const table = $( 'gain-table' );
+		const old = this.settings();
+		table.querySelectorAll( 'tr[data-region]' ).forEach( ( r ) => r.remove() );
+		for ( const region of regions ) {
+
+			const row = document.createElement( 'tr' );
+			row.dataset.region = region;
+			row.innerHTML = `<td>${ region }</td>
+				<td><input class="gain" type="range" min="0" max="2" step="0.05" title="Gain: 1 = as performed"></td>
+				<td><input class="cutoff" type="number" min="0.01" max="30" step="0.1" title="One Euro minimum cutoff (Hz): lower = smoother at rest"></td>`;
+			row.querySelector( '.gain' ).value = old.gain[ region ] ?? 1;
+			row.querySelector( '.cutoff' ).value = old.one_euro[ region ]?.min_cutoff ?? 1;
+			table.append( row );
+
+		}
+
+	}
+
+	_layout() {
+
+		const name = this.app.project?.landmarks?.layout || 'ibug68';
+		const layout = this.app.layouts?.find( ( l ) => l.name === name );
+		if ( ! layout ) throw new Error( `Unknown layout ${ name }.` );
+		return layout;
+
+	}
+
+	_setRecording( on ) {
+
+		this.recording = on;
+		$( 'record' ).textContent = on ? '■ Stop & save' : '● Record';
+		$( 'record' ).classList.toggle( 'recording', on );
+
+	}
+
+	_toggleRecording() {
+
+		if ( ! this.webcam ) throw new Error( 'Recording keeps what the webcam tracks: start the webcam source first.' );
+		if ( this.recording ) {
+
+			const name = $( 'record-name' ).value.trim() || `webcam ${ new Date().toLocaleTimeString() }`;
+			this.app.stream.send( { type: 'record_stop', name } );
+			this._setRecording( false );
+
+		} else {
+
+			this.app.stream.send( { type: 'record' } );
+
+		}
+
+	}
+
+	_sendSettings() {
+
+		if ( this.app.streaming ) this.app.stream?.send( { type: 'settings', settings: this.settings() } );
+
+	}
+
+	async _withProgress( text, work ) {
+
+		const bar = $( 'source-progress' );
+		bar.hidden = false;
+		bar.value = 0;
+		this._note( text );
+		try {
+
+			return await work( ( fraction ) => {
+
+				bar.value = fraction;
+
+			} );
+
+		} finally {
+
+			bar.hidden = true;
+
+		}
+
+	}
+
+	_note( text ) {
+
+		$( 'source-note' ).textContent = text;
+
+	}
+
+	async _guard( fn ) {
+
+		try {
+
+			await fn();
+
+		} catch ( error ) {
+
+			this.app.errors.show( error );
+
+		}
+
+	}
+
+	_bind() {
+
+		$( 'take-file' ).addEventListener( 'change', ( event ) => {
+
+			const file = event.target.files[ 0 ];
+			event.target.value = '';
+			if ( file ) this._guard( () => this.importTake( file ) );
+
+		} );
+		$( 'video-file' ).addEventListener( 'change', ( event ) => {
+
+			const file = event.target.files[ 0 ];
+			event.target.value = '';
+			if ( file ) this._guard( () => this.trackVideoFile( file ) );
+
+		} );
+		$( 'source-select' ).addEventListener( 'change', () => {
+
+			if ( $( 'source-select' ).value !== 'webcam' ) this.stopWebcam();
+
+		} );
+		$( 'recapture-neutral' ).addEventListener( 'click', () => this.app.stream?.send( { type: 'neutral' } ) );
+		$( 'record' ).addEventListener( 'click', () => this._guard( () => this._toggleRecording() ) );
+		$( 'conditioning' ).addEventListener( 'change', () => this._sendSettings() );
+
+	}
+
+}
+
+/**
+ * A NumPy .npy file (format 1.0) of little-endian float32 values.
+ * @param {Float32Array} values
+ * @param {number[]} shape
+ * @returns {Uint8Array}
+ */
+export function npyBytes( values, shape ) {
+
+	let header = `{'descr': '<f4', 'fortran_order': False, 'shape': (${ shape.join( ', ' ) }${ shape.length === 1 ? ',' : '' }), }`;
+	const unpadded = 10 + header.length + 1;
+	header += ' '.repeat( ( 64 - ( unpadded % 64 ) ) % 64 ) + '\n';
+	const bytes = new Uint8Array( 10 + header.length + 4 * values.length );
+	bytes.set( [ 0x93, 0x4e, 0x55, 0x4d, 0x50, 0x59, 1, 0 ] );
+	new DataView( bytes.buffer ).setUint16( 8, header.length, true );
+	for ( let i = 0; i < header.length; i ++ ) bytes[ 10 + i ] = header.charCodeAt( i );
+	new Float32Array( bytes.buffer, 10 + header.length ).set( values );
+	return bytes;
+
+}
