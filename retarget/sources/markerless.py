@@ -9,7 +9,8 @@ How a video is tracked
 ----------------------
 Python decodes the video (`retarget.sources.video.VideoReader`, OpenCV) and hands the
 page one frame at a time as a JPEG (quality 95); the page (``web/static/track.html``)
-tracks it while it fetches the next one, and posts back the layout's points. Nothing
+tracks it while it fetches the next one, and posts back the layout's points about once a
+second (``track.html`` describes the exchange). Nothing
 listens on a port: the page, its modules, the face-mesh package and the frames are all
 answered through Playwright's request interception (``page.route``) on a made-up origin.
 
@@ -57,6 +58,7 @@ _JPEG_QUALITY = 95
 _PAGE_TIMEOUT_MS = 120_000  # browser start and model load on a busy machine
 _FRAME = re.compile(r"/frames/(\d+)")
 _POINTS = re.compile(r"/points/(\d+)")
+_DONE = re.compile(r"done=(\d+)")
 _TYPES = {".js": "text/javascript", ".html": "text/html", ".wasm": "application/wasm"}
 
 
@@ -204,11 +206,14 @@ class _FrameFeed:
 
     def _answer(self, route) -> None:
         request = route.request
-        path = request.url[len(_ORIGIN):].split("?")[0]
+        path, _, query = request.url[len(_ORIGIN):].partition("?")
         if (m := _FRAME.fullmatch(path)) and request.method == "GET":
-            route.fulfill(**self._frame(int(m.group(1))))
+            reply = self._frame(int(m.group(1)))
+            if done := _DONE.fullmatch(query):
+                self._report(int(done.group(1)))  # before fulfilling: a failure gets the 500
+            route.fulfill(**reply)
         elif (m := _POINTS.fullmatch(path)) and request.method == "POST":
-            self._store(int(m.group(1)), request.post_data_buffer or b"")
+            self._report(self._store(int(m.group(1)), request.post_data_buffer or b""))
             route.fulfill(status=204)
         elif (file := _static_file(path)) is not None:
             kind = _TYPES.get(file.suffix) or mimetypes.guess_type(file.name)[0] or "application/octet-stream"
@@ -231,20 +236,26 @@ class _FrameFeed:
             raise RetargetError(f"frame {index} could not be encoded for the page")
         return {"body": jpeg.tobytes(), "content_type": "image/jpeg"}
 
-    def _store(self, index: int, body: bytes) -> None:
-        if index >= len(self.points):
-            grown = np.full((max(2 * len(self.points), index + 1), self.n_points, 3), np.nan, np.float32)
+    def _store(self, first: int, body: bytes) -> int:
+        """Keep the points of frames first, first + 1, ...; the frame after the last."""
+        values = np.frombuffer(body, dtype="<f4")
+        if values.size == 0 or values.size % (self.n_points * 3):
+            raise RetargetError(f"the page sent {values.size} values from frame {first}, "
+                                f"not a positive multiple of {self.n_points} points x 3")
+        frames = values.reshape(-1, self.n_points, 3)
+        stop = first + len(frames)
+        if stop > len(self.points):
+            grown = np.full((max(2 * len(self.points), stop), self.n_points, 3), np.nan, np.float32)
             grown[:len(self.points)] = self.points
             self.points = grown
-        if body:
-            values = np.frombuffer(body, dtype="<f4")
-            if values.size != self.n_points * 3:
-                raise RetargetError(f"the page sent {values.size} values for frame {index}, "
-                                    f"expected {self.n_points * 3}")
-            self.points[index] = values.reshape(self.n_points, 3)
-        self.done += 1
-        if self.progress is not None:
-            self.progress(self.done, self.expected)
+        self.points[first:stop] = frames
+        return stop
+
+    def _report(self, done: int) -> None:
+        if done > self.done:
+            self.done = done
+            if self.progress is not None:
+                self.progress(done, self.expected)
 
 
 def _static_file(path: str) -> Path | None:
