@@ -137,13 +137,15 @@ export class SourcePanel {
 		const video = $( 'webcam-video' );
 		$( 'webcam-box' ).hidden = false;
 		let index = 0;
-		this.webcam = await startWebcam( video, {
+		const lost = new Float32Array( 3 * layout.points.length ).fill( NaN );
+		this.webcam = await startWebcam( video, ( { points, time } ) => {
+
+			// a frame without a face goes as lost points, so the stream knows the time
+			this.app.stream?.sendPoints( encoder.encode( points ?? lost, 3, index ++, time ) );
+
+		}, {
 			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
-			onFrame: ( { points, time } ) => {
-
-				this.app.stream?.sendPoints( encoder.encode( points, 3, index ++, time ) );
-
-			},
+			onError: ( error ) => this.app.errors.show( error ),
 		} );
 
 	}
@@ -184,8 +186,8 @@ export class SourcePanel {
 			signal: controller.signal,
 			onProgress: ( { done, total, faces } ) => {
 
-				progress( done / total );
-				this._note( `Tracking ${ file.name }: frame ${ done } / ${ total }, a face in ${ faces }.` );
+				if ( total ) progress( done / total );
+				this._note( `Tracking ${ file.name }: frame ${ done }${ total ? ' / ' + total : '' }, a face in ${ faces }.` );
 
 			},
 		} ) );
