@@ -350,13 +350,18 @@ def _require_parent(path: Path) -> None:
         raise RetargetError(f"cannot write {str(path)!r}: directory {str(path.parent)!r} does not exist")
 
 
-def _write_npy(path: Path, array: np.ndarray) -> None:
-    """Write exactly `path` (np.save would append .npy to another suffix)."""
+def _write_with(path: Path, save) -> None:
+    """Write exactly `path` through ``save(binary file)`` (numpy's savers would append
+    their suffix to another one)."""
     try:
         with open(path, "wb") as f:
-            np.save(f, array)
+            save(f)
     except OSError as exc:
         raise RetargetError(f"could not write {str(path)!r}: {exc}") from exc
+
+
+def _write_npy(path: Path, array: np.ndarray) -> None:
+    _write_with(path, lambda f: np.save(f, array))
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -399,11 +404,7 @@ def _cmd_rig(args) -> int:
     start = time.perf_counter()
     weights = _weights(args.method, mesh, points, layout, quiet=args.quiet, **options)
     seconds = time.perf_counter() - start
-    try:
-        with open(out, "wb") as f:
-            weights.save(f)
-    except OSError as exc:
-        raise RetargetError(f"could not write {str(out)!r}: {exc}") from exc
+    _write_with(out, weights.save)
     print(
         f"rig {args.method}: {weights.n_vertices} vertices, {weights.n_joints} joints, "
         f"{weights.n_influences} influences per vertex, {seconds:.2f} s -> {out}"
@@ -449,11 +450,7 @@ def _cmd_track(args) -> int:
         points = np.concatenate([points, np.zeros_like(points[..., :1])], axis=-1)
     _write_npy(out, np.ascontiguousarray(points, dtype=np.float32))
     if take_out is not None:
-        try:
-            with open(take_out, "wb") as f:
-                take.save(f)
-        except OSError as exc:
-            raise RetargetError(f"could not write {str(take_out)!r}: {exc}") from exc
+        _write_with(take_out, take.save)
     found = np.isfinite(take.points).all(axis=2)
     print(f"tracked {take.n_frames} frames of {take.n_points} points ({take.layout or 'own labels'}) "
           f"in {seconds:.2f} s: {take.n_frames / max(seconds, 1e-9):.1f} fps; "
@@ -470,10 +467,7 @@ def _cmd_calibrate(args) -> int:
     left, right = _views(args.left, "left"), _views(args.right, "right")
     pattern = (args.pattern, args.cols, args.rows, args.square)
     calibration = calibrate_stereo(left, right, pattern)
-    try:
-        calibration.save(out)
-    except OSError as exc:
-        raise RetargetError(f"could not write {str(out)!r}: {exc}") from exc
+    _write_with(out, calibration.save)
     skipped = calibration.meta.get("skipped") or []
     print(f"stereo calibration from {len(left) - len(skipped)} of {len(left)} view pairs: "
           f"reprojection RMS {calibration.rms:.3f} px, baseline {calibration.baseline:.1f} "

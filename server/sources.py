@@ -69,13 +69,13 @@ class _Retargeted:
     def set_neutral(self, neutral: np.ndarray) -> None:
         """(N, D) neutral source points in layout order (NaN rows: points the source lacks)."""
         self.neutral = neutral
+        self.driven = np.isfinite(neutral).all(axis=1)
         self.set_regions(self.regions)
 
     def encode(self, points: np.ndarray, index: int, t: float, rotation=None) -> bytes:
         """The stream frame for (N, D) conditioned source points; rotation (3, 3) or None."""
         d = self.retargeter.displacements(points)
-        driven = np.isfinite(self.neutral).all(axis=1)
-        lost = bool((~np.isfinite(points[driven]).all(axis=1)).any())
+        lost = bool((~np.isfinite(points[self.driven]).all(axis=1)).any())
         quaternion = None if rotation is None else Rotation.from_matrix(rotation).as_quat()
         return encode_frame(d, frame_index=index % 2**32, source_time=t,
                             flags=FLAG_LOST_POINTS if lost else 0, head_rotation=quaternion)

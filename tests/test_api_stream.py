@@ -1,7 +1,6 @@
 """The live stream over a real WebSocket (in-process): hello, demo frames, masks, errors."""
 
 import asyncio
-import json
 import time
 
 import numpy as np
@@ -13,6 +12,7 @@ from retarget.layouts import get_layout
 from server.app import create_app
 from server.hub import StreamHub
 from server.stream_codec import FLAG_NEUTRAL, decode_frame
+from tests.ws_messages import binary_frames, replies
 
 
 @pytest.fixture(scope="module")
@@ -26,14 +26,6 @@ def sample_id(app):
         return next(p["id"] for p in client.get("/api/projects").json() if p["landmarks"])
 
 
-def frames(ws, n: int):
-    """The next n binary frames, skipping JSON replies."""
-    out = []
-    while len(out) < n:
-        message = ws.receive()
-        if message.get("bytes") is not None:
-            out.append(decode_frame(message["bytes"]))
-    return out
 
 
 def test_hello_then_demo_frames_arrive_and_move(app, sample_id):
@@ -41,7 +33,7 @@ def test_hello_then_demo_frames_arrive_and_move(app, sample_id):
         hello = ws.receive_json()
         assert hello == {"type": "hello", "project": sample_id, "n_points": 68, "layout": "ibug68", "source": None}
         ws.send_json({"type": "start", "source": "demo", "fps": 120})
-        got = frames(ws, 12)
+        got = binary_frames(ws, 12)
         assert all(f.displacements.shape == (68, 3) and np.isfinite(f.displacements).all() for f in got)
         indices = [f.frame_index for f in got]
         assert indices == sorted(indices) and len(set(indices)) == len(indices)
@@ -54,9 +46,9 @@ def test_mask_leaves_other_regions_at_rest(app, sample_id):
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
         ws.receive_json()
         ws.send_json({"type": "start", "fps": 120})
-        frames(ws, 2)
+        binary_frames(ws, 2)
         ws.send_json({"type": "mask", "regions": ["brows"]})
-        later = frames(ws, 30)[-20:]  # a frame or two may predate the mask
+        later = binary_frames(ws, 30)[-20:]  # a frame or two may predate the mask
         assert all(np.all(f.displacements[~brows] == 0.0) for f in later)
         assert max(np.abs(f.displacements[brows]).max() for f in later) > 0.0
         ws.send_json({"type": "mask", "regions": None})
@@ -70,7 +62,7 @@ def test_two_viewers_both_receive(app, sample_id):
             a.receive_json()
             b.receive_json()
             a.send_json({"type": "start", "fps": 120})
-            assert len(frames(a, 5)) == 5 and len(frames(b, 5)) == 5
+            assert len(binary_frames(a, 5)) == 5 and len(binary_frames(b, 5)) == 5
             a.send_json({"type": "stop"})
 
 
@@ -115,14 +107,6 @@ def test_a_slow_viewer_holds_only_the_newest_frame():
     assert newest == bytes([99]) and dropped == 99 and left == 0
 
 
-def replies(ws, n: int):
-    """The next n JSON replies, skipping binary frames."""
-    out = []
-    while len(out) < n:
-        message = ws.receive()
-        if message.get("text") is not None:
-            out.append(json.loads(message["text"]))
-    return out
 
 
 def test_bad_fps_mid_stream_is_an_error_and_frames_keep_coming(app, sample_id):
@@ -130,12 +114,12 @@ def test_bad_fps_mid_stream_is_an_error_and_frames_keep_coming(app, sample_id):
         ws.receive_json()
         ws.send_json({"type": "start", "fps": 120})
         assert replies(ws, 1) == [{"type": "started", "source": "demo", "fps": 120.0}]
-        before = frames(ws, 2)[-1].frame_index
+        before = binary_frames(ws, 2)[-1].frame_index
         for fps in (None, "fast", [60], 0, 1e6):
             ws.send_json({"type": "start", "fps": fps})
             reply = replies(ws, 1)[0]
             assert reply["type"] == "error" and "fps" in reply["detail"]
-        assert frames(ws, 3)[-1].frame_index > before  # the running source was not replaced
+        assert binary_frames(ws, 3)[-1].frame_index > before  # the running source was not replaced
         ws.send_json({"type": "stop"})
 
 
@@ -147,7 +131,7 @@ def test_the_last_viewer_leaving_stops_the_source(app, sample_id):
             a.receive_json()
             b.receive_json()
             a.send_json({"type": "start", "fps": 120})
-            frames(a, 2)
+            binary_frames(a, 2)
         with client.websocket_connect(f"/api/projects/{sample_id}/stream") as c:
             assert c.receive_json()["source"] is None  # the departed viewers' source is gone
         deadline = time.monotonic() + 5.0
@@ -198,7 +182,7 @@ def test_demo_drives_every_layout_through_its_ibug_indices(app, sample_id):
         with client.websocket_connect(f"/api/projects/{pid}/stream") as ws:
             assert ws.receive_json()["n_points"] == 21
             ws.send_json({"type": "start", "fps": 120})
-            got = frames(ws, 10)
+            got = binary_frames(ws, 10)
             assert all(f.displacements.shape == (21, 3) for f in got)
             assert max(np.abs(f.displacements).max() for f in got) > 1e-3
 
@@ -207,10 +191,10 @@ def test_stop_sends_a_neutral_frame(app, sample_id):
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
         ws.receive_json()
         ws.send_json({"type": "start", "fps": 120})
-        frames(ws, 3)
+        binary_frames(ws, 3)
         ws.send_json({"type": "stop"})
         for _ in range(200):  # frames already in flight may precede it
-            (frame,) = frames(ws, 1)
+            (frame,) = binary_frames(ws, 1)
             if frame.flags & FLAG_NEUTRAL:
                 break
         assert frame.flags & FLAG_NEUTRAL and np.all(frame.displacements == 0.0)

@@ -3,7 +3,6 @@ download, replay through conditioning and retargeting, live points pushed over t
 WebSocket and recorded into a take, and bad input that leaves everything intact."""
 
 import io
-import json
 
 import numpy as np
 import pytest
@@ -13,7 +12,8 @@ from retarget.layouts import get_layout
 from retarget.pipeline import Retargeter
 from retarget.sample_face import demo_weights, sample_face
 from server.app import create_app
-from server.stream_codec import FLAG_HEAD_ROTATION, decode_frame, encode_points
+from server.stream_codec import FLAG_HEAD_ROTATION, encode_points
+from tests.ws_messages import binary_frames, replies
 
 FPS = 30.0
 
@@ -55,22 +55,8 @@ def upload(client, pid, name, data, **fields):
     return client.post(f"/api/projects/{pid}/takes", files={"file": (name, data)}, data=fields)
 
 
-def binary_frames(ws, n):
-    out = []
-    while len(out) < n:
-        message = ws.receive()
-        if message.get("bytes") is not None:
-            out.append(decode_frame(message["bytes"]))
-    return out
 
 
-def replies(ws, n):
-    out = []
-    while len(out) < n:
-        message = ws.receive()
-        if message.get("text") is not None:
-            out.append(json.loads(message["text"]))
-    return out
 
 
 def test_upload_list_trim_rename_download_delete(client, sample_id, performance):

@@ -275,11 +275,12 @@ def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: b
     """
     present = ~np.isnan(take.points[..., 0]).all(axis=0)
     layout = get_layout(take.layout) if take.layout else None
-    points = take.points
+    rows = slice(None)  # the points conditioned
     if layout is not None and not present.all() and present.any():
-        layout, points = layout.select(present), points[:, present]
+        rows, layout = present, layout.select(present)
         if neutral is not None:
-            neutral = np.asarray(neutral)[present]
+            neutral = np.asarray(neutral)[rows]
+    points = take.points[:, rows]
     conditioner = SourceConditioner(layout, take.dims, settings, neutral)
     times = take.frame_times()
     out, kept, rotations = [], [], []
@@ -295,7 +296,6 @@ def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: b
             f"({conditioner.settings.neutral['seconds']:g} s)")
     conditioned = np.full((len(kept), take.n_points, take.dims), np.nan, np.float32)
     neutral_out = np.full((take.n_points, take.dims), np.nan, np.float32)
-    rows = present if points is not take.points else slice(None)
     conditioned[:, rows] = np.stack(out)
     neutral_out[rows] = conditioner.neutral_
     meta = dict(take.meta, conditioned_from_s=float(times[kept[0]] - times[0]),
