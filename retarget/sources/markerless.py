@@ -87,7 +87,7 @@ def track_video_markerless(
     (their share of the frames), fps_tracked (frames per second of decoding, hand-over
     and tracking, browser start and model load excluded: those are startup_s), truncated
     (fewer decodable frames than the header said), fps_from_header (False: the container
-    gave no rate and `fps` is `retarget.sources.video.DEFAULT_FPS`). A video in which no face is ever
+    gave no rate and `fps` is `retarget.sources.take.DEFAULT_FPS`). A video in which no face is ever
     found is returned all NaN with face_share 0, and a `RuntimeWarning` says so.
 
     Raises `RetargetError` for a missing or undecodable video, a bad `max_frames`, a

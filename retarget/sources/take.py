@@ -25,6 +25,9 @@ import numpy as np
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 
+DEFAULT_FPS = 30.0
+"""The nominal frame rate of a take whose source states none (a file, a video container)."""
+
 __all__ = ["Take"]
 
 _FORMAT = "retarget-take-1"

@@ -14,11 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.sources.take import DEFAULT_FPS
 
-__all__ = ["DEFAULT_FPS", "VideoReader"]
-
-DEFAULT_FPS = 30.0
-"""Frame rate assumed when the container does not state one."""
+__all__ = ["VideoReader"]
 
 
 class VideoReader:
