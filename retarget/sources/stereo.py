@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import zipfile
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -274,14 +275,19 @@ class StereoCalibration:
         if not path.is_file():
             raise RetargetError(f"stereo calibration file {str(path)!r} does not exist")
         try:
-            with np.load(path, allow_pickle=False) as npz:
+            loaded = np.load(path, allow_pickle=False)
+            if not isinstance(loaded, np.lib.npyio.NpzFile):
+                raise ValueError("it holds a single array, not an .npz archive")
+            with loaded as npz:
                 data = json.loads(str(npz["calibration"]))
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+            # BadZipFile: a file that starts like a zip (as .npz files do) but is not one
             raise RetargetError(
                 f"{str(path)!r} is not a stereo calibration saved by retarget: {exc}"
             ) from None
-        if data.get("format") != _FORMAT:
-            raise RetargetError(f"{str(path)!r}: unknown calibration format {data.get('format')!r}")
+        if not isinstance(data, dict) or data.get("format") != _FORMAT:
+            found = data.get("format") if isinstance(data, dict) else type(data).__name__
+            raise RetargetError(f"{str(path)!r}: unknown calibration format {found!r}")
         try:
             return cls.from_dict(data)
         except RetargetError as exc:
