@@ -49,7 +49,8 @@ class ConditionSettings:
         "frame": int >= 0}. "first_seconds": the per-point median of the frames within
         `seconds` of the first (3D with head pose removal: each registered on the stable
         points first, `headpose.head_neutral`), frames before the neutral is known give
-        no output; "frame": the `frame`-th frame; "given": the caller passes it.
+        no output; frames without any point (a camera that sees no face) wait, and a
+        capture that fails starts again with the next frame; "frame": the `frame`-th frame; "given": the caller passes it.
     head_pose : "remove" (3D sources: rigid head motion removed, Woodward §5.1) or "keep".
         2D sources keep it whatever this says.
     apply_rotation : whether the consumer should turn the target's head by the
@@ -177,6 +178,8 @@ class SourceConditioner:
                 self._start(p)
             else:
                 if self._t0 is None:
+                    if np.isnan(p[:, 0]).all():
+                        return None  # nothing tracked yet (a live camera without a face)
                     self._t0 = t
                 if t <= self._t0 + mode["seconds"]:
                     self._captured.append(p)
@@ -186,7 +189,7 @@ class SourceConditioner:
 
     def _captured_neutral(self) -> np.ndarray:
         frames = np.stack(self._captured)
-        self._captured = []
+        self._captured, self._t0 = [], None  # a failed capture starts again at the next frame
         lost = np.isnan(frames[..., 0]).all(axis=0)
         if lost.any():
             raise RetargetError(
