@@ -146,6 +146,7 @@ export class SourcePanel {
 		}, {
 			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
 			onError: ( error ) => this.app.errors.show( error ),
+			onFace: ( found ) => this._note( found ? 'Webcam: tracking a face.' : 'Webcam: no face found in the camera image. Face the camera, in good light.' ),
 		} );
 
 	}

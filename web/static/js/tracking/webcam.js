@@ -18,12 +18,14 @@ import { FaceMeshTracker } from './FaceMeshTracker.js';
  * @param {MediaStreamConstraints['video']} [options.video] - camera constraints.
  * @param {FaceMeshTracker} [options.tracker] - a tracker to reuse (not disposed by stop()).
  * @param {function(Error): void} [options.onError] - a tracking failure; the loop stops.
+ * @param {function(boolean): void} [options.onFace] - whether the camera shows a face: called
+ *   after the first tracked frame, then whenever a face appears or is lost (not every frame).
  * @returns {Promise<{stop: function(): Promise<void>, stream: MediaStream, tracker: FaceMeshTracker}>}
  *   resolves once the camera plays and the tracker is loaded; rejects when the camera is
  *   refused or missing (getUserMedia's error, with its name).
  */
 export async function startWebcam( videoEl, onFrame, { layoutIndices = null, video = { width: 640, height: 480 },
-	tracker = null, onError = null } = {} ) {
+	tracker = null, onError = null, onFace = null } = {} ) {
 
 	if ( typeof videoEl.requestVideoFrameCallback !== 'function' ) {
 
@@ -57,6 +59,7 @@ export async function startWebcam( videoEl, onFrame, { layoutIndices = null, vid
 
 	let running = true;
 	let handle = 0;
+	let face = null; // whether the last tracked frame had a face; null before the first
 	const origin = performance.now();
 
 	const onVideoFrame = async ( now, metadata ) => {
@@ -68,6 +71,13 @@ export async function startWebcam( videoEl, onFrame, { layoutIndices = null, vid
 			if ( ! running ) return;
 			const points = mesh === null || layoutIndices === null ? mesh : FaceMeshTracker.pick( mesh, layoutIndices );
 			const shown = metadata.captureTime ?? metadata.expectedDisplayTime ?? now;
+			if ( ( mesh !== null ) !== face ) {
+
+				face = mesh !== null;
+				if ( onFace ) onFace( face );
+
+			}
+
 			onFrame( { points, time: ( shown - origin ) / 1000, width: metadata.width, height: metadata.height } );
 
 		} catch ( error ) {
