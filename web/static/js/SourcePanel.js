@@ -1,4 +1,5 @@
 import { api } from './api.js';
+import { ask } from './dialogs.js';
 import { PointsEncoder } from './PointsEncoder.js';
 import { trackVideo } from './tracking/videoTake.js';
 
@@ -240,25 +241,76 @@ export class SourcePanel {
 
 	}
 
-	async _rename( take ) {
+	/** Edit the take's name in its row: Enter or leaving the box saves, Escape cancels. */
+	_rename( take, label ) {
 
-		const name = window.prompt( 'Take name', take.name );
-		if ( name === null || ! name.trim() ) return;
-		await api.patchTake( this.app.projectId, take.id, { name: name.trim() } );
-		await this.refreshTakes();
+		const box = document.createElement( 'input' );
+		box.type = 'text';
+		box.className = 'take-rename';
+		box.maxLength = 200;
+		box.value = take.name;
+		box.setAttribute( 'aria-label', 'Take name' );
+		let done = false;
+		const finish = ( save ) => {
+
+			if ( done ) return;
+			done = true;
+			const name = box.value.trim();
+			if ( ! save || ! name || name === take.name ) {
+
+				this._renderTakes();
+				return;
+
+			}
+
+			this._guard( async () => {
+
+				try {
+
+					await api.patchTake( this.app.projectId, take.id, { name } );
+
+				} finally {
+
+					await this.refreshTakes();
+
+				}
+
+			} );
+
+		};
+
+		box.addEventListener( 'keydown', ( event ) => {
+
+			if ( event.key === 'Enter' ) finish( true );
+			else if ( event.key === 'Escape' ) finish( false );
+
+		} );
+		box.addEventListener( 'blur', () => finish( true ) );
+		label.replaceWith( box );
+		box.focus();
+		box.select();
 
 	}
 
 	async _trim( take, start, stop ) {
 
-		await api.patchTake( this.app.projectId, take.id, { trim: [ start, stop >= take.duration ? null : stop ] } );
-		await this.refreshTakes();
+		try {
+
+			await api.patchTake( this.app.projectId, take.id, { trim: [ start, stop >= take.duration ? null : stop ] } );
+
+		} finally {
+
+			// a refused span puts the boxes back to the stored one
+			await this.refreshTakes();
+
+		}
 
 	}
 
 	async _delete( take ) {
 
-		if ( ! window.confirm( `Delete the take "${ take.name }"? This cannot be undone.` ) ) return;
+		const answer = await ask( `Delete the take "${ take.name }"? This cannot be undone.`, { ok: 'Delete' } );
+		if ( answer !== 'ok' ) return;
 		await api.deleteTake( this.app.projectId, take.id );
 		await this.refreshTakes();
 
@@ -287,7 +339,8 @@ export class SourcePanel {
 			const radio = li.querySelector( 'input[type=radio]' );
 			radio.checked = take.id === this.selectedTake;
 			radio.after( document.createTextNode( ' ' + take.name ) );
-			radio.addEventListener( 'change', () => {
+			// click, not change: choosing the take already selected must still choose the take source
+			radio.addEventListener( 'click', () => {
 
 				this.selectedTake = take.id;
 				$( 'source-select' ).value = 'take';
@@ -302,7 +355,7 @@ export class SourcePanel {
 			const trim = () => this._guard( () => this._trim( take, Number( startInput.value ), Number( stopInput.value ) ) );
 			startInput.addEventListener( 'change', trim );
 			stopInput.addEventListener( 'change', trim );
-			li.querySelector( '.rename' ).addEventListener( 'click', () => this._guard( () => this._rename( take ) ) );
+			li.querySelector( '.rename' ).addEventListener( 'click', () => this._rename( take, li.querySelector( '.take-name' ) ) );
 			li.querySelector( '.delete' ).addEventListener( 'click', () => this._guard( () => this._delete( take ) ) );
 			const download = li.querySelector( '.download' );
 			download.href = api.takePointsUrl( this.app.projectId, take.id );
@@ -403,6 +456,34 @@ export class SourcePanel {
 
 	}
 
+	/**
+	 * Run an import or a tracking: the file controls wait until it ends, and a failure
+	 * leaves no stale progress behind (bar hidden, note cleared) and shows why.
+	 */
+	async _task( work ) {
+
+		const controls = [ 'take-file', 'video-file', 'video-method' ].map( $ );
+		for ( const control of controls ) control.disabled = true;
+		$( 'source-panel' ).classList.add( 'busy' );
+		try {
+
+			await work();
+
+		} catch ( error ) {
+
+			this._note( '' );
+			this.app.errors.show( error );
+
+		} finally {
+
+			$( 'source-progress' ).hidden = true;
+			for ( const control of controls ) control.disabled = false;
+			$( 'source-panel' ).classList.remove( 'busy' );
+
+		}
+
+	}
+
 	async _guard( fn ) {
 
 		try {
@@ -423,14 +504,14 @@ export class SourcePanel {
 
 			const file = event.target.files[ 0 ];
 			event.target.value = '';
-			if ( file ) this._guard( () => this.importTake( file ) );
+			if ( file ) this._task( () => this.importTake( file ) );
 
 		} );
 		$( 'video-file' ).addEventListener( 'change', ( event ) => {
 
 			const file = event.target.files[ 0 ];
 			event.target.value = '';
-			if ( file ) this._guard( () => this.trackVideoFile( file ) );
+			if ( file ) this._task( () => this.trackVideoFile( file ) );
 
 		} );
 		$( 'source-select' ).addEventListener( 'change', () => {

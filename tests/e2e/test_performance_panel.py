@@ -1,0 +1,251 @@
+"""The Performance panel end to end on the sample project (68-point iBUG rig): a take
+file imported, played, renamed, trimmed, downloaded and deleted from the page; a ring-
+marker video tracked by the server with the progress bar; and bad input, each refused
+with a message naming the problem while the project and its takes stay as they were.
+
+Ground truth: the take is the sample face's 68 landmarks opening the jaw between known
+times, so the frames the stream plays must move the face exactly when the take does; the
+marker video is rendered by `retarget.synthetic.marker_video`. One server and one page
+serve the whole module (the sample project's rig loads once).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import cv2
+import numpy as np
+import pytest
+
+from retarget.layouts import get_layout
+from retarget.sample_face import EXPRESSION_NAMES, posed_vertices, sample_face
+from retarget.sources.files import write_take_csv
+from retarget.sources.take import Take
+from retarget.synthetic.marker_video import default_camera, render_marker_video
+from retarget.synthetic.render import render_face
+from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project
+
+FPS = 30.0
+N_FRAMES = 90
+TRIM = (0.5, 2.5)  # s: starts at rest, so the trimmed take's neutral is a rest pose
+MARKER_FRAMES = 20
+
+# Collects every stream frame and control message the page receives, from now on.
+_RECORD = """() => {
+    window.frames = [];
+    window.messages = [];
+    window.app.stream.addEventListener('frame', (e) => window.frames.push({
+        index: e.detail.frameIndex, time: e.detail.sourceTime,
+        d: Array.from(e.detail.displacements)}));
+    window.app.stream.addEventListener('message', (e) => window.messages.push(e.detail));
+}"""
+
+# Every (hidden, value) state the source progress bar goes through, from now on.
+_WATCH_PROGRESS = """() => {
+    const bar = document.getElementById('source-progress');
+    window.progress = [];
+    window.progressObserver?.disconnect();
+    window.progressObserver = new MutationObserver(() => window.progress.push([bar.hidden, bar.value]));
+    window.progressObserver.observe(bar, {attributes: true, attributeFilter: ['hidden', 'value']});
+}"""
+
+
+def jaw_weight(t: np.ndarray) -> np.ndarray:
+    """(F,) jawOpen weight at times t (s): rest until 1.1 s, open by 1.4 s, held to 1.8 s,
+    closed again by 2.1 s (smooth ramps)."""
+    up = np.clip((t - 1.1) / 0.3, 0, 1)
+    down = np.clip((2.1 - t) / 0.3, 0, 1)
+    w = np.minimum(up, down)
+    return w * w * (3 - 2 * w)
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    srv = Server(tmp_path_factory.mktemp("perf") / "data").start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="module")
+def shared_page(browser, server):
+    """One page on the sample project for the module; console errors collect in
+    `page.console_errors` and fail the test during which they appeared."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800}, accept_downloads=True)
+    page = context.new_page()
+    page.set_default_timeout(15_000)
+    page.console_errors = []
+    page.on("console", lambda msg: page.console_errors.append(f"console.{msg.type}: {msg.text}")
+            if msg.type == "error" and not _expected_error(msg.text) else None)
+    page.on("pageerror", lambda exc: page.console_errors.append(f"page error: {exc}"))
+    sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
+    open_project(page, server, sample["id"])
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.sample = sample
+    yield page
+    context.close()
+
+
+@pytest.fixture
+def page(shared_page, request):
+    """The module's page, the error banner cleared; a screenshot after each test."""
+    shared_page.evaluate("() => window.app.errors.clear()")
+    yield shared_page
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shared_page.screenshot(path=str(ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', request.node.name)}.png"))
+    errors, shared_page.console_errors[:] = list(shared_page.console_errors), []
+    assert not errors, "browser reported errors:\n" + "\n".join(errors)
+
+
+@pytest.fixture(scope="module")
+def jaw_take(tmp_path_factory) -> Take:
+    """The sample face's 68 landmarks (cm) at 30 fps opening and closing the jaw."""
+    face = sample_face(1)
+    t = np.arange(N_FRAMES) / FPS
+    weights = np.zeros((N_FRAMES, len(EXPRESSION_NAMES)))
+    weights[:, EXPRESSION_NAMES.index("jawOpen")] = jaw_weight(t)
+    points = posed_vertices(face, weights)[:, face.landmarks68].astype(np.float32)
+    return Take(points, get_layout("ibug68").point_names, FPS)
+
+
+@pytest.fixture(scope="module")
+def marker_video(tmp_path_factory):
+    """A short ring-marker video (MJPG .avi) of the sample face talking and blinking."""
+    path = tmp_path_factory.mktemp("video") / "markers.avi"
+    render_marker_video(path, n_frames=MARKER_FRAMES, seed=3, start=0.55)
+    return path
+
+
+def reload(page) -> None:
+    """Reload the page and wait until the sample project and its face are shown again."""
+    page.reload()
+    page.wait_for_function("() => window.app && window.app.projectId")
+    page.evaluate("() => window.app.ready")
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+
+
+def takes(server, page) -> list[dict]:
+    return server.api("GET", f"/api/projects/{page.sample['id']}/takes")
+
+
+def take_row(page, take_id: str):
+    return page.locator(f"#take-list li[data-take='{take_id}']")
+
+
+def play_to_the_end(page) -> tuple[dict, list[dict]]:
+    """Play the selected take once (no loop); the 'started' message and every frame
+    received up to its last one."""
+    page.evaluate("() => { window.frames.length = 0; window.messages.length = 0; }")
+    page.click("#play")
+    page.wait_for_function("() => window.messages.some(m => m.type === 'started')", timeout=15_000)
+    started = page.evaluate("() => window.messages.find(m => m.type === 'started')")
+    page.wait_for_function("n => window.frames.some(f => f.index === n - 1)", arg=started["frames"],
+                           timeout=30_000)
+    return started, page.evaluate("() => window.frames")
+
+
+def motion(frames: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """(indices (K,), largest point displacement (K,)) of the received frames."""
+    index = np.array([f["index"] for f in frames])
+    d = np.array([f["d"] for f in frames], np.float64).reshape(len(frames), -1, 3)
+    return index, np.linalg.norm(d, axis=2).max(axis=1)
+
+
+def assert_motion_follows(weight: np.ndarray, size: np.ndarray) -> None:
+    """The face is still where the take rests and moves with the jaw where it opens."""
+    assert size.max() > 0.1, size.max()  # cm on the sample face
+    assert np.all(size[weight == 0] < 1e-3 * size.max()), size[weight == 0].max()
+    assert np.all(size[weight > 0.99] > 0.5 * size.max())
+    assert np.corrcoef(weight, size)[0, 1] > 0.99
+
+
+def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, jaw_take, tmp_path):
+    path = tmp_path / "jaw open.csv"
+    write_take_csv(jaw_take, path)
+    page.select_option("#source-select", "demo")
+    page.set_input_files("#take-file", str(path))
+    page.wait_for_selector("#take-list li", timeout=15_000)
+    (info,) = takes(server, page)
+    assert info["name"] == "jaw open" and info["n_frames"] == N_FRAMES and info["n_points"] == 68
+    assert info["dims"] == 3 and info["layout"] == "ibug68"
+    assert info["duration"] == pytest.approx((N_FRAMES - 1) / FPS)
+    assert info["trim"] == [0.0, pytest.approx(info["duration"])]
+    assert page.is_hidden("#takes-empty")
+    assert "jaw open" in take_row(page, info["id"]).inner_text()
+    assert f"{N_FRAMES} frames" in page.inner_text("#source-note")
+
+    # select it, play it once unfiltered: the face moves exactly where the take does
+    page.select_option("#source-select", "demo")
+    take_row(page, info["id"]).locator(".take-name").click()
+    assert page.input_value("#source-select") == "take"
+    page.click("#conditioning summary")
+    page.select_option("#filter", "none")
+    page.uncheck("#take-loop")
+    page.evaluate(_RECORD)
+    started, frames = play_to_the_end(page)
+    assert started["source"] == "take" and started["take"] == info["id"]
+    skipped = N_FRAMES - started["frames"]  # the neutral capture (first 0.5 s) is not played
+    assert 0 < skipped <= 0.5 * FPS + 1
+    index, size = motion(frames)
+    assert len(index) > started["frames"] // 2
+    assert_motion_follows(jaw_weight((skipped + index) / FPS), size)
+
+    # rename in the list
+    take_row(page, info["id"]).locator(".rename").click()
+    box = take_row(page, info["id"]).locator("input.take-rename")
+    box.fill("  wide jaw ")
+    box.press("Enter")
+    page.wait_for_function("id => document.querySelector(`#take-list li[data-take='${id}']`)"
+                           ".innerText.includes('wide jaw')", arg=info["id"])
+    assert takes(server, page)[0]["name"] == "wide jaw"
+
+    # trim: the server keeps the span, playback covers only it
+    row = take_row(page, info["id"])
+    row.locator(".trim-start").fill(str(TRIM[0]))
+    row.locator(".trim-start").press("Enter")
+    page.wait_for_function("id => window.app.sources.takes.find(t => t.id === id).trim[0] > 0", arg=info["id"])
+    row = take_row(page, info["id"])
+    row.locator(".trim-stop").fill(str(TRIM[1]))
+    row.locator(".trim-stop").press("Enter")
+    page.wait_for_function("([id, stop]) => window.app.sources.takes.find(t => t.id === id).trim[1] === stop",
+                           arg=[info["id"], TRIM[1]])
+    (trimmed,) = takes(server, page)
+    assert trimmed["trim"] == [pytest.approx(TRIM[0]), pytest.approx(TRIM[1])]
+    span = jaw_take.trimmed(*TRIM)
+    first = int(round(TRIM[0] * FPS))
+    started, frames = play_to_the_end(page)
+    assert started["frames"] == span.n_frames - skipped
+    played = (started["frames"] - 1) / FPS
+    assert started["duration"] == pytest.approx(played + 1 / FPS)
+    index, size = motion(frames)
+    assert index.max() == started["frames"] - 1
+    assert max(f["time"] for f in frames) == pytest.approx(played)
+    assert_motion_follows(jaw_weight((first + skipped + index) / FPS), size)
+    page.click("#stop")
+
+    # download: the trimmed take's points
+    with page.expect_download() as download:
+        take_row(page, info["id"]).locator(".download").click()
+    got = np.load(download.value.path())
+    np.testing.assert_allclose(got, span.points, atol=1e-5)
+
+    # a reload shows the same list, names and spans
+    reload(page)
+    page.wait_for_selector(f"#take-list li[data-take='{info['id']}']")
+    row = take_row(page, info["id"])
+    assert "wide jaw" in row.inner_text()
+    assert float(row.locator(".trim-start").input_value()) == pytest.approx(TRIM[0])
+    assert float(row.locator(".trim-stop").input_value()) == pytest.approx(TRIM[1])
+    assert page.locator("#take-list li").count() == len(takes(server, page))
+    page.evaluate(_RECORD)
+
+    # delete, after confirming
+    take_row(page, info["id"]).locator(".delete").click()
+    page.click("#confirm-ok")
+    page.wait_for_selector(f"#take-list li[data-take='{info['id']}']", state="detached")
+    assert takes(server, page) == []
+    assert page.is_visible("#takes-empty")
+    reload(page)
+    page.wait_for_selector("#takes-empty", state="visible")
+    assert page.locator("#take-list li").count() == 0
+    page.evaluate(_RECORD)
