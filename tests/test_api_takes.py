@@ -1,9 +1,14 @@
 """Takes over the REST API and as stream sources: upload, list, trim, rename, delete,
 download, replay through conditioning and retargeting, live points pushed over the
-WebSocket and recorded into a take, and bad input that leaves everything intact."""
+WebSocket and recorded into a take, stereo colour-marker pairs tracked in a job (with a
+calibration file or checkerboard videos) against the rendered truth, and bad input that
+leaves everything intact."""
 
 import io
+import json
+import time
 
+import cv2
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -11,7 +16,16 @@ from fastapi.testclient import TestClient
 from retarget.layouts import get_layout
 from retarget.pipeline import Retargeter
 from retarget.sample_face import demo_weights, sample_face
+from retarget.sources.stereo import StereoCalibration
+from retarget.synthetic.marker_video import render_marker_video
+from retarget.synthetic.stereo_rig import (
+    checkerboard_views,
+    render_stereo_video,
+    rig_calibration,
+    stereo_cameras,
+)
 from server.app import create_app
+from server.routers.takes import _view_pairs
 from server.stream_codec import FLAG_HEAD_ROTATION, encode_points
 from tests.ws_messages import binary_frames, replies
 
@@ -55,7 +69,185 @@ def upload(client, pid, name, data, **fields):
     return client.post(f"/api/projects/{pid}/takes", files={"file": (name, data)}, data=fields)
 
 
+def write_video(path, frames, fps=30.0):
+    """`frames` (H, W, 3) uint8 BGR into a lossless FFV1 .mkv at `path`; the path."""
+    h, w = frames[0].shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h))
+    for frame in frames:
+        writer.write(frame)
+    writer.release()
+    return path
 
+
+@pytest.fixture(scope="module")
+def rig():
+    return stereo_cameras()
+
+
+@pytest.fixture(scope="module")
+def stereo(tmp_path_factory, rig):
+    """Rendered stereo material (bytes by name): an 8-frame colour-marker pair ("left.mkv",
+    "right.mkv", truth in "truth"), the rig's exact calibration ("exact.npz"), and 6
+    checkerboard view pairs as videos ("board_left.mkv", "board_right.mkv")."""
+    folder = tmp_path_factory.mktemp("stereo")
+    truth = render_stereo_video(folder / "take.mkv", n_frames=8, cameras=rig, start=3.6, seed=2)
+    rig_calibration(*rig).save(folder / "exact.npz")
+    lefts, rights, _ = checkerboard_views(*rig, 6, seed=0)
+    files = {"left.mkv": truth.videos[0], "right.mkv": truth.videos[1], "exact.npz": folder / "exact.npz",
+             "board_left.mkv": write_video(folder / "bl.mkv", lefts),
+             "board_right.mkv": write_video(folder / "br.mkv", rights)}
+    material = {name: open(path, "rb").read() for name, path in files.items()}
+    material["truth"] = truth
+    return material
+
+
+def track_stereo(client, pid, files: dict, **fields):
+    """POST a stereo track request; files maps a form field to (file name, bytes)."""
+    return client.post(f"/api/projects/{pid}/takes/track", files=files,
+                       data={"method": "stereo", **fields})
+
+
+def finished_job(client, job_id, timeout_s=120.0):
+    deadline = time.monotonic() + timeout_s
+    while (job := client.get(f"/api/jobs/{job_id}").json())["state"] == "running":
+        assert time.monotonic() < deadline, job
+        time.sleep(0.05)
+    return job
+
+
+def tracked_points(client, pid, answer):
+    """The finished job's take: its info and (F, N, 3) points."""
+    job = finished_job(client, answer["id"])
+    assert job["state"] == "done", job["detail"]
+    take_id = json.loads(job["detail"])["take"]
+    info = client.get(f"/api/projects/{pid}/takes/{take_id}").json()
+    points = np.load(io.BytesIO(client.get(f"/api/projects/{pid}/takes/{take_id}/points").content))
+    return info, points
+
+
+def test_a_stereo_pair_with_a_calibration_file_tracks_the_truth(client, sample_id, stereo, rig, tmp_path):
+    files = {"file": ("left.mkv", stereo["left.mkv"]), "right": ("right.mkv", stereo["right.mkv"]),
+             "calibration": ("exact.npz", stereo["exact.npz"])}
+    r = track_stereo(client, sample_id, files, name="pair")
+    assert r.status_code == 202, r.text
+    answer = r.json()
+    assert answer["calibration"]["source"] == "file"
+    assert answer["calibration"]["baseline"] == pytest.approx(150.0) and answer["calibration"]["size"] == [640, 480]
+    info, points = tracked_points(client, sample_id, answer)
+    assert (info["name"], info["source"], info["layout"], info["dims"]) == ("pair", "stereo", "dutreve21", 3)
+    assert points.shape == (8, 21, 3)
+    # the left camera's frame, mm; the head motion is kept (the panel's conditioning removes it)
+    err = np.linalg.norm(points - rig[0].to_camera(stereo["truth"].points3d), axis=2)
+    assert np.isfinite(err).all() and np.median(err) < 0.3 and err.max() < 1.5
+    # the take carries its calibration, downloadable for the next pairs of the same cameras
+    r = client.get(f"/api/projects/{sample_id}/takes/{info['id']}/calibration")
+    assert r.status_code == 200
+    path = tmp_path / "back.npz"
+    path.write_bytes(r.content)
+    back, exact = StereoCalibration.load(path), rig_calibration(*rig)
+    for name in ("K1", "K2", "R", "T", "F"):
+        np.testing.assert_allclose(getattr(back, name), getattr(exact, name))
+
+
+def test_a_stereo_pair_calibrated_from_checkerboard_videos(client, sample_id, stereo, rig):
+    files = {"file": ("left.mkv", stereo["left.mkv"]), "right": ("right.mkv", stereo["right.mkv"]),
+             "calibration_left": ("board_left.mkv", stereo["board_left.mkv"]),
+             "calibration_right": ("board_right.mkv", stereo["board_right.mkv"])}
+    r = track_stereo(client, sample_id, files, cols="9", rows="6", square="25")
+    assert r.status_code == 202, r.text
+    cal = r.json()["calibration"]
+    assert cal["source"] == "checkerboard" and cal["views"] == 6 and cal["rms"] < 0.3
+    assert cal["baseline"] == pytest.approx(150.0, rel=0.01)  # mm, the rig's
+    info, points = tracked_points(client, sample_id, r.json())
+    assert info["name"] == "left" and points.shape == (8, 21, 3)
+    err = np.linalg.norm(points - rig[0].to_camera(stereo["truth"].points3d), axis=2)
+    assert np.median(err) < 1.5  # mm at 1 m, with an estimated calibration
+    r = client.get(f"/api/projects/{sample_id}/takes/{info['id']}/calibration")
+    assert r.status_code == 200 and r.content[:2] == b"PK"
+
+
+def test_bad_stereo_input_is_refused_before_tracking(client, app, sample_id, stereo, rig, tmp_path):
+    left, right = ("left.mkv", stereo["left.mkv"]), ("right.mkv", stereo["right.mkv"])
+    exact = ("exact.npz", stereo["exact.npz"])
+    boards = {"calibration_left": ("board_left.mkv", stereo["board_left.mkv"]),
+              "calibration_right": ("board_right.mkv", stereo["board_right.mkv"])}
+    pattern = {"cols": "9", "rows": "6", "square": "25"}
+    truth = stereo["truth"]
+    short = write_video(tmp_path / "short.mkv", [np.full((480, 640, 3), 90, np.uint8)] * 5)
+    np.savez(tmp_path / "other.npz", points=np.zeros(3))
+    rig_calibration(*stereo_cameras(size=(320, 240))).save(tmp_path / "small.npz")
+    cases = [
+        ({"file": left, "calibration": exact}, {}, 422, "'right', which is missing"),
+        ({"right": right, "calibration": exact}, {}, 422, "left camera's as 'file', which is missing"),
+        ({"file": left, "right": right}, {}, 422, "needs the cameras' calibration"),
+        ({"file": left, "right": right, "calibration": exact, **boards}, pattern, 422, "not both"),
+        ({"file": left, "right": right, "calibration_left": boards["calibration_left"]}, pattern, 422,
+         "'calibration_right' is missing"),
+        ({"file": left, "right": right, **boards}, {"cols": "9", "rows": "6"}, 422, "pattern's square"),
+        ({"file": left, "right": ("right.txt", b"text"), "calibration": exact}, {}, 415, "'.txt'"),
+        ({"file": left, "right": right, "calibration": ("cal.json", b"{}")}, {}, 415, "'.json'"),
+        ({"file": left, "right": ("right.mkv", b"not a video at all"), "calibration": exact}, {}, 422,
+         "'right.mkv' is not a video OpenCV can open"),
+        ({"file": left, "right": ("short.mkv", short.read_bytes()), "calibration": exact}, {}, 422,
+         f"'left.mkv' has {truth.points3d.shape[0]} frames but 'short.mkv' has 5"),
+        ({"file": left, "right": right, "calibration": ("other.npz", (tmp_path / "other.npz").read_bytes())},
+         {}, 422, "'other.npz' is not a stereo calibration"),
+        ({"file": left, "right": right, "calibration": ("zip.npz", b"PK\x03\x04" + b"x" * 64)}, {}, 422,
+         "'zip.npz' is not a stereo calibration"),
+        ({"file": left, "right": right, "calibration": ("small.npz", (tmp_path / "small.npz").read_bytes())},
+         {}, 422, "the calibration is for 320x240"),
+        # calibration failure: the pattern is in none of the views
+        ({"file": left, "right": right, "calibration_left": left, "calibration_right": right}, pattern, 422,
+         "pattern (9x6) was found in both images of 0 of 8 pairs"),
+        # no markers: the checkerboard videos as the take
+        ({"file": boards["calibration_left"], "right": boards["calibration_right"], "calibration": exact}, {},
+         422, "0 markers matched"),
+    ]
+    before = client.get(f"/api/projects/{sample_id}/takes").json()
+    for files, fields, code, message in cases:
+        r = track_stereo(client, sample_id, files, **fields)
+        assert r.status_code == code and message in r.json()["detail"], (message, r.text)
+        assert "scratch" not in r.json()["detail"]  # uploads are named by their file names
+    r = client.post(f"/api/projects/{sample_id}/takes/track", files={"file": left, "right": right},
+                    data={"method": "markers"})
+    assert r.status_code == 422 and "right: for method 'stereo'" in r.json()["detail"]
+    assert client.get(f"/api/projects/{sample_id}/takes").json() == before
+    assert list(app.state.store.scratch_dir.iterdir()) == []  # no upload left behind
+    plain = upload(client, sample_id, "plain.npy", npy_bytes(np.zeros((2, 68, 3))), layout="ibug68").json()
+    r = client.get(f"/api/projects/{sample_id}/takes/{plain['id']}/calibration")
+    assert r.status_code == 404 and "no stereo calibration" in r.json()["detail"]
+    client.delete(f"/api/projects/{sample_id}/takes/{plain['id']}")
+
+
+def test_a_ring_marker_video_is_tracked_in_a_job(client, sample_id, tmp_path):
+    truth = render_marker_video(tmp_path / "rings.mkv", n_frames=4, seed=3, start=0.55)
+    r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
+                    files={"file": ("rings.mkv", (tmp_path / "rings.mkv").read_bytes())})
+    assert r.status_code == 202, r.text
+    info, points = tracked_points(client, sample_id, r.json())
+    assert (info["name"], info["source"], info["dims"]) == ("rings", "markers", 2)
+    expected = truth.points2d[:, 0] * [1, -1] + [0, 480]  # pixels, y up
+    assert np.nanmedian(np.linalg.norm(points - expected, axis=2)) < 0.5
+    r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
+                    files={"file": ("rings.mkv", b"not a video")})
+    assert r.status_code == 422 and r.json()["detail"].startswith("'rings.mkv' is not a video OpenCV can open")
+    # a video without markers fails in the job, named
+    plain = write_video(tmp_path / "plain.mkv", [np.full((480, 640, 3), 200, np.uint8)] * 2)
+    r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
+                    files={"file": ("plain.mkv", plain.read_bytes())})
+    job = finished_job(client, r.json()["id"])
+    assert job["state"] == "failed" and job["detail"].startswith("'plain.mkv': found 0 ring markers")
+
+
+def test_calibration_views_are_pairs_spread_over_the_videos(tmp_path):
+    """Frame i of both videos is grey level 5 i: the kept pairs show which frames they are."""
+    frames = [np.full((48, 64, 3), 5 * i, np.uint8) for i in range(45)]
+    a, b = write_video(tmp_path / "a.mkv", frames), write_video(tmp_path / "b.mkv", frames)
+    lefts, rights = _view_pairs(a, b, 8)
+    index = [int(f[0, 0, 0]) // 5 for f in lefts]
+    assert index == [int(f[0, 0, 0]) // 5 for f in rights]
+    assert 4 <= len(index) <= 8 and index[0] == 0 and index[-1] >= 30
+    assert len(set(np.diff(index))) == 1  # evenly spaced
 
 
 

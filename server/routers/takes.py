@@ -3,18 +3,31 @@
     GET    /api/projects/{id}/takes                 list, oldest first
     POST   /api/projects/{id}/takes                 upload a landmark / motion-capture /
                                                     animated-face file (multipart)
-    POST   /api/projects/{id}/takes/track           upload a marker video; a job tracks it
-                                                    into a take (poll GET /api/jobs/{job})
+    POST   /api/projects/{id}/takes/track           upload a marker video, or a stereo pair of
+                                                    colour-marker videos with their calibration;
+                                                    a job tracks it into a take (poll
+                                                    GET /api/jobs/{job})
     GET    /api/projects/{id}/takes/{take}          its info
     GET    /api/projects/{id}/takes/{take}/points   (F, N, D) float32 .npy of the trimmed take
+    GET    /api/projects/{id}/takes/{take}/calibration  a stereo take's calibration (.npz)
     PATCH  /api/projects/{id}/takes/{take}          {"name"?, "trim"?: [start, stop|null]} (s)
     DELETE /api/projects/{id}/takes/{take}
 
 A take's info is ``{id, name, created, source, layout, fps, n_frames, n_points, dims,
 duration, trim: [start, stop]}``. Takes keep the source's own point names; playing one
 maps them to the project's layout by name (`server.sources`). Files are parsed by
-`retarget.sources.files.read_take`, videos tracked by `retarget.sources.markers`; the
-server only moves bytes and schedules.
+`retarget.sources.files.read_take`, videos tracked by `retarget.sources.markers` and
+`retarget.sources.stereo`; the server only moves bytes and schedules.
+
+Stereo (Woodward §5): the calibration is an uploaded .npz (`retarget calibrate`, or a
+stereo take's calibration download) or is computed here from two checkerboard videos.
+What can be checked before tracking is checked in the request, so it is refused with 4xx
+and nothing starts: the pair (both videos, equal frame counts and sizes, readable), the
+calibration (a real one, for the videos' size; with checkerboards the calibration itself,
+which takes a few seconds) and the markers of the first frame pair. The take keeps the
+head motion and no temporal mean: the Performance panel's conditioning removes, filters
+or applies them when the take plays. Its points are in the left camera's frame, in the
+pattern's units (mm), and it carries its calibration for reuse.
 """
 
 from __future__ import annotations
@@ -22,14 +35,26 @@ from __future__ import annotations
 import io
 import json
 import math
+from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Response, UploadFile, status
 from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
+from retarget.layouts import get_layout
 from retarget.sources.files import read_take
 from retarget.sources.markers import track_marker_video
+from retarget.sources.stereo import (
+    StereoCalibration,
+    calibrate_stereo,
+    pattern_points,
+    track_stereo_frames,
+    track_stereo_videos,
+)
+from retarget.sources.take import Take
+from retarget.sources.video import VideoReader
 from server.deps import JobsDep, LimitsDep, ProjectDep, StoreDep
 from server.jobs import JobBusy
 from server.routers.meshes import read_capped, upload_extension
@@ -40,9 +65,16 @@ TAKE_EXTENSIONS = ("csv", "json", "npy", "trc", "c3d", "glb", "gltf", "zip")
 """Files a take is read from (`retarget.sources.files.read_take`)."""
 VIDEO_EXTENSIONS = ("mp4", "m4v", "mov", "avi", "mkv", "webm")
 """Videos the marker tracker reads (through OpenCV's FFmpeg)."""
-TRACK_METHODS = ("markers",)
+TRACK_METHODS = ("markers", "stereo")
 """Server-side trackers. Markerless tracking runs in the browser (web/static/js/tracking),
 which uploads its result as a take file."""
+CALIBRATION_EXTENSIONS = ("npz",)
+"""A stereo calibration as `StereoCalibration.save` writes it."""
+CALIBRATION_VIEWS = 20
+"""Checkerboard frame pairs a server calibration uses at most, spread over the videos:
+the pattern search costs about 0.15 s an image, and 20 well spread views calibrate as well
+as hundreds of neighbouring frames."""
+STEREO_FIELDS = ("right", "calibration", "calibration_left", "calibration_right")
 
 
 def _json_form(value: str | None, what: str):
@@ -93,42 +125,258 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep,
 
 @router.post("/track", status_code=status.HTTP_202_ACCEPTED)
 def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: JobsDep,
-                file: UploadFile = File(description=", ".join(f".{e}" for e in VIDEO_EXTENSIONS)),
+                file: UploadFile | None = File(
+                    default=None, description="the video; for stereo the left camera's: "
+                    + ", ".join(f".{e}" for e in VIDEO_EXTENSIONS)),
                 method: str = Form(default="markers", description=" | ".join(TRACK_METHODS)),
                 layout: str = Form(default="dutreve21",
                                    description="the layout whose points the markers are"),
-                name: str | None = Form(default=None, max_length=200)) -> dict:
-    """Track a marker video into a take in the background; answers the job (poll
-    ``GET /api/jobs/{job_id}``; its detail names the take when done)."""
+                name: str | None = Form(default=None, max_length=200),
+                right: UploadFile | None = File(default=None,
+                                                description="stereo: the right camera's video"),
+                calibration: UploadFile | None = File(
+                    default=None, description="stereo: the pair's calibration, a .npz written by "
+                    "`retarget calibrate` (or a stereo take's calibration download)"),
+                calibration_left: UploadFile | None = File(
+                    default=None, description="stereo, instead of a calibration file: the left "
+                    "camera's video of the calibration pattern moved around"),
+                calibration_right: UploadFile | None = File(
+                    default=None, description="stereo: the right camera's video of the pattern, "
+                    "filmed at the same time"),
+                pattern: str = Form(default="checkerboard",
+                                    description="checkerboard | circles | acircles"),
+                cols: int | None = Form(default=None, ge=2, le=64,
+                                        description="inner corners (circles) per pattern row"),
+                rows: int | None = Form(default=None, ge=2, le=64,
+                                        description="inner corners (circles) per pattern column"),
+                square: float | None = Form(default=None, gt=0, le=1000,
+                                            description="square side (circle spacing), mm: the "
+                                            "unit of the take's points")) -> dict:
+    """Track a marker video, or a stereo pair of colour-marker videos, into a take in the
+    background; answers the job (poll ``GET /api/jobs/{job_id}``; its detail names the
+    take when done). A stereo answer also has the calibration it uses,
+    ``calibration: {source, rms, baseline, size, views}`` (rms px, baseline mm)."""
     if method not in TRACK_METHODS:
         raise RetargetError(f"unknown tracking method {method!r}; the server tracks "
                             f"{', '.join(TRACK_METHODS)} (markerless tracking runs in the browser)")
-    ext = upload_extension(file.filename, VIDEO_EXTENSIONS)
-    data = read_capped(file, limits.max_upload_bytes)
-    if not data:
-        raise RetargetError(f"the uploaded video {file.filename!r} is empty")
-    path = store.scratch_file(ext)
-    path.write_bytes(data)
-    take_name = name or _default_name(file.filename, "markers")
-
-    def work(job) -> str:
-        try:
-            take = track_marker_video(
-                path, layout=layout,
-                progress=lambda done, total: job.report(done / total) if total else None)
-        except RetargetError as exc:
-            raise RetargetError(f"video {file.filename!r}: {exc}") from exc
-        finally:
-            path.unlink(missing_ok=True)
-        info = store.put_take(project["id"], take, name=take_name)
-        return json.dumps({"take": info["id"], "frames": info["n_frames"]})
-
+    if file is None:
+        raise RetargetError("no video: upload it as 'file'" if method != "stereo" else
+                            "method 'stereo' needs two videos: the left camera's as 'file', "
+                            "which is missing, and the right camera's as 'right'")
+    get_layout(layout)
+    scratch = _Scratch(store, limits.max_upload_bytes)
     try:
+        if method == "stereo":
+            run, answer = _stereo_tracker(scratch, file, right, calibration,
+                                          (calibration_left, calibration_right),
+                                          (pattern, cols, rows, square), layout)
+        else:
+            stray = [f for f, v in zip(STEREO_FIELDS, (right, calibration, calibration_left,
+                                                       calibration_right)) if v is not None]
+            if stray:
+                raise RetargetError(f"{', '.join(stray)}: for method 'stereo', not {method!r}")
+            run, answer = _marker_tracker(scratch, file, layout), {}
+        take_name = name or _default_name(file.filename, method)
+
+        def work(job) -> str:
+            try:
+                take = run(lambda done, total: job.report(done / total) if total else None)
+            finally:
+                scratch.remove()
+            info = store.put_take(project["id"], take, name=take_name)
+            return json.dumps({"take": info["id"], "frames": info["n_frames"]})
+
         job = jobs.start(project["id"], "track", work)
     except JobBusy as exc:
-        path.unlink(missing_ok=True)
+        scratch.remove()
         raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from exc
-    return job.as_json()
+    except BaseException:
+        scratch.remove()
+        raise
+    return {**job.as_json(), **answer}
+
+
+class _Scratch:
+    """Uploads written to the scratch folder, for the library to read by path; `names`
+    maps each path to its upload's file name. `remove()` deletes them all."""
+
+    def __init__(self, store, max_bytes: int):
+        self.store, self.max_bytes = store, max_bytes
+        self.names: dict[Path, str] = {}
+
+    def save(self, upload: UploadFile, allowed, what: str) -> Path:
+        """The path of `upload` saved; 415 for an extension not in `allowed`, 413 when over
+        the size limit, 422 when empty."""
+        ext = upload_extension(upload.filename, allowed)
+        data = read_capped(upload, self.max_bytes)
+        shown = (upload.filename or what).replace("\\", "/").rsplit("/", 1)[-1]
+        if not data:
+            raise RetargetError(f"the uploaded {what} {shown!r} is empty")
+        path = self.store.scratch_file(ext)
+        self.names[path] = shown
+        path.write_bytes(data)
+        return path
+
+    @contextmanager
+    def naming(self):
+        """Library refusals that name a scratch file name the upload instead (the paths
+        are the server's own and mean nothing to the user)."""
+        try:
+            yield
+        except RetargetError as exc:
+            message = str(exc)
+            for path, shown in self.names.items():
+                message = message.replace(repr(str(path)), repr(shown))
+                message = message.replace(str(path), repr(shown))
+            raise RetargetError(message) from exc
+
+    def remove(self) -> None:
+        for path in self.names:
+            path.unlink(missing_ok=True)
+
+
+def _marker_tracker(scratch: _Scratch, video: UploadFile, layout: str):
+    """The marker job's work, ``run(progress) -> Take``, once the video opens."""
+    path = scratch.save(video, VIDEO_EXTENSIONS, "video")
+    shown = scratch.names[path]
+    with scratch.naming():
+        VideoReader(path).close()
+
+    def run(progress) -> Take:
+        try:
+            with scratch.naming():
+                return track_marker_video(path, layout=layout, progress=progress)
+        except RetargetError as exc:
+            if repr(shown) in str(exc):
+                raise
+            raise RetargetError(f"video {shown!r}: {exc}") from exc
+
+    return run
+
+
+def _stereo_tracker(scratch: _Scratch, left: UploadFile, right: UploadFile | None,
+                    calibration: UploadFile | None, boards: tuple, pattern: tuple, layout: str):
+    """The stereo job's work, ``run(progress) -> Take``, once everything that can be
+    checked before tracking is (see the module docstring); and the answer's extras."""
+    _require_stereo_fields(right, calibration, boards, pattern)
+    videos = [scratch.save(left, VIDEO_EXTENSIONS, "left video"),
+              scratch.save(right, VIDEO_EXTENSIONS, "right video")]
+    if calibration is not None:
+        cal_file = scratch.save(calibration, CALIBRATION_EXTENSIONS, "calibration file")
+    else:
+        board_videos = [scratch.save(v, VIDEO_EXTENSIONS, f"{side} checkerboard video")
+                        for v, side in zip(boards, ("left", "right"))]
+    with scratch.naming():
+        size = _pair_size(videos, scratch.names)
+        if calibration is not None:
+            cal, source = StereoCalibration.load(cal_file), "file"
+        else:
+            _pair_size(board_videos, scratch.names)
+            cal, source = _calibration(board_videos, pattern, scratch.names), "checkerboard"
+        if cal.size != size:
+            raise RetargetError(
+                f"the stereo videos are {size[0]}x{size[1]} but the calibration is for "
+                f"{cal.size[0]}x{cal.size[1]}: calibrate the cameras at the size they film")
+        _check_first_markers(videos, cal, layout, scratch.names)
+    names = [scratch.names[v] for v in videos]
+
+    def run(progress) -> Take:
+        with scratch.naming():
+            take = track_stereo_videos(*videos, cal, layout=layout, head_motion="keep",
+                                       progress=progress)
+        take.meta.update(videos=names, calibration=cal.to_dict())
+        return take
+
+    views = cal.meta.get("views")
+    return run, {"calibration": {"source": source, "rms": cal.rms, "baseline": cal.baseline,
+                                 "size": list(cal.size), "views": views}}
+
+
+def _require_stereo_fields(right, calibration, boards, pattern) -> None:
+    if right is None:
+        raise RetargetError("method 'stereo' needs two videos: the left camera's as 'file' and "
+                            "the right camera's as 'right', which is missing")
+    given = [b is not None for b in boards]
+    if calibration is not None:
+        if any(given):
+            raise RetargetError("give the stereo calibration as a file ('calibration') or as "
+                                "checkerboard videos ('calibration_left', 'calibration_right'), "
+                                "not both")
+        return
+    if not any(given):
+        raise RetargetError("method 'stereo' needs the cameras' calibration: a .npz as "
+                            "'calibration' (from `retarget calibrate`), or both cameras' videos "
+                            "of a checkerboard as 'calibration_left' and 'calibration_right' "
+                            "with its cols, rows and square")
+    if not all(given):
+        missing = "calibration_right" if given[0] else "calibration_left"
+        raise RetargetError(f"a checkerboard calibration needs a video from each camera; "
+                            f"{missing!r} is missing")
+    absent = [n for n, v in zip(("cols", "rows", "square"), pattern[1:]) if v is None]
+    if absent:
+        raise RetargetError(f"a checkerboard calibration needs the pattern's {', '.join(absent)} "
+                            "(inner corners per row and per column, square side in mm)")
+    pattern_points(pattern)  # refuses a malformed pattern before any upload is read
+
+
+def _pair_size(videos: list[Path], names: dict[Path, str]) -> tuple[int, int]:
+    """(width, height) of two videos of one moment, which must agree in size and in the
+    frame count their headers state (frames are paired by index)."""
+    sizes, counts = [], []
+    for path in videos:
+        with VideoReader(path) as reader:
+            sizes.append(tuple(reader.size))
+            counts.append(reader.n_frames)
+    a, b = (names[v] for v in videos)
+    if sizes[0] != sizes[1]:
+        raise RetargetError(f"{a!r} is {sizes[0][0]}x{sizes[0][1]} but {b!r} is "
+                            f"{sizes[1][0]}x{sizes[1][1]}: the two cameras must film at one size")
+    if all(counts) and counts[0] != counts[1]:
+        raise RetargetError(f"{a!r} has {counts[0]} frames but {b!r} has {counts[1]}: a stereo "
+                            "pair is matched frame by frame, so both videos must start and end "
+                            "on the same moment")
+    return sizes[0]
+
+
+def _calibration(boards: list[Path], pattern: tuple, names: dict[Path, str]) -> StereoCalibration:
+    """The pair's calibration from its checkerboard videos (`CALIBRATION_VIEWS` pairs)."""
+    lefts, rights = _view_pairs(*boards, CALIBRATION_VIEWS)
+    try:
+        return calibrate_stereo(lefts, rights, pattern)
+    except RetargetError as exc:
+        a, b = (names[v] for v in boards)
+        raise RetargetError(f"checkerboard videos {a!r} and {b!r} ({len(lefts)} frame pairs "
+                            f"searched): {exc}") from exc
+
+
+def _view_pairs(left: Path, right: Path, count: int) -> tuple[list, list]:
+    """At most `count` frame pairs spread over two calibration videos, (H, W, 3) uint8 BGR.
+
+    Every `step`-th pair is kept; when more than ``2 count`` are held the step doubles and
+    every other pair goes, so memory stays bounded without trusting the headers' counts.
+    """
+    kept, step = [], 1
+    with VideoReader(left) as a, VideoReader(right) as b:
+        for (index, image_a), (_, image_b) in zip(a, b):
+            if index % step == 0:
+                kept.append((image_a, image_b))
+                if len(kept) > 2 * count:
+                    kept, step = kept[::2], 2 * step
+    kept = kept[::-(-len(kept) // count)]
+    return [a for a, _ in kept], [b for _, b in kept]
+
+
+def _check_first_markers(videos: list[Path], cal: StereoCalibration, layout: str,
+                         names: dict[Path, str]) -> None:
+    """Refuse a pair whose first frames show too few of the layout's colour markers, so
+    it fails in the request rather than in the job (tracking one pair costs ~0.2 s)."""
+    with VideoReader(videos[0]) as a, VideoReader(videos[1]) as b:
+        first = (next(iter(a))[1], next(iter(b))[1])
+    try:
+        track_stereo_frames([first], cal, layout=layout, head_motion="keep")
+    except RetargetError as exc:
+        raise RetargetError(f"the colour markers of {layout!r} in the first frames of "
+                            f"{names[videos[0]]!r} and {names[videos[1]]!r}: {exc}") from exc
 
 
 @router.get("/{take_id}")
@@ -145,6 +393,24 @@ def get_take_points(project: ProjectDep, store: StoreDep, take_id: str) -> Respo
     np.save(buffer, np.asarray(take.points, dtype="<f4"))
     return Response(buffer.getvalue(), media_type="application/octet-stream",
                     headers={"Content-Disposition": f'attachment; filename="take-{take_id}.npy"'})
+
+
+@router.get("/{take_id}/calibration", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}}}})
+def get_take_calibration(project: ProjectDep, store: StoreDep, take_id: str) -> Response:
+    """The stereo calibration a stereo take was tracked with, as the .npz `retarget
+    calibrate` writes: upload it with the next pairs from the same cameras. 404 for a take
+    that has none."""
+    take = store.take(project["id"], take_id, trimmed=False)
+    if "calibration" not in take.meta:
+        raise HTTPException(status.HTTP_404_NOT_FOUND,
+                            f"take {take_id!r} has no stereo calibration: only takes tracked "
+                            "from a stereo pair here carry one")
+    buffer = io.BytesIO()
+    StereoCalibration.from_dict(take.meta["calibration"]).save(buffer)
+    return Response(buffer.getvalue(), media_type="application/octet-stream",
+                    headers={"Content-Disposition":
+                             f'attachment; filename="calibration-{take_id}.npz"'})
 
 
 class TakePatch(BaseModel):
