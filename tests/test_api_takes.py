@@ -226,6 +226,14 @@ def test_a_ring_marker_video_is_tracked_in_a_job(client, sample_id, tmp_path):
     assert r.status_code == 202, r.text
     info, points = tracked_points(client, sample_id, r.json())
     assert (info["name"], info["source"], info["dims"]) == ("rings", "markers", 2)
+    detail = json.loads(client.get(f"/api/jobs/{r.json()['id']}").json()["detail"])
+    assert (detail["frames"], detail["frames_claimed"], detail["truncated"]) == (4, 4, False)
+    # a cut-off file gives its frames up to the cut, and the job says so
+    whole = (tmp_path / "rings.mkv").read_bytes()
+    r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
+                    files={"file": ("cut.mkv", whole[:int(0.6 * len(whole))])})
+    detail = json.loads(finished_job(client, r.json()["id"])["detail"])
+    assert (detail["frames"], detail["frames_claimed"], detail["truncated"]) == (2, 4, True)
     expected = truth.points2d[:, 0] * [1, -1] + [0, 480]  # pixels, y up
     assert np.nanmedian(np.linalg.norm(points - expected, axis=2)) < 0.5
     r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},

@@ -184,7 +184,9 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
             finally:
                 scratch.remove()
             info = store.put_take(project["id"], take, name=take_name)
-            return json.dumps({"take": info["id"], "frames": info["n_frames"]})
+            # a cut-off video still gives the frames up to the cut: the page says so
+            cut = {k: take.meta[k] for k in ("truncated", "frames_claimed") if k in take.meta}
+            return json.dumps({"take": info["id"], "frames": info["n_frames"], **cut})
 
         job = jobs.start(project["id"], "track", work)
     except JobBusy as exc:
