@@ -200,6 +200,16 @@ export const api = {
 	 */
 	trackVideo: ( id, file, fields, onProgress ) => upload( 'POST', `/api/projects/${ id }/takes/track`, file, fields, onProgress ),
 
+	/**
+	 * Upload a stereo pair of colour-marker videos and their calibration; the server checks
+	 * them (and calibrates from checkerboard videos) before it answers, then tracks in a job.
+	 * @param {File} left - the left camera's video
+	 * @param {Object<string, File|string>} fields - right (File), and calibration (.npz File)
+	 *   or calibration_left, calibration_right (Files) with cols, rows, square (mm); name.
+	 * @returns {Promise<object>} the job, with calibration {source, rms, baseline, size, views}
+	 */
+	trackStereo: ( id, left, fields, onProgress ) => upload( 'POST', `/api/projects/${ id }/takes/track`, left, { ...fields, method: 'stereo' }, onProgress ),
+
 	/** @param {{name?: string, trim?: [number, number|null]}} patch */
 	patchTake: ( id, takeId, patch ) => request( 'PATCH', `/api/projects/${ id }/takes/${ takeId }`, { json: patch } ),
 
@@ -211,8 +221,8 @@ export const api = {
 };
 
 /**
- * A multipart upload (field "file" plus `fields`) with progress; XHR because fetch reports
- * no upload progress.
+ * A multipart upload (field "file" plus `fields`, whose Files go as files) with progress;
+ * XHR because fetch reports no upload progress.
  * @returns {Promise<object>} the JSON answer
  */
 function upload( method, url, file, fields, onProgress ) {
@@ -254,7 +264,8 @@ function upload( method, url, file, fields, onProgress ) {
 		form.append( 'file', file, file.name );
 		for ( const [ key, value ] of Object.entries( fields ?? {} ) ) {
 
-			if ( value !== undefined && value !== null && value !== '' ) form.append( key, String( value ) );
+			if ( value instanceof Blob ) form.append( key, value, value.name );
+			else if ( value !== undefined && value !== null && value !== '' ) form.append( key, String( value ) );
 
 		}
 
