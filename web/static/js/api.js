@@ -218,6 +218,9 @@ export const api = {
 	/** URL of the trimmed take's (F, N, D) float32 .npy */
 	takePointsUrl: ( id, takeId ) => `/api/projects/${ id }/takes/${ takeId }/points`,
 
+	/** URL of a stereo take's calibration (.npz, as `retarget calibrate` writes it) */
+	takeCalibrationUrl: ( id, takeId ) => `/api/projects/${ id }/takes/${ takeId }/calibration`,
+
 };
 
 /**
