@@ -11,8 +11,9 @@ serve the whole module (the sample project's rig loads once).
 
 from __future__ import annotations
 
-import json
+import multiprocessing
 import re
+from concurrent.futures import ProcessPoolExecutor
 
 import cv2
 import numpy as np
@@ -29,7 +30,7 @@ from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project
 FPS = 30.0
 N_FRAMES = 90
 TRIM = (0.5, 2.5)  # s: starts at rest, so the trimmed take's neutral is a rest pose
-MARKER_FRAMES = 20
+MARKER_FRAMES = 16
 
 # Collects every stream frame and control message the page receives, from now on.
 _RECORD = """() => {
@@ -108,11 +109,20 @@ def jaw_take(tmp_path_factory) -> Take:
     return Take(points, get_layout("ibug68").point_names, FPS)
 
 
-@pytest.fixture(scope="module")
-def marker_video(tmp_path_factory):
-    """A short ring-marker video (MJPG .avi) of the sample face talking and blinking."""
+@pytest.fixture(scope="module", autouse=True)
+def rendering(tmp_path_factory):
+    """The module's marker video rendered in another process from the start, so the
+    rendering (a few seconds) overlaps the first test: (path, its future)."""
     path = tmp_path_factory.mktemp("video") / "markers.avi"
-    render_marker_video(path, n_frames=MARKER_FRAMES, seed=3, start=0.55)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield path, pool.submit(render_marker_video, path, n_frames=MARKER_FRAMES, seed=3, start=0.55)
+
+
+@pytest.fixture(scope="module")
+def marker_video(rendering):
+    """A short ring-marker video (MJPG .avi) of the sample face talking and blinking."""
+    path, future = rendering
+    future.result(timeout=120)
     return path
 
 
@@ -122,6 +132,11 @@ def reload(page) -> None:
     page.wait_for_function("() => window.app && window.app.projectId")
     page.evaluate("() => window.app.ready")
     page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+
+
+def open_conditioning(page) -> None:
+    if not page.evaluate("() => document.getElementById('conditioning').open"):
+        page.click("#conditioning summary")
 
 
 def takes(server, page) -> list[dict]:
@@ -178,7 +193,7 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     page.select_option("#source-select", "demo")
     take_row(page, info["id"]).locator(".take-name").click()
     assert page.input_value("#source-select") == "take"
-    page.click("#conditioning summary")
+    open_conditioning(page)
     page.select_option("#filter", "none")
     page.uncheck("#take-loop")
     page.evaluate(_RECORD)
@@ -245,7 +260,49 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     page.wait_for_selector(f"#take-list li[data-take='{info['id']}']", state="detached")
     assert takes(server, page) == []
     assert page.is_visible("#takes-empty")
-    reload(page)
-    page.wait_for_selector("#takes-empty", state="visible")
-    assert page.locator("#take-list li").count() == 0
+
+
+def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(server, page, marker_video):
+    before = takes(server, page)
+    page.select_option("#video-method", "markers")
+    page.evaluate(_WATCH_PROGRESS)
+    page.set_input_files("#video-file", str(marker_video))
+    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=30_000)
+    page.wait_for_selector("#source-progress", state="hidden")
+    (info,) = [t for t in takes(server, page) if t["id"] not in {b["id"] for b in before}]
+    assert info["name"] == "markers" and info["source"] == "markers"
+    assert info["n_frames"] == MARKER_FRAMES and info["n_points"] == 21 and info["dims"] == 2
+    assert f"{MARKER_FRAMES} frames" in page.inner_text("#source-note")
+    assert page.is_enabled("#video-file") and page.is_enabled("#take-file")
+
+    # the bar showed the upload, then the job from 0 to done, never going back, and it
+    # is hidden at the end
+    progress = page.evaluate("() => window.progress")
+    runs, run = [], None  # the values of each stretch the bar was shown
+    for hidden, value in progress:
+        if hidden:
+            run = None
+        elif run is None:
+            runs.append(run := [value])
+        else:
+            run.append(value)
+    assert len(runs) == 2 and progress[-1][0] is True, progress
+    job = runs[1]
+    assert job[0] == 0 and max(job) > 0 and job == sorted(job), job
+
+    # it is selected; playing it (neutral: its first frame, as it is shorter than the
+    # default half-second capture) moves the face
+    assert page.input_value("#source-select") == "take"
+    assert take_row(page, info["id"]).get_attribute("class") == "selected"
+    page.check("#take-loop")
+    open_conditioning(page)
+    page.select_option("#neutral-mode", "frame")
+    page.fill("#neutral-value", "0")
     page.evaluate(_RECORD)
+    page.click("#play")
+    page.wait_for_function("() => window.frames.length >= 20 || !document.querySelector('#error').hidden",
+                           timeout=30_000)
+    assert page.inner_text("#error-text") == ""
+    _, size = motion(page.evaluate("() => window.frames"))
+    assert size.max() > 0.05
+    page.click("#stop")

@@ -1,6 +1,7 @@
 import { api } from './api.js';
 import { ask } from './dialogs.js';
 import { PointsEncoder } from './PointsEncoder.js';
+import { StereoTrack } from './StereoTrack.js';
 import { trackVideo } from './tracking/videoTake.js';
 
 /**
@@ -17,7 +18,7 @@ import { trackVideo } from './tracking/videoTake.js';
 
 const $ = ( id ) => document.getElementById( id );
 const TAKE_EXTENSIONS = [ 'csv', 'json', 'npy', 'trc', 'c3d', 'glb', 'gltf', 'zip' ];
-const JOB_POLL_MS = 250;
+const JOB_POLL_MS = 100;
 
 export class SourcePanel {
 
@@ -32,6 +33,17 @@ export class SourcePanel {
 		this.selectedTake = null;
 		this.webcam = null; // {stop()} while the webcam runs
 		this.recording = false;
+		this.stereo = new StereoTrack( {
+			projectId: () => this.app.projectId,
+			run: ( work ) => this._task( work ),
+			onTracked: async ( take ) => {
+
+				this.selectedTake = take;
+				$( 'source-select' ).value = 'take';
+				await this.refreshTakes();
+
+			},
+		} );
 		this._bind();
 
 	}
@@ -208,7 +220,9 @@ export class SourcePanel {
 		const id = this.app.projectId;
 		const job = await this._withProgress( `Uploading ${ file.name }…`, ( progress ) => api.trackVideo( id, file, { method: 'markers', layout: 'dutreve21' }, progress ) );
 		const bar = $( 'source-progress' );
+		bar.value = 0; // the job's share done, no longer the upload's
 		bar.hidden = false;
+		let result; // {take, frames, truncated?, frames_claimed?}
 		try {
 
 			for ( ;; ) {
@@ -219,8 +233,8 @@ export class SourcePanel {
 				if ( state.state === 'failed' ) throw new Error( `Marker tracking failed: ${ state.detail }` );
 				if ( state.state === 'done' ) {
 
-					const { take } = JSON.parse( state.detail );
-					this.selectedTake = take;
+					result = JSON.parse( state.detail );
+					this.selectedTake = result.take;
 					break;
 
 				}
@@ -235,9 +249,14 @@ export class SourcePanel {
 
 		}
 
-		this._note( `Tracked the markers of ${ file.name }.` );
 		$( 'source-select' ).value = 'take';
-		if ( id === this.app.projectId ) await this.refreshTakes();
+		if ( id !== this.app.projectId ) return;
+		await this.refreshTakes();
+		const info = this.takes.find( ( t ) => t.id === result.take );
+		let text = `Tracked "${ info?.name ?? file.name }": ${ info?.n_points ?? '' } markers in ${ result.frames } frames of ${ file.name }.`;
+		// a cut-off file still gives its frames up to the cut: say so, or the take looks whole
+		if ( result.truncated ) text += ` The file is cut off: only ${ result.frames } of the ${ result.frames_claimed } frames it announces could be read.`;
+		this._note( text, result.truncated );
 
 	}
 
@@ -450,9 +469,11 @@ export class SourcePanel {
 
 	}
 
-	_note( text ) {
+	/** Say `text` under the take tools; `warn` shows it as a warning. */
+	_note( text, warn = false ) {
 
 		$( 'source-note' ).textContent = text;
+		$( 'source-note' ).classList.toggle( 'warn', Boolean( warn ) );
 
 	}
 
@@ -505,6 +526,14 @@ export class SourcePanel {
 			const file = event.target.files[ 0 ];
 			event.target.value = '';
 			if ( file ) this._task( () => this.importTake( file ) );
+
+		} );
+		$( 'video-file' ).addEventListener( 'click', ( event ) => {
+
+			// a stereo pair is two videos and a calibration: its own form
+			if ( $( 'video-method' ).value !== 'stereo' ) return;
+			event.preventDefault();
+			this.stereo.open();
 
 		} );
 		$( 'video-file' ).addEventListener( 'change', ( event ) => {
