@@ -1,0 +1,64 @@
+"""`Clip`: one take retargeted, the feature displacements per frame with their timing."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from retarget.errors import RetargetError
+
+
+@dataclass(frozen=True, eq=False)
+class Clip:
+    """Target feature displacements over time, as a glTF animation holds them.
+
+    name : the animation's name.
+    displacements : (F, N, 3) float32, d_f of `retarget.pipeline.Retargeter`, mesh units.
+    times : (F,) float64 seconds, strictly increasing also as float32 (glTF stores
+        keyframe times in float32).
+
+    Build it with `clip_at_rate` for frames at a constant rate, or directly for a take's
+    own times. Construction validates and makes read-only copies.
+    """
+
+    name: str
+    displacements: np.ndarray
+    times: np.ndarray
+
+    def __post_init__(self):
+        d = np.array(self.displacements, dtype=np.float32)
+        t = np.array(self.times, dtype=np.float64)
+        if d.ndim != 3 or d.shape[2] != 3 or len(d) == 0:
+            raise RetargetError(f"clip {self.name!r}: displacements must have shape (F, N, 3) "
+                                f"with F >= 1; got {d.shape}")
+        if not np.isfinite(d).all():
+            raise RetargetError(f"clip {self.name!r}: displacements hold NaN or infinite values")
+        if t.shape != (len(d),):
+            raise RetargetError(f"clip {self.name!r}: times must have shape ({len(d)},), one "
+                                f"per frame; got {t.shape}")
+        t32 = t.astype(np.float32)
+        if not np.isfinite(t).all() or (t < 0).any() or (np.diff(t32) <= 0).any():
+            raise RetargetError(f"clip {self.name!r}: times must be finite, >= 0 and strictly "
+                                "increasing (also in float32)")
+        for array in (d, t):
+            array.setflags(write=False)
+        object.__setattr__(self, "displacements", d)
+        object.__setattr__(self, "times", t)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.displacements)
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first frame to the last."""
+        return float(self.times[-1] - self.times[0])
+
+
+def clip_at_rate(name: str, displacements, fps: float) -> Clip:
+    """A `Clip` whose frame f is at ``f / fps`` seconds."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise RetargetError(f"fps must be a positive number; got {fps!r}")
+    n = len(np.asarray(displacements))
+    return Clip(name, displacements, np.arange(n) / float(fps))

@@ -1,0 +1,246 @@
+"""The GLB container (glTF 2.0 binary): writing buffer views and accessors, reading them back.
+
+A GLB file is a 12-byte header, a JSON chunk (the glTF document) and one BIN chunk (the
+buffer), each chunk padded to 4 bytes (glTF 2.0 spec, "GLB File Format Specification").
+`GlbBuilder` appends arrays to the BIN chunk as buffer views, each at a 4-byte aligned
+offset so that every accessor is aligned to its component size, and declares accessors
+on them; `glb_bytes` joins the document and the buffer. `glb_document` splits a GLB
+back and `accessor_array` decodes an accessor (dense or sparse, tightly packed or
+strided) into a numpy array.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+
+from retarget.errors import RetargetError
+
+GLB_MAGIC = b"glTF"
+JSON_CHUNK = 0x4E4F534A
+BIN_CHUNK = 0x004E4942
+ARRAY_BUFFER = 34962  # bufferView.target of vertex attributes
+ELEMENT_ARRAY_BUFFER = 34963  # bufferView.target of triangle indices
+
+COMPONENT_TYPES = {
+    5120: np.dtype("<i1"),
+    5121: np.dtype("<u1"),
+    5122: np.dtype("<i2"),
+    5123: np.dtype("<u2"),
+    5125: np.dtype("<u4"),
+    5126: np.dtype("<f4"),
+}
+_COMPONENT_CODES = {dtype: code for code, dtype in COMPONENT_TYPES.items()}
+TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_TYPES_BY_SIZE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+_MAX_GLB_BYTES = 2**32 - 1  # the header's uint32 length
+
+
+class GlbBuilder:
+    """A glTF document under construction with its binary buffer.
+
+    `document` is the glTF JSON as a dict; callers add nodes, meshes, skins, animations
+    to it and use `view` and `accessor` for the binary data.
+    """
+
+    def __init__(self, generator: str):
+        self.document: dict = {
+            "asset": {"version": "2.0", "generator": generator},
+            "buffers": [{"byteLength": 0}],
+            "bufferViews": [],
+            "accessors": [],
+        }
+        self._parts: list[bytes] = []
+        self._length = 0
+
+    def view(self, data, target: int | None = None) -> int:
+        """Append raw bytes (or an array's little-endian bytes) as a buffer view at a
+        4-byte aligned offset; returns the view's index."""
+        raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
+        self._pad()
+        view = {"buffer": 0, "byteOffset": self._length, "byteLength": len(raw)}
+        if target is not None:
+            view["target"] = target
+        self._parts.append(raw)
+        self._length += len(raw)
+        self.document["bufferViews"].append(view)
+        return len(self.document["bufferViews"]) - 1
+
+    def accessor(self, array: np.ndarray, *, target: int | None = None,
+                 bounds: bool = False, view: int | None = None, offset: int = 0) -> int:
+        """Declare an accessor on `array`, (count,) or (count, k) with k in 2, 3, 4, 16
+        (MAT4 as 16 column-major values), of a dtype in `COMPONENT_TYPES`.
+
+        view : an existing buffer view the array already lies in at byte `offset`;
+            None appends the array as a view of its own (with `target`).
+        bounds : write ``min`` and ``max`` (required for POSITION and animation inputs),
+            from the stored values so they match to the last bit.
+        """
+        array = np.ascontiguousarray(array, dtype=array.dtype.newbyteorder("<"))
+        if view is None:
+            view = self.view(array, target)
+        accessor = {
+            "bufferView": view,
+            "componentType": _component_code(array.dtype),
+            "count": len(array),
+            "type": _TYPES_BY_SIZE[1 if array.ndim == 1 else array.shape[1]],
+        }
+        if offset:
+            accessor["byteOffset"] = offset
+        if bounds:
+            accessor["min"], accessor["max"] = _bounds(array)
+        return self._add(accessor)
+
+    def sparse_accessor(self, count: int, indices: np.ndarray, values: np.ndarray,
+                        *, indices_view: int | None = None, bounds: bool = False) -> int:
+        """A (count, k) float32 accessor that is zero except at `indices` (ascending,
+        (n,) uint16 or uint32, n may be 0) where it holds `values` (n, k) float32; no
+        base view.
+
+        indices_view : a view already holding these indices (targets of the same rows
+            share it); None appends them.
+        """
+        k = 1 if values.ndim == 1 else values.shape[1]
+        accessor = {
+            "componentType": _component_code(np.dtype("<f4")),
+            "count": int(count),
+            "type": _TYPES_BY_SIZE[k],
+        }
+        if len(indices):  # glTF has no empty sparse set: no rows is an all-zero accessor
+            if indices_view is None:
+                indices_view = self.view(indices)
+            accessor["sparse"] = {
+                "count": len(indices),
+                "indices": {"bufferView": indices_view,
+                            "componentType": _component_code(indices.dtype)},
+                "values": {"bufferView": self.view(values.astype("<f4"))},
+            }
+        if bounds:
+            stored = values.astype("<f4").reshape(len(values), k)
+            if len(indices) < count:  # the zeros between the sparse rows count too
+                stored = np.vstack([stored, np.zeros((1, k), np.float32)])
+            accessor["min"], accessor["max"] = _bounds(stored)
+        return self._add(accessor)
+
+    @property
+    def n_bytes(self) -> int:
+        """Bytes in the binary buffer so far."""
+        return self._length
+
+    def glb_bytes(self) -> bytes:
+        """The GLB file: header, JSON chunk, BIN chunk."""
+        self._pad()
+        self.document["buffers"][0]["byteLength"] = self._length
+        text = json.dumps(self.document, separators=(",", ":"), allow_nan=False).encode()
+        text += b" " * (-len(text) % 4)
+        total = 12 + 8 + len(text) + 8 + self._length
+        if total > _MAX_GLB_BYTES:
+            raise RetargetError(f"the glTF would be {total} bytes long, above the GLB "
+                                f"format's limit of {_MAX_GLB_BYTES} bytes")
+        return b"".join([
+            struct.pack("<4sII", GLB_MAGIC, 2, total),
+            struct.pack("<II", len(text), JSON_CHUNK), text,
+            struct.pack("<II", self._length, BIN_CHUNK), *self._parts,
+        ])
+
+    def _pad(self) -> None:
+        if self._length % 4:
+            pad = 4 - self._length % 4
+            self._parts.append(b"\0" * pad)
+            self._length += pad
+
+    def _add(self, accessor: dict) -> int:
+        self.document["accessors"].append(accessor)
+        return len(self.document["accessors"]) - 1
+
+
+def glb_document(data: bytes, label: str) -> tuple[dict, bytes]:
+    """(glTF JSON document, BIN chunk bytes) of a GLB file; `label` names it in errors."""
+    data = bytes(data)
+    if len(data) < 20 or data[:4] != GLB_MAGIC:
+        raise RetargetError(f"{label} is not a GLB file (it does not start with 'glTF')")
+    _, version, total = struct.unpack_from("<4sII", data)
+    if version != 2:
+        raise RetargetError(f"{label} is GLB version {version}; only glTF 2.0 is read")
+    if total > len(data):
+        raise RetargetError(f"{label} is truncated: the header says {total} bytes, "
+                            f"the file has {len(data)}")
+    document, binary, at = None, b"", 12
+    while at + 8 <= total:
+        length, kind = struct.unpack_from("<II", data, at)
+        chunk = data[at + 8:at + 8 + length]
+        if len(chunk) != length:
+            raise RetargetError(f"{label} is truncated inside a chunk at byte {at}")
+        if kind == JSON_CHUNK and document is None:
+            try:
+                document = json.loads(chunk)
+            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise RetargetError(f"{label}: its JSON chunk is not valid JSON: {exc}") from exc
+        elif kind == BIN_CHUNK and not binary:
+            binary = chunk
+        at += 8 + length
+    if not isinstance(document, dict):
+        raise RetargetError(f"{label} has no JSON chunk holding a glTF object")
+    return document, binary
+
+
+def accessor_array(document: dict, binary: bytes, index: int) -> np.ndarray:
+    """Accessor `index` as an array: (count,) for SCALAR, else (count, k); its component
+    dtype (normalized integers are returned as stored, not scaled)."""
+    try:
+        accessor = document["accessors"][index]
+        dtype = COMPONENT_TYPES[accessor["componentType"]]
+        k = TYPE_SIZES[accessor["type"]]
+        count = int(accessor["count"])
+        if "bufferView" in accessor:
+            out = _view_elements(document, binary, accessor["bufferView"], dtype, k, count,
+                                 int(accessor.get("byteOffset", 0)))
+        else:
+            out = np.zeros((count, k), dtype)
+        sparse = accessor.get("sparse")
+        if sparse:
+            n = int(sparse["count"])
+            rows = _view_elements(document, binary, sparse["indices"]["bufferView"],
+                                  COMPONENT_TYPES[sparse["indices"]["componentType"]], 1, n,
+                                  int(sparse["indices"].get("byteOffset", 0)))[:, 0]
+            values = _view_elements(document, binary, sparse["values"]["bufferView"], dtype,
+                                    k, n, int(sparse["values"].get("byteOffset", 0)))
+            out[rows.astype(np.int64)] = values
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
+        raise RetargetError(f"glTF accessor {index} cannot be read: "
+                            f"{type(exc).__name__}: {exc}") from exc
+    return out[:, 0] if k == 1 else out
+
+
+def _view_elements(document, binary, view_index, dtype, k, count, offset) -> np.ndarray:
+    """(count, k) elements of a buffer view from byte `offset`, honouring byteStride."""
+    view = document["bufferViews"][view_index]
+    if view.get("buffer", 0) != 0:
+        raise ValueError("only the GLB's own buffer (0) is read")
+    start = int(view.get("byteOffset", 0)) + offset
+    element = dtype.itemsize * k
+    stride = int(view.get("byteStride", element))
+    end = start + stride * (count - 1) + element if count else start
+    if end > int(view.get("byteOffset", 0)) + int(view["byteLength"]) or end > len(binary):
+        raise ValueError(f"{count} elements run past the end of buffer view {view_index}")
+    if stride == element:
+        return np.frombuffer(binary, dtype, count * k, start).reshape(count, k).copy()
+    rows = np.frombuffer(binary, np.uint8, end - start, start)
+    rows = np.lib.stride_tricks.as_strided(rows, (count, element), (stride, 1))
+    return np.ascontiguousarray(rows).view(dtype).reshape(count, k)
+
+
+def _component_code(dtype: np.dtype) -> int:
+    try:
+        return _COMPONENT_CODES[np.dtype(dtype).newbyteorder("<")]
+    except KeyError:
+        raise RetargetError(f"no glTF component type for dtype {dtype}") from None
+
+
+def _bounds(array: np.ndarray) -> tuple[list, list]:
+    """Per-component min and max as JSON numbers (exact for float32 and integers)."""
+    values = array.reshape(len(array), -1)
+    cast = float if values.dtype.kind == "f" else int
+    return ([cast(x) for x in values.min(0)], [cast(x) for x in values.max(0)])

@@ -1,0 +1,268 @@
+"""A rigged, animated target face as one glTF 2.0 binary file (.glb).
+
+`export_gltf` writes the mesh (positions, triangles, and its normals, uv and material
+where it has them), the feature points as joints, the deformation and one animation per
+`Clip`:
+
+- The scene holds two root nodes: the mesh node, and ``root``, a static joint at the
+  origin whose children are the N feature joints, one per feature point, named after
+  the layout's points (``feature_00``... without a layout). A feature joint is a pure
+  translation to its neutral position p_i (Dutreve §3: feature points as
+  translation-only joints); an animation moves it to ``p_i + d_if`` at frame f, with
+  LINEAR interpolation between the clip's times.
+- Joint-based rigs (non-negative rows summing to at most 1: ellipsoid, geodesic) are a
+  glTF skin over ``root`` and the features with inverse bind matrices ``T(-p_i)``, and
+  per-vertex JOINTS_n / WEIGHTS_n (float weights, each vertex's summing to 1 with the
+  root taking the remainder; as many sets of four as the busiest vertex needs: two for
+  the four-influence sparse rigs). See `retarget.export.influences`.
+- Other rigs (negative weights: dense RBF, region RBF, Laplacian, biharmonic) are not
+  joint-based; the mesh carries 3N morph targets (``<feature>.x``... in
+  ``mesh.extras.targetNames``) animated by the displacements, and the joints move as
+  plain nodes beside it. See `retarget.export.morph`.
+
+Either way a glTF viewer draws ``v0 + W d_f``, what `retarget.skin.skin_displacements`
+computes, to float32 rounding; normals are not animated (translation-only joints keep
+them; morph targets carry no NORMAL offsets).
+
+Units: the mesh's own, unscaled. glTF's convention is metres and +y up; the sample face
+and the ICT data are centimetres with +y up, so they appear 100 times too large in a
+viewer that trusts the convention. Scaling would change every position and displacement
+the round trip (`retarget.export.gltf_reader`) must give back, so it is left to the
+viewer. The scene's ``extras.retarget`` records the landmarks (`SurfacePoints.to_json`),
+the rig's method and the deformation kind for that round trip.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from retarget import __version__
+from retarget.errors import RetargetError
+from retarget.export.clips import Clip
+from retarget.export.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
+from retarget.export.influences import is_joint_based, joint_influences
+from retarget.export.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
+                                   target_names)
+from retarget.landmarks import SurfacePoints
+from retarget.layouts import get_layout
+from retarget.mesh import Mesh
+from retarget.skin import SkinWeights
+
+FORMAT = "retarget-gltf-1"
+ROOT_NAME = "root"
+MESH_NODE, ROOT_NODE, FIRST_FEATURE_NODE = 0, 1, 2
+TRIANGLES = 4
+
+
+def joint_names(points: SurfacePoints) -> list[str]:
+    """N feature joint names: the layout's point names when the landmarks follow a
+    built-in layout of N points, else ``feature_00``, ``feature_01``..."""
+    if points.layout:
+        try:
+            layout = get_layout(points.layout)
+        except RetargetError:
+            layout = None
+        if layout is not None and layout.n_points == points.n_points:
+            return list(layout.point_names)
+    width = max(2, len(str(points.n_points - 1)))
+    return [f"feature_{i:0{width}d}" for i in range(points.n_points)]
+
+
+def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
+                progress=None) -> bytes:
+    """The .glb bytes of `mesh` rigged with `weights` at `points`, with `clips` animated.
+
+    mesh : the target, V vertices (units kept, see the module docstring).
+    points : its N landmarks; the joints sit at ``points.positions(mesh.vertices)``.
+    weights : (V, K) skin weights over the N features (any method; see the module
+        docstring for skin versus morph targets).
+    clips : `Clip` objects of N features each, one glTF animation per clip, in order.
+    progress : optional callable taking the fraction done in [0, 1].
+
+    Raises `RetargetError` when the sizes disagree (naming both) or the file would pass
+    the GLB format's 4 GiB.
+    """
+    clips = tuple(clips)
+    _check_sizes(mesh, points, weights, clips)
+    names = joint_names(points)
+    neutral = points.positions(mesh.vertices).astype(np.float32)  # (N, 3)
+    skinned = is_joint_based(weights)
+    report = progress or (lambda fraction: None)
+    steps = 2 + len(clips) + (0 if skinned else points.n_points)
+    done = [0]
+
+    def step():
+        done[0] += 1
+        report(done[0] / steps)
+
+    out = GlbBuilder(f"retarget {__version__}")
+    doc = out.document
+    primitive = _primitive(out, mesh)
+    doc["meshes"] = [{"name": mesh.name or "face", "primitives": [primitive]}]
+    doc["nodes"] = [{"name": mesh.name or "face", "mesh": 0},
+                    {"name": _root_name(names),
+                     "children": list(range(FIRST_FEATURE_NODE, FIRST_FEATURE_NODE + len(names)))}]
+    doc["nodes"] += [{"name": name, "translation": [float(x) for x in p]}
+                     for name, p in zip(names, neutral)]
+    step()
+    if skinned:
+        _add_skin(out, primitive, weights, neutral)
+    else:
+        _add_morph_targets(out, doc["meshes"][0], weights, names, step)
+    doc["scene"] = 0
+    doc["scenes"] = [{
+        "name": mesh.name or "face",
+        "nodes": [MESH_NODE, ROOT_NODE],
+        "extras": {"retarget": {
+            "format": FORMAT,
+            "deformation": "skin" if skinned else "morph",
+            "method": weights.method,
+            "landmarks": points.to_json(),
+        }},
+    }]
+    if clips:
+        doc["animations"] = []
+        for clip in clips:
+            doc["animations"].append(_animation(out, clip, neutral, skinned))
+            step()
+    data = out.glb_bytes()
+    step()
+    return data
+
+
+def _check_sizes(mesh, points, weights, clips) -> None:
+    if weights.n_vertices != mesh.n_vertices:
+        raise RetargetError(f"the rig has weights for {weights.n_vertices} vertices but the "
+                            f"mesh has {mesh.n_vertices}")
+    if weights.n_joints != points.n_points:
+        raise RetargetError(f"the rig has {weights.n_joints} joints but there are "
+                            f"{points.n_points} landmarks")
+    if not np.isfinite(weights.weights).all():
+        raise RetargetError("the rig's weights hold NaN or infinite values")
+    for clip in clips:
+        if not isinstance(clip, Clip):
+            raise RetargetError(f"clips must be Clip objects; got {type(clip).__name__}")
+        if clip.displacements.shape[1] != points.n_points:
+            raise RetargetError(f"clip {clip.name!r} moves {clip.displacements.shape[1]} "
+                                f"features but there are {points.n_points} landmarks")
+
+
+def _root_name(names: list[str]) -> str:
+    """``root``, or ``root_`` ... when a feature already has that name."""
+    name = ROOT_NAME
+    while name in names:
+        name += "_"
+    return name
+
+
+def _primitive(out: GlbBuilder, mesh: Mesh) -> dict:
+    """The triangle primitive with POSITION, NORMAL and TEXCOORD_0 where the mesh has
+    them, and its material."""
+    attributes = {"POSITION": out.accessor(mesh.vertices.astype(np.float32),
+                                           target=ARRAY_BUFFER, bounds=True)}
+    if mesh.normals is not None:
+        attributes["NORMAL"] = out.accessor(_unit_normals(mesh), target=ARRAY_BUFFER)
+    if mesh.uv is not None:
+        # Mesh.uv has OBJ's v (up); glTF's v runs down the image
+        uv = np.column_stack([mesh.uv[:, 0], 1.0 - mesh.uv[:, 1]]).astype(np.float32)
+        attributes["TEXCOORD_0"] = out.accessor(uv, target=ARRAY_BUFFER)
+    index_type = np.uint16 if mesh.n_vertices <= 65535 else np.uint32
+    primitive = {"attributes": attributes, "mode": TRIANGLES,
+                 "indices": out.accessor(mesh.faces.ravel().astype(index_type),
+                                         target=ELEMENT_ARRAY_BUFFER)}
+    return primitive
+
+
+def _unit_normals(mesh: Mesh) -> np.ndarray:
+    """(V, 3) float32 unit normals (glTF requires unit length): the mesh's, normalised;
+    where one is zero, the area-weighted normal of the faces around the vertex, and +z
+    where that is zero too (a vertex on no face or only on degenerate ones)."""
+    n = np.asarray(mesh.normals, dtype=np.float64)
+    length = np.linalg.norm(n, axis=1)
+    zero = length < 1e-12
+    if zero.any():
+        computed = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).vertex_normals
+        n = np.where(zero[:, None], computed, n)
+        length = np.linalg.norm(n, axis=1)
+        still = length < 1e-12
+        n[still], length[still] = (0.0, 0.0, 1.0), 1.0
+    return (n / length[:, None]).astype(np.float32)
+
+
+def _add_skin(out: GlbBuilder, primitive: dict, weights: SkinWeights, neutral: np.ndarray):
+    """JOINTS_n / WEIGHTS_n on the primitive and the skin over root + features."""
+    joints, influence = joint_influences(weights)
+    for s in range(joints.shape[1] // 4):
+        cols = slice(4 * s, 4 * s + 4)
+        primitive["attributes"][f"JOINTS_{s}"] = out.accessor(
+            np.ascontiguousarray(joints[:, cols]), target=ARRAY_BUFFER)
+        primitive["attributes"][f"WEIGHTS_{s}"] = out.accessor(
+            np.ascontiguousarray(influence[:, cols]), target=ARRAY_BUFFER)
+    n = len(neutral)
+    inverse_bind = np.tile(np.eye(4, dtype=np.float32), (n + 1, 1, 1))
+    inverse_bind[1:, :3, 3] = -neutral
+    # glTF matrices are column-major
+    ibm = inverse_bind.transpose(0, 2, 1).reshape(n + 1, 16)
+    out.document["skins"] = [{
+        "name": "features",
+        "joints": [ROOT_NODE] + list(range(FIRST_FEATURE_NODE, FIRST_FEATURE_NODE + n)),
+        "inverseBindMatrices": out.accessor(ibm),
+        "skeleton": ROOT_NODE,
+    }]
+    out.document["nodes"][MESH_NODE]["skin"] = 0
+
+
+def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, names,
+                       step) -> None:
+    """Three targets per feature (see `retarget.export.morph`); sparse where few
+    vertices move, the three axes sharing one index view."""
+    columns = feature_columns(weights)
+    v = weights.n_vertices
+    index_type = np.uint16 if v <= 65536 else np.uint32
+    targets = []
+    for i in range(weights.n_joints):
+        rows = columns.indices[columns.indptr[i]:columns.indptr[i + 1]]
+        values = columns.data[columns.indptr[i]:columns.indptr[i + 1]]
+        sparse = len(rows) < SPARSE_SHARE * v
+        view = None
+        if sparse and len(rows):
+            view = out.view(rows.astype(index_type))
+        else:
+            full = np.zeros(v, np.float32)
+            full[rows] = values
+        for a in range(len(AXES)):
+            if sparse:
+                accessor = out.sparse_accessor(v, rows.astype(index_type),
+                                               axis_offsets(values, a),
+                                               indices_view=view, bounds=True)
+            else:
+                accessor = out.accessor(axis_offsets(full, a), target=ARRAY_BUFFER,
+                                        bounds=True)
+            targets.append({"POSITION": accessor})
+        step()
+    gltf_mesh["primitives"][0]["targets"] = targets
+    gltf_mesh["weights"] = [0.0] * len(targets)
+    gltf_mesh["extras"] = {"targetNames": target_names(names)}
+
+
+def _animation(out: GlbBuilder, clip: Clip, neutral: np.ndarray, skinned: bool) -> dict:
+    """One animation: every feature joint's translation p_i + d_if (LINEAR), and for a
+    morph rig the mesh's 3N target weights d_if."""
+    f, n = clip.n_frames, len(neutral)
+    times = out.accessor(clip.times.astype(np.float32), bounds=True)
+    moved = (neutral.astype(np.float64)[:, None] + clip.displacements.transpose(1, 0, 2))
+    translations = np.ascontiguousarray(moved, dtype=np.float32)  # (N, F, 3)
+    view = out.view(translations)
+    samplers, channels = [], []
+    for i in range(n):
+        output = out.accessor(translations[i], view=view, offset=i * f * 12)
+        channels.append({"sampler": len(samplers),
+                         "target": {"node": FIRST_FEATURE_NODE + i, "path": "translation"}})
+        samplers.append({"input": times, "output": output, "interpolation": "LINEAR"})
+    if not skinned:
+        output = out.accessor(clip.displacements.reshape(f * n * 3))
+        channels.append({"sampler": len(samplers),
+                         "target": {"node": MESH_NODE, "path": "weights"}})
+        samplers.append({"input": times, "output": output, "interpolation": "LINEAR"})
+    return {"name": clip.name, "samplers": samplers, "channels": channels}

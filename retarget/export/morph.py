@@ -1,0 +1,71 @@
+"""Skin weights as glTF morph targets, for rigs no glTF skin can hold, and back.
+
+The interpolating deformers (dense RBF and region RBF, Zhang §2.1 and §4; Laplacian
+editing, Zhang §2.2; biharmonic) are linear vertex deformers with negative weights, so
+they are not joint-based in glTF's sense (`retarget.export.influences`). Their motion is
+still exactly linear in the feature displacements, so three morph targets per feature
+hold it: target (i, a), a in x, y, z, moves vertex v by ``W[v, i]`` along axis a, and
+its animated weight at frame f is ``d_f[i, a]``. glTF's morphing
+``v0 + Σ_{i,a} d_f[i, a] W[:, i] e_a`` is then Dutreve §3.1's ``v0 + Σ_i W[:, i] d_f[i]``
+to float32 rounding. Target names are ``<feature>.x``, ``.y``, ``.z``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from retarget.errors import RetargetError
+from retarget.skin import SkinWeights
+
+AXES = ("x", "y", "z")
+SPARSE_SHARE = 0.75
+"""A target is stored sparse when fewer than this share of vertices move: a sparse row
+costs its 4-byte index on top of the 12 bytes a dense row costs."""
+
+
+def target_names(joint_names) -> list[str]:
+    """The 3N morph target names, ``<feature>.<axis>``, feature-major."""
+    return [f"{name}.{axis}" for name in joint_names for axis in AXES]
+
+
+def feature_columns(weights: SkinWeights) -> sp.csc_matrix:
+    """(V, N) float32 weight matrix by columns: column i's non-zero rows (ascending) and
+    values are feature i's morph targets."""
+    m = weights.matrix()
+    m = sp.csc_matrix(m, dtype=np.float32)
+    m.sum_duplicates()
+    m.eliminate_zeros()
+    m.sort_indices()
+    return m
+
+
+def axis_offsets(values: np.ndarray, axis: int) -> np.ndarray:
+    """(n, 3) float32 offsets of one target: `values` (n,) on `axis`, zero elsewhere."""
+    out = np.zeros((len(values), 3), np.float32)
+    out[:, axis] = values
+    return out
+
+
+def weights_from_targets(targets, n_features: int, method: str = "") -> SkinWeights:
+    """Skin weights from the 3N (V, 3) target offsets in `target_names` order.
+
+    K is the most non-zero weights of a vertex (all N for a dense rig), so the rig that
+    was exported comes back with its own sparsity. Raises `RetargetError` when the
+    targets are not ``W[:, i] e_a`` (another file's shapes).
+    """
+    if len(targets) != 3 * n_features:
+        raise RetargetError(f"{len(targets)} morph targets for {n_features} features; "
+                            f"expected 3 per feature ({3 * n_features})")
+    stacked = np.stack([np.asarray(t, dtype=np.float32) for t in targets])  # (3N, V, 3)
+    by_axis = stacked.reshape(n_features, 3, -1, 3)
+    w = by_axis[:, 0, :, 0].T  # (V, N)
+    expected = np.zeros_like(by_axis)
+    for a in range(3):
+        expected[:, a, :, a] = w.T
+    if not np.array_equal(by_axis, expected):
+        raise RetargetError("the morph targets are not per-feature unit displacements "
+                            "(target <feature>.<axis> moving along its axis only, the same "
+                            "weights on every axis)")
+    k = int((w != 0).sum(1).max()) if w.size else 0
+    return SkinWeights.from_dense(w, None if k >= n_features else max(k, 1), method)
