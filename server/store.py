@@ -5,7 +5,8 @@ Layout on disk::
     <data_dir>/index.sqlite                      the index (WAL mode): one row per project
     <data_dir>/projects/<id>/mesh-r<R>.<ext>     the upload's bytes exactly as uploaded
     <data_dir>/projects/<id>/landmarks-r<R>.json
-    <data_dir>/projects/<id>/rig-r<R>-<hex>.npz  `retarget.skin.SkinWeights.save`
+    <data_dir>/projects/<id>/rig-r<R>-<hex>.npz  `retarget.skin.SkinWeights.save`: the
+                                                 automatic rig and, once painted, the painted one
     <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
 
 R is the project revision the file was written for. The index is the source of truth:
@@ -16,6 +17,11 @@ then one SQLite transaction points the row at it, then the replaced files are de
 A crash at any step leaves the old or the new state whole (never a new mesh with the
 old mesh's landmarks); files no row names are swept when the store opens, and a new
 `ProjectStore` on the same folder finds everything a previous one committed.
+
+The automatic rig stays when the rig is painted: the row names the rig in use
+(``rig_file``) and the automatic one (``auto_rig_file``, the same file until a paint), so
+a reset goes back to it. ``rig_version`` counts every change of the rig (computed,
+painted, reset), so a paint made on an older rig is refused (`StaleRig`).
 
 Takes (recorded performances) belong to the project, not to its mesh: they are source
 points, so a new mesh or new landmarks keep them. A take's file is written once; renaming
@@ -54,7 +60,7 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
 MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf")
 """File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads)."""
 
-_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file")
+_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "auto_rig_file")
 _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
 
@@ -79,7 +85,10 @@ CREATE TABLE IF NOT EXISTS projects (
     settings      TEXT NOT NULL DEFAULT '{}',
     mesh_file     TEXT,              -- current file names in the project folder
     landmarks_file TEXT,
-    rig_file      TEXT
+    rig_file      TEXT,              -- the rig in use: the automatic one or a painted one
+    auto_rig_file TEXT,              -- the automatic rig, kept for resets
+    rig_version   INTEGER NOT NULL DEFAULT 0,  -- bumped by every new rig, paint or reset
+    rig_painted   INTEGER NOT NULL DEFAULT 0   -- vertices whose rows differ from the automatic rig's
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS takes (
@@ -119,7 +128,13 @@ class TakeNotFound(LookupError):
 
 
 class StaleRig(RuntimeError):
-    """A rig was computed for a mesh or landmarks that have changed since."""
+    """A rig was computed for a mesh or landmarks that have changed since, or painted on
+    a rig version that is no longer the current one."""
+
+    @classmethod
+    def painted_on(cls, version: int, current: int) -> "StaleRig":
+        return cls(f"the rig changed (now version {current}) since version {version} that "
+                   f"this edit was made on: reload the weights and paint again")
 
 
 def _now() -> str:
@@ -206,6 +221,12 @@ class ProjectStore:
                    "WHERE landmarks_file IS NULL AND n_landmarks IS NOT NULL")
         db.execute("UPDATE projects SET rig_file = 'rig.npz' "
                    "WHERE rig_file IS NULL AND rig_method IS NOT NULL")
+        for column in ("rig_version", "rig_painted"):
+            if column not in columns:
+                db.execute(f"ALTER TABLE projects ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0")
+        # rigs from before painting are automatic ones
+        db.execute("UPDATE projects SET auto_rig_file = rig_file "
+                   "WHERE auto_rig_file IS NULL AND rig_file IS NOT NULL")
 
     def _sweep(self, project_id: str, row: sqlite3.Row | None = None) -> None:
         """Delete the store's files in the project's folder that its row does not name:
@@ -378,7 +399,8 @@ class ProjectStore:
             db.execute(
                 "UPDATE projects SET mesh_filename = ?, mesh_format = ?, n_vertices = ?, "
                 "n_faces = ?, layout = NULL, n_landmarks = NULL, rig_method = NULL, "
-                "mesh_file = ?, landmarks_file = NULL, rig_file = NULL, "
+                "mesh_file = ?, landmarks_file = NULL, rig_file = NULL, auto_rig_file = NULL, "
+                "rig_painted = 0, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
                 (filename[:255], extension, n_vertices, n_faces, name, _now(), project_id),
             )
@@ -421,7 +443,7 @@ class ProjectStore:
             write_atomic(folder / name, json.dumps(landmarks).encode())
             db.execute(
                 "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
-                "landmarks_file = ?, rig_file = NULL, "
+                "landmarks_file = ?, rig_file = NULL, auto_rig_file = NULL, rig_painted = 0, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
                 (layout, n_points, name, _now(), project_id),
             )
@@ -438,8 +460,8 @@ class ProjectStore:
     # -- rig ----------------------------------------------------------------------------
 
     def put_rig(self, project_id: str, weights: SkinWeights, *, revision: int) -> dict:
-        """Store a rig computed from the mesh and landmarks of `revision`; raises
-        `StaleRig` if either changed since."""
+        """Store an automatic rig computed from the mesh and landmarks of `revision`
+        (it replaces any painted one); raises `StaleRig` if either changed since."""
         folder = self.folder(project_id)
         with self._transaction() as db:
             row = self._row(project_id)
@@ -447,22 +469,72 @@ class ProjectStore:
                 raise StaleRig(
                     "the mesh or landmarks changed while the rig was computed; start it again"
                 )
-            # a rig may be recomputed at the same revision (another method): new name each time
-            name = f"rig-r{revision}-{secrets.token_hex(4)}.npz"
-            write_atomic(folder / name, writer=weights.save)
+            name = self._write_rig(folder, weights, revision)
             db.execute(
-                "UPDATE projects SET rig_method = ?, rig_file = ?, updated = ? WHERE id = ?",
-                (weights.method, name, _now(), project_id),
+                "UPDATE projects SET rig_method = ?, rig_file = ?, auto_rig_file = ?, "
+                "rig_version = rig_version + 1, rig_painted = 0, updated = ? WHERE id = ?",
+                (weights.method, name, name, _now(), project_id),
             )
         self._sweep(project_id)
         return self.get(project_id)
 
+    def put_painted_rig(self, project_id: str, weights: SkinWeights | None, *, version: int,
+                        painted: int) -> dict:
+        """Store a painted rig in place of the current one, keeping the automatic rig;
+        None goes back to the automatic rig. `version` is the rig version the paint was
+        made on and `painted` the number of vertices it changed; raises `StaleRig` if the
+        rig changed since `version`. Answers `rig_status`."""
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["rig_method"] is None:
+                raise StaleRig(f"project {project_id!r} has no rig any more")
+            if row["rig_version"] != version:
+                raise StaleRig.painted_on(version, row["rig_version"])
+            name = (row["auto_rig_file"] if weights is None
+                    else self._write_rig(folder, weights, row["revision"]))
+            db.execute(
+                "UPDATE projects SET rig_file = ?, rig_version = rig_version + 1, "
+                "rig_painted = ?, updated = ? WHERE id = ?",
+                (name, 0 if weights is None else int(painted), _now(), project_id),
+            )
+        self._sweep(project_id)
+        return self.rig_status(project_id)
+
+    @staticmethod
+    def _write_rig(folder: Path, weights: SkinWeights, revision: int) -> str:
+        # rigs are rewritten at one revision (another method, a paint): a new name each time
+        name = f"rig-r{revision}-{secrets.token_hex(4)}.npz"
+        write_atomic(folder / name, writer=weights.save)
+        return name
+
     def rig(self, project_id: str) -> SkinWeights | None:
+        """The rig in use (painted or automatic), or None when there is none."""
         with self._lock:
             row = self._row(project_id)
             if row["rig_method"] is None:
                 return None
             return SkinWeights.load(self.folder(project_id) / row["rig_file"])
+
+    def rigs(self, project_id: str) -> tuple[SkinWeights, SkinWeights, int] | None:
+        """(rig in use, automatic rig, rig version) read together, or None without a rig."""
+        with self._lock:
+            row = self._row(project_id)
+            if row["rig_method"] is None:
+                return None
+            folder = self.folder(project_id)
+            automatic = SkinWeights.load(folder / row["auto_rig_file"])
+            current = (automatic if row["rig_file"] == row["auto_rig_file"]
+                       else SkinWeights.load(folder / row["rig_file"]))
+            return current, automatic, row["rig_version"]
+
+    def rig_status(self, project_id: str) -> dict | None:
+        """``{version, painted_vertices}`` of the rig, or None when there is none."""
+        with self._lock:
+            row = self._row(project_id)
+        if row["rig_method"] is None:
+            return None
+        return {"version": row["rig_version"], "painted_vertices": row["rig_painted"]}
 
     # -- takes --------------------------------------------------------------------------
 

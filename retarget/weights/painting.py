@@ -79,7 +79,10 @@ def weight_edit(vertices, indices, weights, automatic: SkinWeights) -> WeightEdi
         raise RetargetError(f"vertices must be a non-empty list of vertex indices; got shape {v.shape}")
     if v.dtype.kind not in "iu":
         raise RetargetError(f"vertices must be integers; got {v.dtype} values")
-    idx, w = np.asarray(indices), np.asarray(weights)
+    try:
+        idx, w = np.asarray(indices), np.asarray(weights)
+    except ValueError as exc:  # ragged lists
+        raise RetargetError(f"indices and weights must be rectangular (R, K) arrays: {exc}") from None
     if idx.ndim != 2 or idx.shape != w.shape or len(idx) != len(v) or idx.shape[1] == 0:
         raise RetargetError(
             f"indices and weights must both be ({len(v)}, K) arrays, one row of K >= 1 "

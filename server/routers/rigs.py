@@ -15,6 +15,27 @@ little-endian::
 
 Weights are `retarget.skin.SkinWeights`: unused slots have weight 0; the rest of a row's
 1 belongs to the static root joint.
+
+Painting. ``PATCH /api/projects/{id}/rig/weights`` replaces the rows of some vertices
+(`retarget.weights.painting` validates and normalises them against the automatic rig)
+and answers the rig's info. The body is JSON ``{version, vertices, indices, weights}``
+or ``application/octet-stream``, little-endian::
+
+    offset      size    field
+    0           4       magic b"RTSE"
+    4           4       uint32 format version (1)
+    8           4       uint32 R, rows (edited vertices)
+    12          4       uint32 K, influences per row
+    16          4       uint32 N, joint count (the rig's)
+    20          4       uint32 rig version the edit was made on (``version`` of GET rig)
+    24          4 R     uint32 vertex indices
+    24+4R       2 R K   uint16 joint indices, (R, K) row-major
+    ...         0 or 2  zero padding, so the weights start at a multiple of 4
+    ...         4 R K   float32 weights, (R, K) row-major
+
+An edit made on an older rig version is refused with 409. ``POST .../rig/reset``
+``{"joints": [j, ...] | null}`` paints joints back to the automatic rig (null: all).
+The automatic rig is kept beside the painted one, so both survive a restart.
 """
 
 from __future__ import annotations
@@ -23,22 +44,29 @@ import inspect
 import struct
 
 import numpy as np
-from fastapi import APIRouter, HTTPException, Response, status
-from pydantic import BaseModel, Field
+from fastapi import APIRouter, HTTPException, Request, Response, status
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
+from pydantic import BaseModel, Field, ValidationError
 
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
-from server.deps import JobsDep, MeshDep, ProjectDep, StoreDep
+from retarget.weights.painting import painted_rig, painted_vertices, reset_joints, weight_edit
+from server.deps import JobsDep, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.jobs import JobBusy
+from server.store import StaleRig
 
 router = APIRouter(tags=["rigs"])
 
 WEIGHTS_MAGIC = b"RTSW"
 WEIGHTS_VERSION = 1
 WEIGHTS_HEADER = struct.Struct("<4sIIII")
+EDIT_MAGIC = b"RTSE"
+EDIT_VERSION = 1
+EDIT_HEADER = struct.Struct("<4sIIIII")
 
 
 class RigRequest(BaseModel):
@@ -98,12 +126,18 @@ def _rig(project: dict, store) -> SkinWeights:
     return rig
 
 
+def rig_info(rig: SkinWeights, rig_status: dict) -> dict:
+    return {"method": rig.method, "n_vertices": rig.n_vertices, "n_joints": rig.n_joints,
+            "n_influences": rig.n_influences, **rig_status}
+
+
 @router.get("/api/projects/{project_id}/rig")
 def get_rig(project: ProjectDep, store: StoreDep) -> dict:
-    """``{method, n_vertices, n_joints, n_influences}``."""
+    """``{method, n_vertices, n_joints, n_influences, version, painted_vertices}``:
+    `version` counts the rig's changes (compute, paint, reset); `painted_vertices` is how
+    many rows differ from the automatic rig's."""
     rig = _rig(project, store)
-    return {"method": rig.method, "n_vertices": rig.n_vertices, "n_joints": rig.n_joints,
-            "n_influences": rig.n_influences}
+    return rig_info(rig, store.rig_status(project["id"]))
 
 
 def weights_binary(rig: SkinWeights) -> bytes:
@@ -123,3 +157,100 @@ def weights_binary(rig: SkinWeights) -> bytes:
 def get_rig_weights(project: ProjectDep, store: StoreDep) -> Response:
     """Joint indices and weights as little-endian binary (format in the module docstring)."""
     return Response(weights_binary(_rig(project, store)), media_type="application/octet-stream")
+
+
+class ResetRequest(BaseModel):
+    joints: list[int] | None = Field(description="joints to paint back to the automatic rig; "
+                                     "null: the whole rig")
+    version: int | None = Field(default=None, description="refuse (409) unless the rig is at "
+                                "this version")
+
+
+class WeightEditJSON(BaseModel):
+    version: int = Field(description="the rig version the edit was made on (GET rig)")
+    vertices: list[int] = Field(description="R vertex indices")
+    indices: list[list[int]] = Field(description="(R, K) joint indices")
+    weights: list[list[float]] = Field(description="(R, K) weights")
+
+
+def _rigs(project: dict, store) -> tuple[SkinWeights, SkinWeights, int]:
+    found = store.rigs(project["id"])
+    if found is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"project {project['id']!r} has no rig yet")
+    return found
+
+
+def _store_painted(store, project_id: str, rig: SkinWeights, automatic: SkinWeights,
+                   version: int) -> dict:
+    painted = len(painted_vertices(rig, automatic))
+    rig_status = store.put_painted_rig(project_id, rig if painted else None, version=version,
+                                       painted=painted)
+    return rig_info(rig, rig_status)
+
+
+def edit_arrays(body: bytes) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
+    """(rig version, N, (R,) vertices, (R, K) joints, (R, K) weights) of the binary form."""
+    if len(body) < EDIT_HEADER.size:
+        raise RetargetError(f"weight edit: {len(body)} bytes is shorter than its "
+                            f"{EDIT_HEADER.size}-byte header")
+    magic, fmt, r, k, n, version = EDIT_HEADER.unpack_from(body)
+    if magic != EDIT_MAGIC or fmt != EDIT_VERSION:
+        raise RetargetError(f"weight edit: expected magic {EDIT_MAGIC!r} version {EDIT_VERSION}, "
+                            f"got {magic!r} version {fmt}")
+    index_bytes = 2 * r * k
+    start = EDIT_HEADER.size + 4 * r + index_bytes + (-index_bytes % 4)
+    if len(body) != start + 4 * r * k:
+        raise RetargetError(f"weight edit: {r} rows of {k} influences need {start + 4 * r * k} "
+                            f"bytes; got {len(body)}")
+    vertices = np.frombuffer(body, "<u4", r, EDIT_HEADER.size)
+    joints = np.frombuffer(body, "<u2", r * k, EDIT_HEADER.size + 4 * r).reshape(r, k)
+    weights = np.frombuffer(body, "<f4", r * k, start).reshape(r, k)
+    return version, n, vertices, joints, weights
+
+
+@router.patch("/api/projects/{project_id}/rig/weights",
+              openapi_extra={"requestBody": {"required": True, "content": {
+                  "application/octet-stream": {}, "application/json": {}}}})
+async def patch_rig_weights(project: ProjectDep, store: StoreDep, limits: LimitsDep,
+                            request: Request) -> dict:
+    """Replace the rows of some vertices (binary or JSON form in the module docstring);
+    answers the rig's info. 409 when the rig changed since the edit's version, 422 with
+    the reason for a row the library refuses."""
+    if int(request.headers.get("content-length") or 0) > limits.max_upload_bytes:
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE,
+                            f"a weight edit may be at most {limits.max_upload_bytes} bytes")
+    body = await request.body()
+    if len(body) > limits.max_upload_bytes:
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE,
+                            f"a weight edit may be at most {limits.max_upload_bytes} bytes")
+    if request.headers.get("content-type", "").startswith("application/json"):
+        try:
+            edit = WeightEditJSON.model_validate_json(body)
+        except ValidationError as exc:
+            raise RequestValidationError(exc.errors(include_url=False)) from None
+        version, n, vertices, joints, weights = (edit.version, None, edit.vertices,
+                                                 edit.indices, edit.weights)
+    else:
+        version, n, vertices, joints, weights = edit_arrays(body)
+
+    def paint() -> dict:
+        current, automatic, current_version = _rigs(project, store)
+        if version != current_version:
+            raise StaleRig.painted_on(version, current_version)
+        if n is not None and n != automatic.n_joints:
+            raise RetargetError(f"weight edit is for {n} joints; the rig has {automatic.n_joints}")
+        edit = weight_edit(vertices, joints, weights, automatic)
+        return _store_painted(store, project["id"], painted_rig(current, edit), automatic, version)
+
+    return await run_in_threadpool(paint)
+
+
+@router.post("/api/projects/{project_id}/rig/reset")
+def reset_rig(project: ProjectDep, store: StoreDep, body: ResetRequest) -> dict:
+    """Paint `joints` back to the automatic rig (null: the whole rig); answers the rig's
+    info."""
+    current, automatic, version = _rigs(project, store)
+    if body.version is not None and body.version != version:
+        raise StaleRig.painted_on(body.version, version)
+    rig = automatic if body.joints is None else reset_joints(current, automatic, body.joints)
+    return _store_painted(store, project["id"], rig, automatic, version)
