@@ -210,11 +210,19 @@ def test_morph_structure(face, exported):
     assert "skins" not in doc and len(targets) == 3 * n
     assert gmesh["extras"]["targetNames"][:4] == \
         [f"{IBUG.point_names[0]}.{a}" for a in "xyz"] + [f"{IBUG.point_names[1]}.x"]
-    # target (i, y) is feature i's weights along y only
+    # target (i, y) is feature i's weights along y only, times a power of two that puts
+    # the animated weights (displacements over it) within [-1, 1]
+    scale = gmesh["extras"]["targetScale"]
+    largest = max(np.abs(c.displacements).max() for c in face["clips"])
+    assert largest <= scale < 2 * largest and np.log2(scale) % 1 == 0
     dense = face["rigs"]["rbf"].dense()
     target = _accessor(doc, blob, targets[3 * 5 + 1]["POSITION"])
     np.testing.assert_array_equal(target[:, [0, 2]], 0)
-    np.testing.assert_allclose(target[:, 1], dense[:, 5], atol=1e-7)
+    np.testing.assert_allclose(target[:, 1], scale * dense[:, 5], atol=1e-7)
+    largest_weight = max(
+        np.abs(_accessor(doc, blob, a["samplers"][a["channels"][-1]["sampler"]]["output"])).max()
+        for a in doc["animations"])
+    assert 0.5 < largest_weight <= 1
 
 
 @pytest.mark.parametrize("method", ["ellipsoid", "rbf"])

@@ -73,7 +73,8 @@ def read_gltf(source) -> RiggedFace:
         deformation = "skin"
     elif primitive.get("targets"):
         targets = [accessor_array(doc, binary, t["POSITION"]) for t in primitive["targets"]]
-        weights = weights_from_targets(targets, len(features), method)
+        scale = doc["meshes"][nodes[mesh_node]["mesh"]].get("extras", {}).get("targetScale", 1.0)
+        weights = weights_from_targets(targets, len(features), float(scale), method)
         deformation = "morph"
     else:
         raise RetargetError(f"{label}: its mesh has neither a skin nor morph targets")

@@ -17,8 +17,11 @@ where it has them), the feature points as joints, the deformation and one animat
   the four-influence sparse rigs). See `retarget.export.influences`.
 - Other rigs (negative weights: dense RBF, region RBF, Laplacian, biharmonic) are not
   joint-based; the mesh carries 3N morph targets (``<feature>.x``... in
-  ``mesh.extras.targetNames``) animated by the displacements, and the joints move as
-  plain nodes beside it. See `retarget.export.morph`.
+  ``mesh.extras.targetNames``, their scale in ``mesh.extras.targetScale``) animated by
+  the displacements over that scale, within [-1, 1], and the joints move as plain nodes
+  beside it. See `retarget.export.morph`. Blender 5.0's importer sets a shape key's
+  slider range from the first key only and clamps the animation to it, so widen the
+  ranges to [-1, 1] after import (tests/blender/evaluate_glb.py does).
 
 Either way a glTF viewer draws ``v0 + W d_f``, what `retarget.skin.skin_displacements`
 computes, to float32 rounding; normals are not animated (translation-only joints keep
@@ -43,7 +46,7 @@ from retarget.export.clips import Clip
 from retarget.export.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
 from retarget.export.influences import is_joint_based, joint_influences
 from retarget.export.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
-                                   target_names)
+                                   morph_scale, target_names)
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
 from retarget.mesh import Mesh
@@ -106,10 +109,11 @@ def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(
     doc["nodes"] += [{"name": name, "translation": [float(x) for x in p]}
                      for name, p in zip(names, neutral)]
     step()
+    scale = None if skinned else morph_scale(clips)
     if skinned:
         _add_skin(out, primitive, weights, neutral)
     else:
-        _add_morph_targets(out, doc["meshes"][0], weights, names, step)
+        _add_morph_targets(out, doc["meshes"][0], weights, names, scale, step)
     doc["scene"] = 0
     doc["scenes"] = [{
         "name": mesh.name or "face",
@@ -124,7 +128,7 @@ def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(
     if clips:
         doc["animations"] = []
         for clip in clips:
-            doc["animations"].append(_animation(out, clip, neutral, skinned))
+            doc["animations"].append(_animation(out, clip, neutral, scale))
             step()
     data = out.glb_bytes()
     step()
@@ -214,16 +218,16 @@ def _add_skin(out: GlbBuilder, primitive: dict, weights: SkinWeights, neutral: n
 
 
 def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, names,
-                       step) -> None:
-    """Three targets per feature (see `retarget.export.morph`); sparse where few
-    vertices move, the three axes sharing one index view."""
+                       scale: float, step) -> None:
+    """Three targets per feature, s W[:, i] e_a (see `retarget.export.morph`); sparse
+    where few vertices move, the three axes sharing one index view."""
     columns = feature_columns(weights)
     v = weights.n_vertices
     index_type = np.uint16 if v <= 65536 else np.uint32
     targets = []
     for i in range(weights.n_joints):
         rows = columns.indices[columns.indptr[i]:columns.indptr[i + 1]]
-        values = columns.data[columns.indptr[i]:columns.indptr[i + 1]]
+        values = columns.data[columns.indptr[i]:columns.indptr[i + 1]] * np.float32(scale)
         sparse = len(rows) < SPARSE_SHARE * v
         view = None
         if sparse and len(rows):
@@ -243,12 +247,12 @@ def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, n
         step()
     gltf_mesh["primitives"][0]["targets"] = targets
     gltf_mesh["weights"] = [0.0] * len(targets)
-    gltf_mesh["extras"] = {"targetNames": target_names(names)}
+    gltf_mesh["extras"] = {"targetNames": target_names(names), "targetScale": scale}
 
 
-def _animation(out: GlbBuilder, clip: Clip, neutral: np.ndarray, skinned: bool) -> dict:
+def _animation(out: GlbBuilder, clip: Clip, neutral: np.ndarray, scale: float | None) -> dict:
     """One animation: every feature joint's translation p_i + d_if (LINEAR), and for a
-    morph rig the mesh's 3N target weights d_if."""
+    morph rig (`scale` s given) the mesh's 3N target weights d_if / s."""
     f, n = clip.n_frames, len(neutral)
     times = out.accessor(clip.times.astype(np.float32), bounds=True)
     moved = (neutral.astype(np.float64)[:, None] + clip.displacements.transpose(1, 0, 2))
@@ -260,8 +264,8 @@ def _animation(out: GlbBuilder, clip: Clip, neutral: np.ndarray, skinned: bool) 
         channels.append({"sampler": len(samplers),
                          "target": {"node": FIRST_FEATURE_NODE + i, "path": "translation"}})
         samplers.append({"input": times, "output": output, "interpolation": "LINEAR"})
-    if not skinned:
-        output = out.accessor(clip.displacements.reshape(f * n * 3))
+    if scale is not None:
+        output = out.accessor(clip.displacements.reshape(f * n * 3) / np.float32(scale))
         channels.append({"sampler": len(samplers),
                          "target": {"node": MESH_NODE, "path": "weights"}})
         samplers.append({"input": times, "output": output, "interpolation": "LINEAR"})

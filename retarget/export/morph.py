@@ -4,10 +4,16 @@ The interpolating deformers (dense RBF and region RBF, Zhang §2.1 and §4; Lapl
 editing, Zhang §2.2; biharmonic) are linear vertex deformers with negative weights, so
 they are not joint-based in glTF's sense (`retarget.export.influences`). Their motion is
 still exactly linear in the feature displacements, so three morph targets per feature
-hold it: target (i, a), a in x, y, z, moves vertex v by ``W[v, i]`` along axis a, and
-its animated weight at frame f is ``d_f[i, a]``. glTF's morphing
-``v0 + Σ_{i,a} d_f[i, a] W[:, i] e_a`` is then Dutreve §3.1's ``v0 + Σ_i W[:, i] d_f[i]``
-to float32 rounding. Target names are ``<feature>.x``, ``.y``, ``.z``.
+hold it: target (i, a), a in x, y, z, moves vertex v by ``s W[v, i]`` along axis a, and
+its animated weight at frame f is ``d_f[i, a] / s``. glTF's morphing
+``v0 + Σ_{i,a} (d_f[i, a] / s) s W[:, i] e_a`` is then Dutreve §3.1's
+``v0 + Σ_i W[:, i] d_f[i]`` to float32 rounding. Target names are ``<feature>.x``,
+``.y``, ``.z``.
+
+The scale s (`morph_scale`, mesh units per unit weight) is the power of two at or above
+the largest displacement of the exported clips, so every animated weight lies in
+[-1, 1] (Blender clamps shape-key values to [-10, 10], and a centimetre or millimetre
+face moves further than that) and scaling by it is exact in floating point.
 """
 
 from __future__ import annotations
@@ -29,6 +35,12 @@ def target_names(joint_names) -> list[str]:
     return [f"{name}.{axis}" for name in joint_names for axis in AXES]
 
 
+def morph_scale(clips) -> float:
+    """s: the smallest power of two >= every |d| of the clips (1 without motion)."""
+    largest = max((float(np.abs(c.displacements).max()) for c in clips), default=0.0)
+    return float(2.0 ** np.ceil(np.log2(largest))) if largest > 0 else 1.0
+
+
 def feature_columns(weights: SkinWeights) -> sp.csc_matrix:
     """(V, N) float32 weight matrix by columns: column i's non-zero rows (ascending) and
     values are feature i's morph targets."""
@@ -47,8 +59,10 @@ def axis_offsets(values: np.ndarray, axis: int) -> np.ndarray:
     return out
 
 
-def weights_from_targets(targets, n_features: int, method: str = "") -> SkinWeights:
-    """Skin weights from the 3N (V, 3) target offsets in `target_names` order.
+def weights_from_targets(targets, n_features: int, scale: float = 1.0,
+                         method: str = "") -> SkinWeights:
+    """Skin weights from the 3N (V, 3) target offsets in `target_names` order, made with
+    `scale` s (the offsets are s W).
 
     K is the most non-zero weights of a vertex (all N for a dense rig), so the rig that
     was exported comes back with its own sparsity. Raises `RetargetError` when the
@@ -59,10 +73,10 @@ def weights_from_targets(targets, n_features: int, method: str = "") -> SkinWeig
                             f"expected 3 per feature ({3 * n_features})")
     stacked = np.stack([np.asarray(t, dtype=np.float32) for t in targets])  # (3N, V, 3)
     by_axis = stacked.reshape(n_features, 3, -1, 3)
-    w = by_axis[:, 0, :, 0].T  # (V, N)
+    w = by_axis[:, 0, :, 0].T / np.float32(scale)  # (V, N)
     expected = np.zeros_like(by_axis)
     for a in range(3):
-        expected[:, a, :, a] = w.T
+        expected[:, a, :, a] = by_axis[:, 0, :, 0]
     if not np.array_equal(by_axis, expected):
         raise RetargetError("the morph targets are not per-feature unit displacements "
                             "(target <feature>.<axis> moving along its axis only, the same "

@@ -1,0 +1,124 @@
+"""Blender imports our glTF export: the armature, vertex groups, shape keys and animation,
+and the positions Blender evaluates equal our linear blend skinning.
+
+Blender runs as a Python module (PyPI ``bpy``) in its own interpreter, ``.venv-blender``
+beside ``.venv`` (or the one named by ``RETARGET_BLENDER_PYTHON``), because bpy 5.0 needs
+numpy < 2 (see tests/blender/requirements.txt); tests/blender/evaluate_glb.py does the
+Blender side in a subprocess. A missing interpreter fails the tests with the command
+that makes it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from retarget.export import clip_at_rate, export_gltf, joint_names
+from retarget.landmarks import from_vertex_indices
+from retarget.layouts import get_layout
+from retarget.mesh import mesh_from_arrays
+from retarget.sample_face import demo_weights, posed_vertices, sample_face
+from retarget.skin import skin_displacements
+from retarget.weights import compute_weights
+
+ROOT = Path(__file__).resolve().parents[1]
+EVALUATE = ROOT / "tests" / "blender" / "evaluate_glb.py"
+FPS = 30.0
+# key frames, subframes between keys (LINEAR interpolation), the last key
+FRAMES = (0.0, 6.0, 11.5, 17.25, 29.0)
+
+
+def blender_python() -> Path:
+    path = Path(os.environ.get("RETARGET_BLENDER_PYTHON", ROOT / ".venv-blender" / "bin" / "python"))
+    if not path.is_file():
+        pytest.fail(f"no Python with Blender's bpy at {path}: create it with `python3.11 -m venv "
+                    ".venv-blender && .venv-blender/bin/pip install -r tests/blender/requirements.txt` "
+                    "or name one in RETARGET_BLENDER_PYTHON")
+    return path
+
+
+@pytest.fixture(scope="module")
+def face():
+    f = sample_face(1)
+    mesh = mesh_from_arrays(f.vertices, f.faces, uv=f.uv, name="sample_face")
+    points = from_vertex_indices(f.landmarks68, mesh.n_vertices, "ibug68")
+    # a second of the demo around its surprise (3.7 s): jaw open, brows up
+    posed = posed_vertices(f, demo_weights(126, FPS)[96:])[:, f.landmarks68]
+    clip = clip_at_rate("demo", posed - f.vertices[f.landmarks68], FPS)
+    return {"mesh": mesh, "points": points, "clip": clip,
+            "size": float(np.linalg.norm(np.ptp(f.vertices, axis=0)))}
+
+
+def _blender(face, method, tmp_path_factory):
+    """Export with `method`'s rig, import in Blender: (weights, Blender's results)."""
+    mesh, points = face["mesh"], face["points"]
+    weights = compute_weights(method, mesh.vertices, mesh.faces, points, get_layout("ibug68"))
+    d = tmp_path_factory.mktemp(f"blender_{method}")
+    path = d / "face.glb"
+    path.write_bytes(export_gltf(mesh, points, weights, [face["clip"]]))
+    run = subprocess.run([str(blender_python()), str(EVALUATE), str(path), str(d / "out.npz"),
+                          str(FPS), *map(str, FRAMES)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    with np.load(d / "out.npz") as z:
+        result = {key: z[key] for key in ("positions", "rest", "bone_heads")}
+        result["info"] = json.loads(str(z["info"]))
+    return weights, result
+
+
+@pytest.fixture(scope="module")
+def skinned(face, tmp_path_factory):
+    return _blender(face, "ellipsoid", tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def morphed(face, tmp_path_factory):
+    return _blender(face, "rbf", tmp_path_factory)
+
+
+def _assert_matches_our_skinning(face, weights, result):
+    """Blender's evaluated vertices at FRAMES equal v0 + W d(t) within 1e-4 of the mesh
+    size, d linearly interpolated between the clip's frames (glTF LINEAR)."""
+    clip, v0 = face["clip"], face["mesh"].vertices
+    assert result["positions"].shape == (len(FRAMES), len(v0), 3)
+    np.testing.assert_allclose(result["rest"], v0, atol=1e-6 * face["size"])
+    motion = 0.0
+    for frame, got in zip(FRAMES, result["positions"]):
+        i, u = int(np.floor(frame)), frame % 1.0
+        d = (1 - u) * clip.displacements[i] + u * clip.displacements[min(i + 1, clip.n_frames - 1)]
+        expected = v0 + skin_displacements(weights, d)
+        error = np.abs(got - expected).max()
+        assert error < 1e-4 * face["size"], (frame, error)
+        motion = max(motion, np.abs(expected - v0).max())
+    assert motion > 100 * 1e-4 * face["size"]  # the comparison has motion to get wrong
+
+
+def test_blender_builds_an_armature_with_one_bone_per_feature(face, skinned):
+    _, result = skinned
+    info = result["info"]
+    names = joint_names(face["points"])
+    assert len(info["armatures"]) == 1 and info["meshes"] == ["sample_face"]
+    assert sorted(info["bones"]) == sorted(["root", *names])
+    assert "ARMATURE" in info["modifiers"]
+    assert set(names) <= set(info["vertex_groups"])
+    heads = dict(zip(info["bones"], result["bone_heads"]))
+    neutral = face["points"].positions(face["mesh"].vertices)
+    np.testing.assert_allclose([heads[n] for n in names], neutral, atol=1e-5 * face["size"])
+    assert info["actions"] == {"demo": [0.0, FPS - 1]}
+
+
+def test_blender_skins_like_we_do(face, skinned):
+    _assert_matches_our_skinning(face, *skinned)
+
+
+def test_blender_morphs_like_we_do(face, morphed):
+    weights, result = morphed
+    info = result["info"]
+    assert info["armatures"] == [] and info["shape_keys"][0] == "Basis"
+    assert info["shape_keys"][1:4] == [f"{joint_names(face['points'])[0]}.{a}" for a in "xyz"]
+    assert len(info["shape_keys"]) == 1 + 3 * face["points"].n_points
+    _assert_matches_our_skinning(face, weights, result)
