@@ -115,9 +115,13 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep,
     if not data:
         raise RetargetError(f"the uploaded file {file.filename!r} is empty")
     try:
-        take = read_take(data, filename=f"upload.{ext}", layout=layout or None,
-                         mapping=_json_form(mapping, "mapping"), fps=fps,
+        take = read_take(data, filename=f"{_default_name(file.filename, 'take')}.{ext}",
+                         layout=layout or None, mapping=_json_form(mapping, "mapping"), fps=fps,
                          labelled_vertices=_json_form(labelled_vertices, "labelled_vertices"))
+        if project["landmarks"]:
+            # a take naming none of the project's points could never drive it: refused
+            # now rather than when it is played
+            take.to_layout(project["landmarks"]["layout"] or "ibug68", partial=True)
     except RetargetError as exc:
         raise RetargetError(f"take file {file.filename!r} refused: {exc}") from exc
     return store.put_take(project["id"], take, name=name or _default_name(file.filename, "take"))
