@@ -1,0 +1,246 @@
+"""The webcam source end to end, with Chromium's fake camera: the page tracks the camera
+(MediaPipe face mesh, tracking/webcam.js), sends the points over the stream, and the
+server's live source sends back the frames that move the sample project's face.
+
+The performer is the first 5 s of ``../shared/data/video/face_expressions_480.mp4`` (a
+still face for about 1.5 s, then grimaces, an open mouth, raised brows), looped by the
+fake camera; that test skips only when ../shared is absent. A camera that sees a
+checkerboard (no face) runs everywhere.
+
+Ground truth is what the page itself sent: every points message is logged in the page,
+so the frames that come back are matched to the tracked points by frame index, and a
+recorded take is compared with the points sent while recording.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from playwright.sync_api import sync_playwright
+
+from retarget.layouts import get_layout
+from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project
+from tests.e2e.fake_camera import checkerboard, video_frames, write_y4m
+
+SHARED = Path(__file__).resolve().parents[3] / "shared"
+VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
+CAMERA_FPS = 30
+CAMERA_SIZE = 240  # px; MediaPipe's detector looks at 128 px and its mesh at 192 px
+RECORD_S = 2.0
+
+# Logs, in the page, the points messages and controls it sends (in sending order, which
+# is the order the server handles them in) and the frames and messages it receives.
+_LOG = """() => {
+    const stream = window.app.stream;
+    window.log = { sent: [], frames: [], messages: [] };
+    const sendPoints = stream.sendPoints.bind(stream);
+    stream.sendPoints = (buffer) => {
+        const view = new DataView(buffer);
+        window.log.sent.push({ index: view.getUint32(8, true), time: view.getFloat64(16, true),
+                               points: Array.from(new Float32Array(buffer, 32)) });
+        return sendPoints(buffer);
+    };
+    const send = stream.send.bind(stream);
+    stream.send = (message) => {
+        window.log.sent.push({ control: message.type, at: performance.now() });
+        return send(message);
+    };
+    stream.addEventListener('frame', (e) => window.log.frames.push({
+        index: e.detail.frameIndex, flags: e.detail.flags,
+        displacements: Array.from(e.detail.displacements) }));
+    stream.addEventListener('message', (e) => window.log.messages.push(e.detail));
+}"""
+
+needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared is absent")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """One real server for the module (starting one costs seconds on a loaded machine):
+    the tests only add to its sample project, and each checks what it added."""
+    srv = Server(tmp_path_factory.mktemp("webcam") / "data").start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture
+def camera(request, tmp_path) -> Path:
+    """The fake camera's Y4M file; `request.param` says what it shows."""
+    frames = (video_frames(VIDEO, 5 * CAMERA_FPS, CAMERA_SIZE) if request.param == "performer"
+              else [checkerboard(CAMERA_SIZE)] * CAMERA_FPS)
+    return write_y4m(tmp_path / "camera.y4m", frames, CAMERA_FPS)
+
+
+@pytest.fixture
+def browser(camera):
+    """Chromium whose only camera is the `camera` file, granted without asking; the
+    conftest `page` fixture (console errors fail the test, screenshots) runs on it."""
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=[
+            *CHROMIUM_ARGS, "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
+            f"--use-file-for-fake-video-capture={camera}"])
+        yield b
+        b.close()
+
+
+def open_sample(server, page) -> dict:
+    """The rigged sample project, shown in the page with the log running."""
+    sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
+    open_project(page, server, sample["id"])
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=10_000)
+    page.evaluate(_LOG)
+    return sample
+
+
+def play_webcam(page) -> None:
+    page.select_option("#source-select", "webcam")
+    page.click("#play")
+    page.wait_for_function("() => window.log.messages.some(m => m.type === 'started' && m.source === 'live')",
+                           timeout=60_000)
+
+
+def rest_vertices(server, project_id: str) -> np.ndarray:
+    """(V * 3) float32 the mesh at rest, as the server stores it."""
+    arrays = server.read(f"/api/projects/{project_id}/mesh/arrays")
+    n = np.frombuffer(arrays, "<u4", 1, 8)[0]
+    return np.frombuffer(arrays, "<f4", 3 * n, 16)
+
+
+def on_screen(page) -> np.ndarray:
+    return np.array(page.evaluate("() => Array.from(window.app.face.deformedPositions())"), np.float32)
+
+
+def press(page, selector: str) -> None:
+    """Click a button of a page whose main thread is busy tracking: a click event, as
+    page.click's waits for steady animation frames take seconds there."""
+    page.dispatch_event(selector, "click")
+
+
+def stop_releases_the_camera_and_rests(page, server, project_id: str) -> None:
+    """Stop: the camera track ends, the video lets go of it, no more points go out, and
+    the face is back at rest."""
+    page.evaluate("() => { window.cameraStream = window.app.sources.webcam.stream; }")
+    press(page, "#stop")
+    page.wait_for_function("() => window.cameraStream.getTracks().every(t => t.readyState === 'ended')",
+                           timeout=10_000)
+    assert page.evaluate("() => document.getElementById('webcam-video').srcObject === null")
+    assert page.is_hidden("#webcam-box")
+    page.wait_for_function("() => window.log.frames.length > 0 && window.log.frames.at(-1).flags & 1",
+                           timeout=10_000)
+    sent = page.evaluate("() => window.log.sent.length")
+    page.wait_for_timeout(1000)
+    assert page.evaluate("() => window.log.sent.length") == sent
+    assert np.abs(on_screen(page) - rest_vertices(server, project_id)).max() < 1e-5
+
+
+def _series(points: np.ndarray, layout) -> dict[str, np.ndarray]:
+    """(F,) mouth opening and brow height of (F, N, 3) points, y up."""
+    at = {name: points[:, i] for i, name in enumerate(layout.point_names)}
+    regions = np.array(layout.regions)
+    return {"mouth": at["lip_upper_inner_center"][:, 1] - at["lip_lower_inner_center"][:, 1],
+            "brows": points[:, regions == "brows", 1].mean(axis=1) - points[:, regions == "eyes", 1].mean(axis=1)}
+
+
+@needs_shared
+@pytest.mark.parametrize("camera", ["performer"], indirect=True)
+def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page):
+    sample = open_sample(server, page)
+    layout = get_layout(sample["landmarks"]["layout"])
+    # no filter: each frame that comes back depends on that frame's points only
+    page.click("#conditioning summary")
+    page.select_option("#filter", "none")
+    play_webcam(page)
+    assert page.evaluate("() => { const v = document.getElementById('webcam-video');"
+                         " return !v.paused && v.readyState >= 2 && v.videoWidth; }") == CAMERA_SIZE
+    page.wait_for_function("() => window.log.frames.length >= 12", timeout=60_000)
+    assert np.abs(on_screen(page) - rest_vertices(server, sample["id"])).max() > 0.05  # cm
+    assert page.inner_text("#source-note") == "Webcam: tracking a face."
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "test_webcam_playing.png"))  # the camera beside the face it drives
+
+    log = page.evaluate("() => window.log")
+    sent = {s["index"]: np.array(s["points"], np.float32).reshape(-1, 3) for s in log["sent"] if "index" in s}
+    frames = [f for f in log["frames"] if f["index"] in sent]
+    assert len(frames) >= 12 and all(f["flags"] == 0 for f in frames)  # a face, every frame
+    performer = _series(np.stack([sent[f["index"]] for f in frames]), layout)
+    target = _series(np.stack([np.reshape(f["displacements"], (-1, 3)) for f in frames]), layout)
+    eyes_apart = np.median([p[layout.point_names.index("eye_left_outer"), 0]
+                            - p[layout.point_names.index("eye_right_outer"), 0] for p in sent.values()])
+    for part in ("mouth", "brows"):
+        # the performer's own motion is there to follow...
+        assert np.ptp(performer[part]) > 0.05 * eyes_apart
+        # ...and the face on screen follows it: opens its mouth, raises its brows with her
+        r = np.corrcoef(performer[part], target[part])[0, 1]
+        assert r > 0.8, f"{part}: correlation {r:.2f} between performer and target"
+        assert np.ptp(target[part]) > 0.05, f"{part}: the target moves only {np.ptp(target[part]):.3f} cm"
+
+    # capture neutral: acknowledged, and frames come again once the new neutral is in
+    press(page, "#recapture-neutral")
+    page.wait_for_function("() => window.log.messages.some(m => m.type === 'neutral')", timeout=10_000)
+    n = page.evaluate("() => window.log.frames.length")
+    page.wait_for_function(f"() => window.log.frames.length > {n}", timeout=30_000)
+
+    # record about 2 s under a name
+    page.fill("#record-name", "webcam e2e")
+    press(page, "#record")
+    page.wait_for_function("() => window.log.messages.some(m => m.type === 'recording')", timeout=10_000)
+    assert page.inner_text("#record").startswith("■")
+    page.wait_for_timeout(RECORD_S * 1000)
+    press(page, "#record")
+    page.wait_for_selector("#take-list li:has-text('webcam e2e')", timeout=20_000)
+    page.wait_for_function("() => { const s = window.log.sent;"
+                           " return s.slice(s.findLastIndex(m => m.control === 'record_stop')).some(m => 'index' in m); }",
+                           timeout=10_000)
+    log = page.evaluate("() => window.log.sent")
+    start, stop = (max(i for i, s in enumerate(log) if s.get("control") == c) for c in ("record", "record_stop"))
+    recorded = [s for s in log[start + 1:stop] if "index" in s]
+    take = next(t for t in server.api("GET", f"/api/projects/{sample['id']}/takes") if t["name"] == "webcam e2e")
+    assert take["n_frames"] == len(recorded) >= 2
+    assert take["n_points"] == layout.n_points and take["dims"] == 3 and take["layout"] == layout.name
+    assert take["duration"] == pytest.approx(recorded[-1]["time"] - recorded[0]["time"], abs=1e-6)
+    # the frames span the time the recording was on, give or take the time between two
+    # tracked frames at either end (0.25 to 1 s in SwiftShader, with the machine's load)
+    on = (log[stop]["at"] - log[start]["at"]) / 1000
+    before = next(s for s in reversed(log[:start]) if "index" in s)
+    after = next(s for s in log[stop:] if "index" in s)
+    gap = np.diff([s["time"] for s in (before, *recorded, after)]).max()
+    assert on > RECORD_S and on - 2 * gap <= take["duration"] <= on + gap
+    expected = np.array([s["points"] for s in recorded], np.float32).reshape(len(recorded), -1, 3)
+
+    stop_releases_the_camera_and_rests(page, server, sample["id"])
+
+    server.restart()
+    kept = server.api("GET", f"/api/projects/{sample['id']}/takes/{take['id']}")
+    assert kept["name"] == "webcam e2e" and kept["n_frames"] == take["n_frames"]
+    points = np.load(io.BytesIO(server.read(f"/api/projects/{sample['id']}/takes/{take['id']}/points")))
+    np.testing.assert_array_equal(points, expected)
+
+
+@pytest.mark.parametrize("camera", ["no face"], indirect=True)
+def test_a_camera_without_a_face_says_so_and_leaves_the_face_at_rest(server, page):
+    sample = open_sample(server, page)
+    before = [server.api("GET", f"/api/projects/{sample['id']}{part}") for part in ("", "/takes")]
+    play_webcam(page)
+    page.wait_for_function("() => document.getElementById('source-note').textContent.includes('no face')",
+                           timeout=60_000)
+    assert page.inner_text("#source-note") == \
+        "Webcam: no face found in the camera image. Face the camera, in good light."
+    page.wait_for_function("() => window.log.sent.filter(s => 'index' in s).length >= 5", timeout=30_000)
+
+    log = page.evaluate("() => window.log")
+    lost = np.array([s["points"] for s in log["sent"] if "index" in s], np.float32)
+    assert np.isnan(lost).all()  # every frame went, as lost points
+    assert log["frames"] == []  # no neutral, so nothing to show
+    assert not [m for m in log["messages"] if m["type"] == "error"]
+    assert page.inner_text("#error").strip() == ""
+    assert np.abs(on_screen(page) - rest_vertices(server, sample["id"])).max() < 1e-5
+    assert [server.api("GET", f"/api/projects/{sample['id']}{part}") for part in ("", "/takes")] == before
+
+    stop_releases_the_camera_and_rests(page, server, sample["id"])
