@@ -21,6 +21,10 @@ Subcommands (``retarget <command> --help`` for the details):
 ``calibrate``
     A stereo camera pair's calibration from checkerboard or circle-grid views, for
     ``track --method stereo``.
+``export-gltf``
+    The target mesh rigged (feature points as joints of a glTF skin, or morph targets
+    for rigs with negative weights) and, given a source, the retargeted take animated,
+    as one glTF 2.0 binary (`retarget.export`).
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
 a missing or unreadable file, arrays that do not agree) is one line
@@ -36,7 +40,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +48,8 @@ from tqdm import tqdm
 
 from retarget import __version__
 from retarget.errors import RetargetError
+from retarget.export import clip_at_rate, export_gltf
+from retarget.export.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
 from retarget.mesh import Mesh, load_mesh, mesh_from_arrays, save_mesh
@@ -52,7 +58,8 @@ from retarget.rbf import KERNELS
 from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
 
-__all__ = ["main", "build_parser", "transfer_files", "TransferResult"]
+__all__ = ["main", "build_parser", "transfer_files", "TransferResult", "export_gltf_files",
+           "ExportResult"]
 
 PROG = "retarget"
 DEMO_FRAMES = 90
@@ -291,6 +298,121 @@ class _bar:
 
 
 # ---------------------------------------------------------------------------------------
+# export-gltf
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What `export_gltf_files` did.
+
+    n_vertices, n_points : V and N of the exported face.
+    n_frames : F frames of the animation (0 without a source).
+    fps : the animation's frame rate.
+    deformation : "skin" or "morph" (see `retarget.export.gltf_writer`).
+    method : the rig's method.
+    seconds : wall time, weights and retargeting included.
+    n_bytes : size of the file written.
+    out : the path written.
+    """
+
+    n_vertices: int
+    n_points: int
+    n_frames: int
+    fps: float
+    deformation: str
+    method: str
+    seconds: float
+    n_bytes: int
+    out: Path
+
+    def summary(self) -> str:
+        """The one-line report `export-gltf` prints."""
+        animation = (f", {self.n_frames} frames at {self.fps:g} fps" if self.n_frames
+                     else ", no animation")
+        kind = "feature joints of a skin" if self.deformation == "skin" else \
+            "feature joints, morph targets"
+        return (f"exported {self.n_vertices} vertices, {self.n_points} {kind} "
+                f"({self.method}){animation}: {self.n_bytes / 2**20:.1f} MiB in "
+                f"{self.seconds:.2f} s -> {self.out}")
+
+
+def export_gltf_files(
+    mesh_path,
+    landmarks,
+    out,
+    *,
+    rig=None,
+    deformer: str = DEFAULT_METHOD,
+    source_neutral=None,
+    source_frames=None,
+    fps: float = 30.0,
+    kernel: str | None = None,
+    smoothing: float | None = None,
+    mask: list[str] | None = None,
+    layout: str | None = None,
+    quiet: bool = False,
+) -> ExportResult:
+    """Write a target mesh, rigged and optionally animated, as a glTF 2.0 binary (.glb).
+
+    mesh_path, landmarks : the target mesh file and its landmarks JSON (N points); the
+        joints are named after the layout's points (`retarget.export.joint_names`).
+    out : the .glb written (`retarget.export.export_gltf`; mesh units kept).
+    rig : ``.npz`` from `SkinWeights.save`; else weights of `deformer` are computed.
+    source_neutral, source_frames : ``.npy`` S0 (N, 2|3) and S (F, N, 2|3), as for
+        `transfer_files`; both or neither. Given, the take is retargeted (Dutreve §4)
+        and exported as one animation named after the frames file, frame f at f / fps.
+    kernel, smoothing, mask : the retargeting's (`transfer_files`); they need a source.
+    layout : layout name; default the landmarks JSON's ``"layout"``, if any.
+
+    Raises `RetargetError` for every refusal, naming the file or option.
+    """
+    start = time.perf_counter()
+    out = Path(out)
+    _require_parent(out)
+    if (source_neutral is None) != (source_frames is None):
+        raise RetargetError("--source-neutral and --source-frames go together: give both "
+                            "for an animation, or neither")
+    if source_frames is None and (mask or kernel is not None or smoothing is not None):
+        raise RetargetError("--mask, --kernel and --smoothing shape the animation: give "
+                            "--source-neutral and --source-frames too")
+    if not np.isfinite(fps) or fps <= 0:
+        raise RetargetError(f"fps must be a positive number; got {fps!r}")
+    mesh = _read_mesh(mesh_path)
+    points = _read_landmarks(landmarks, mesh)
+    the_layout = _layout_for(layout, points)
+    if the_layout is not None:
+        points = replace(points, layout=the_layout.name)
+    n = points.n_points
+    clips = []
+    if source_frames is not None:
+        s0 = _read_npy(source_neutral, "source neutral")
+        frames = _read_npy(source_frames, "source frames")
+        _check_source(s0, frames, n)
+        active = _mask_for(mask, the_layout, n)
+    if rig is not None:
+        weights = _read_rig(rig, mesh, n)
+    else:
+        weights = _weights(deformer, mesh, points, the_layout, quiet=quiet)
+    if source_frames is not None:
+        retargeter = Retargeter(kernel or DEFAULT_KERNEL, smoothing=smoothing, mask=active)
+        retargeter.fit(s0, points.positions(mesh.vertices))
+        d = np.empty((len(frames), n, 3), np.float32)
+        chunk = 256
+        with _bar(len(frames), "retarget", "frame", quiet) as advance:
+            for i in range(0, len(frames), chunk):
+                d[i:i + chunk] = retargeter.displacements(frames[i:i + chunk])
+                advance((i + chunk) / len(frames))
+        clips.append(clip_at_rate(Path(source_frames).stem, d, fps))
+    with _bar(100, "glTF", "%", quiet) as advance:
+        data = export_gltf(mesh, points, weights, clips, progress=advance)
+    _write_with(out, lambda f: f.write(data))
+    return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps,
+                        "skin" if is_joint_based(weights) else "morph",
+                        weights.method or ("rig" if rig is not None else deformer),
+                        time.perf_counter() - start, len(data), out)
+
+
+# ---------------------------------------------------------------------------------------
 # file reading and writing: every failure becomes a RetargetError naming the file
 
 
@@ -388,6 +510,26 @@ def _cmd_transfer(args) -> int:
         mask=args.mask,
         layout=args.layout,
         rig=args.rig,
+        quiet=args.quiet,
+    )
+    print(result.summary())
+    return 0
+
+
+def _cmd_export_gltf(args) -> int:
+    result = export_gltf_files(
+        args.mesh,
+        args.landmarks,
+        args.out,
+        rig=args.rig,
+        deformer=args.deformer or DEFAULT_METHOD,
+        source_neutral=args.source_neutral,
+        source_frames=args.source_frames,
+        fps=args.fps,
+        kernel=args.kernel,
+        smoothing=args.smoothing,
+        mask=args.mask,
+        layout=args.layout,
         quiet=args.quiet,
     )
     print(result.summary())
@@ -742,6 +884,39 @@ def build_parser() -> argparse.ArgumentParser:
                    help="square (or circle spacing) size; the units of the 3D points, e.g. mm")
     p.add_argument("--out", required=True, metavar="CALIB.npz", help="the calibration, written here")
     p.set_defaults(run=_cmd_calibrate)
+
+    p = commands.add_parser(
+        "export-gltf", parents=[quiet], help="export the rigged, animated face as glTF (.glb)",
+        description="Write the target mesh (with its uv, normals and material), a joint per "
+        "feature point and the rig (a glTF skin; morph targets for rigs with negative "
+        "weights) as a glTF 2.0 binary; with a source, the retargeted take as an animation. "
+        "Units are the mesh's own.")
+    p.add_argument("--mesh", required=True, metavar="MESH",
+                   help="target mesh (obj, ply, stl, off, gltf, glb)")
+    p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
+    p.add_argument("--out", required=True, metavar="OUT.glb", help="the glTF binary, written here")
+    weights = p.add_mutually_exclusive_group()
+    weights.add_argument("--deformer", choices=list(METHODS), default=None, metavar="NAME",
+                         help=f"one of {methods} (default: {DEFAULT_METHOD}); ellipsoid and "
+                         "geodesic export as a skin, the others as morph targets")
+    weights.add_argument("--rig", metavar="RIG.npz",
+                         help="skin weights from 'retarget rig', instead of computing them")
+    p.add_argument("--source-neutral", metavar="S0.npy",
+                   help="(N, 2|3) neutral source points (with --source-frames: animate)")
+    p.add_argument("--source-frames", metavar="S.npy",
+                   help="(F, N, 2|3) source points per frame; the animation takes its name")
+    p.add_argument("--fps", type=_positive_float, default=30.0,
+                   help="frames per second of the source frames (default: 30)")
+    p.add_argument("--kernel", choices=list(KERNELS), default=None, metavar="NAME",
+                   help=f"RBF space-transform kernel (default: {DEFAULT_KERNEL})")
+    p.add_argument("--smoothing", type=_non_negative_float, default=None, metavar="X",
+                   help="space-transform smoothing, relative (default: as for transfer)")
+    p.add_argument("--mask", nargs="+", action="extend", metavar="NAME",
+                   help="partial retargeting: move only these regions, groups, point names "
+                   "or feature indices")
+    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
+                   help="landmark layout (joint names); default: the landmarks JSON's \"layout\"")
+    p.set_defaults(run=_cmd_export_gltf)
 
     p = commands.add_parser("layouts", help="list the landmark layouts and their regions",
                             description="List the landmark layouts, their point counts and "

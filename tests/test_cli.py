@@ -312,3 +312,83 @@ def test_installed_script_transfers_and_refuses(files, tmp_path):
                           text=True, timeout=120)
     assert done.returncode == 2
     assert done.stderr.strip() == f"retarget: error: target mesh '{missing}' does not exist"
+
+
+# ---------------------------------------------------------------------------------------
+# export-gltf
+
+
+def _export_args(files, out, *extra, source=True):
+    args = ["export-gltf", "--mesh", str(files["mesh"]), "--landmarks", str(files["t0"]),
+            "--out", str(out), "--quiet", *extra]
+    if source:
+        args += ["--source-neutral", str(files["s0"]), "--source-frames", str(files["s"])]
+    return args
+
+
+def test_export_gltf_animates_what_transfer_computes(files, tmp_path, capsys):
+    """The .glb's clip, skinned with its own weights, is the transfer's result."""
+    from retarget.export import read_gltf
+    from retarget.skin import skin_displacements
+    from tests.gltf_check import assert_valid_gltf
+
+    out = tmp_path / "face.glb"
+    assert main(_export_args(files, out, "--deformer", "ellipsoid", "--fps", "24")) == 0
+    text = capsys.readouterr().out
+    assert f"68 feature joints of a skin (ellipsoid), {len(EXPRESSION_FRAMES)} frames at 24 fps" in text
+    assert str(out) in text
+    assert_valid_gltf(out)
+    back = read_gltf(out)
+    assert back.deformation == "skin" and back.joint_names == IBUG.point_names
+    (clip,) = back.clips
+    assert clip.name == "s"
+    np.testing.assert_allclose(clip.times, np.arange(len(EXPRESSION_FRAMES)) / 24, rtol=1e-6)
+    transferred = _run(files, tmp_path / "out.npy")
+    animated = back.mesh.vertices + skin_displacements(back.weights, clip.displacements)
+    np.testing.assert_allclose(animated, transferred, atol=1e-4)
+    assert np.abs(transferred[JAW] - transferred[NEUTRAL]).max() > 0.3
+
+
+def test_export_gltf_partial_morph_targets(files, tmp_path):
+    """A dense rig exports as morph targets; --mask brows moves only the brows' joints."""
+    from retarget.export import read_gltf
+
+    out = tmp_path / "brows.glb"
+    assert main(_export_args(files, out, "--deformer", "rbf", "--mask", "brows")) == 0
+    back = read_gltf(out)
+    assert back.deformation == "morph" and back.weights.method == "rbf"
+    moved = np.abs(back.clips[0].displacements).max(axis=(0, 2))
+    assert moved[BROWS].min() > 0.1
+    assert np.delete(moved, BROWS).max() == 0
+
+
+def test_export_gltf_of_a_rig_without_animation(files, tmp_path, capsys):
+    from retarget.export import read_gltf
+
+    rig = tmp_path / "rig.npz"
+    assert main(["rig", str(files["mesh"]), "--landmarks", str(files["t0"]), "--out", str(rig),
+                 "--method", "geodesic", "--quiet"]) == 0
+    out = tmp_path / "rig.glb"
+    assert main(_export_args(files, out, "--rig", str(rig), source=False)) == 0
+    assert "no animation" in capsys.readouterr().out
+    back = read_gltf(out)
+    assert back.clips == () and back.deformation == "skin"
+    np.testing.assert_allclose(back.weights.dense(), SkinWeights.load(rig).dense(), atol=1e-7)
+
+
+@pytest.mark.parametrize(("extra", "source", "message"), [
+    (("--source-neutral", "{s0}"), False, "--source-neutral and --source-frames go together"),
+    (("--mask", "brows"), False, "--mask, --kernel and --smoothing shape the animation"),
+    (("--fps", "0"), True, "argument --fps: expected a positive number, got 0"),
+    (("--rig", "{dir}/missing.npz"), True, "rig '{dir}/missing.npz' does not exist"),
+    (("--deformer", "rbf", "--rig", "x.npz"), True, "argument --rig: not allowed with argument --deformer"),
+    (("--out", "{dir}/no/such.glb"), True, "cannot write '{dir}/no/such.glb'"),
+])
+def test_export_gltf_refusals(files, tmp_path, capsys, extra, source, message):
+    fill = {"s0": files["s0"], "dir": tmp_path}
+    extra = [e.format(**fill) for e in extra]
+    out = tmp_path / "out.glb"
+    assert main(_export_args(files, out, *extra, source=source)) == 2
+    captured = capsys.readouterr()
+    assert f"retarget: error: {message.format(**fill)}" in captured.err
+    assert captured.out == "" and not out.exists()
