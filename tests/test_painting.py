@@ -205,12 +205,18 @@ def test_resetting_a_joint_keeps_the_proportions_of_the_rest_of_the_row():
     np.testing.assert_allclose(after, before * (after[-1] / before[-1]), atol=1e-6)
 
 
-def test_reset_of_a_signed_rig_stays_in_the_envelope():
+def test_reset_of_a_signed_rig_undoes_raising_exactly_and_lowering_within_the_envelope():
     auto = signed_rig()
-    painted = paint(auto, auto, list(range(10)), 2, np.linspace(0, 1, 10))
+    a = dense(auto)[:, 2]
+    raised = np.flatnonzero(a < 0.9)[:8]
+    painted = paint(auto, auto, raised, 2, np.minimum(1.0, a[raised] + 0.1))
+    assert not len(painted_vertices(reset_joints(painted, auto, [2]), auto))
+
+    lowered = np.flatnonzero((a > 0.2) & (a < 1))[:8]
+    painted = paint(auto, auto, lowered, 2, 0.0)
     reset = reset_joints(painted, auto, [2, 2])
     weight_edit(np.arange(auto.n_vertices), *np.broadcast_arrays(np.arange(N), dense(reset)), auto)  # valid
-    np.testing.assert_allclose(dense(reset)[:, 2], dense(auto)[:, 2], atol=1e-6)
+    np.testing.assert_allclose(dense(reset)[:, 2], a, atol=1e-6)
 
 
 @pytest.mark.parametrize("joints, message", [

@@ -167,11 +167,14 @@ def reset_joints(rig: SkinWeights, automatic: SkinWeights, joints=None) -> SkinW
     automatic rig's.
 
     For each joint j in turn, every vertex whose w_j differs between the rigs gets the
-    automatic w_j by `with_weight`: resetting j is painting j back, and the rest of the
-    row (root included) keeps its painted proportions. On a non-negative rig, resetting
-    the joint painted last restores its vertices' automatic rows exactly. Where that rule cannot
-    reach the automatic row (an automatic weight outside [0, 1], or a row painted all j
-    with nothing left to scale) the vertex takes its automatic row.
+    automatic w_j back, the rest of its row (root included) keeping its painted
+    proportions: scaled by ``(1 - a) / (1 - p)`` for the painted weight p and automatic
+    weight a, which undoes raising or lowering j exactly, or where that would leave the
+    envelope (a lowered row of an interpolating rig) by `with_weight`. So resetting the
+    joint painted last restores its vertices' automatic rows. Where neither rule can
+    reach the automatic w_j (a row painted all j with nothing left to scale, or an
+    automatic weight outside [0, 1] that scaling cannot reach inside the envelope) the
+    vertex takes its automatic row.
     """
     _check_compatible(rig, automatic)
     if joints is None:
@@ -192,11 +195,15 @@ def reset_joints(rig: SkinWeights, automatic: SkinWeights, joints=None) -> SkinW
             continue
         rows = automatic_rows(current, vertices)
         auto_rows = automatic_rows(automatic, vertices)
-        b = auto[vertices]
-        reachable = (b >= 0) & (b <= 1)
+        b, p = auto[vertices], painted[vertices]
+        scalable = np.abs(1.0 - p) > CHANGED
+        scaled = rows * np.divide(1.0 - b, 1.0 - p, out=np.ones_like(p), where=scalable)[:, None]
+        scaled[:, j] = b
+        scalable &= _inside(scaled, auto_rows)
         _, room = _lowered_target(rows, j)
-        reachable &= (b >= rows[:, j]) | (room > 0)
-        reset = np.where(reachable[:, None], with_weight(rows, j, np.clip(b, 0, 1)), auto_rows)
+        blendable = (b >= 0) & (b <= 1) & ((b >= p) | (room > 0))
+        blended = with_weight(rows, j, np.clip(b, 0, 1))
+        reset = np.where(scalable[:, None], scaled, np.where(blendable[:, None], blended, auto_rows))
         kept = SkinWeights.from_dense(reset, rig.n_influences)
         current = painted_rig(current, WeightEdit(vertices, kept.indices, kept.weights))
     return current
@@ -247,10 +254,25 @@ def _check_distinct_joints(idx: np.ndarray, w: np.ndarray, v: np.ndarray) -> Non
                             f"each joint at most once per row")
 
 
+def _envelope(auto: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(R,) lowest and highest weight and lowest and highest sum the rows of (R, N)
+    automatic rows `auto` allow (module docstring)."""
+    sums = auto.sum(1)
+    return (np.minimum(0.0, auto.min(1)), np.maximum(1.0, auto.max(1)),
+            np.minimum(0.0, sums), np.maximum(1.0, sums))
+
+
+def _inside(rows: np.ndarray, auto: np.ndarray) -> np.ndarray:
+    """(R,) bool: each of the (R, N) `rows` lies in its automatic row's envelope."""
+    low, high, sum_low, sum_high = _envelope(auto)
+    sums = rows.sum(1)
+    return ((rows >= low[:, None] - TOLERANCE).all(1) & (rows <= high[:, None] + TOLERANCE).all(1)
+            & (sums >= sum_low - TOLERANCE) & (sums <= sum_high + TOLERANCE))
+
+
 def _check_envelope(rows: np.ndarray, auto: np.ndarray, v: np.ndarray) -> None:
     """Refuse rows outside their automatic rows' envelope (module docstring)."""
-    low = np.minimum(0.0, auto.min(1))
-    high = np.maximum(1.0, auto.max(1))
+    low, high, sum_low, sum_high = _envelope(auto)
     bad = np.argwhere(rows < low[:, None] - TOLERANCE)
     if len(bad):
         r, j = bad[0]
@@ -268,18 +290,18 @@ def _check_envelope(rows: np.ndarray, auto: np.ndarray, v: np.ndarray) -> None:
         raise RetargetError(f"weight {rows[r, j]:.6g} (row {r}, vertex {v[r]}, joint {j}) is over "
                             f"{high[r]:.6g}, the most a weight of vertex {v[r]} may be (1, or its "
                             f"largest automatic weight)")
-    sums, auto_sums = rows.sum(1), auto.sum(1)
-    over = np.flatnonzero(sums > np.maximum(1.0, auto_sums) + TOLERANCE)
+    sums = rows.sum(1)
+    over = np.flatnonzero(sums > sum_high + TOLERANCE)
     if len(over):
         r = over[0]
         raise RetargetError(f"row {r} (vertex {v[r]}) sums to {sums[r]:.6g}, over "
-                            f"{max(1.0, auto_sums[r]):.6g}: a vertex's feature weights sum to at "
-                            f"most 1 (or its automatic sum), the static root joint holding the rest")
-    under = np.flatnonzero(sums < np.minimum(0.0, auto_sums) - TOLERANCE)
+                            f"{sum_high[r]:.6g}: a vertex's feature weights sum to at most 1 (or "
+                            f"its automatic sum), the static root joint holding the rest")
+    under = np.flatnonzero(sums < sum_low - TOLERANCE)
     if len(under):
         r = under[0]
         raise RetargetError(f"row {r} (vertex {v[r]}) sums to {sums[r]:.6g}, below "
-                            f"{min(0.0, auto_sums[r]):.6g}, its automatic sum")
+                            f"{sum_low[r]:.6g}, its automatic sum")
 
 
 def _check_compatible(rig: SkinWeights, automatic: SkinWeights) -> None:
