@@ -25,6 +25,7 @@ import trimesh
 from trimesh.visual.material import SimpleMaterial
 
 from retarget.errors import RetargetError
+from retarget.material import Material, material_from_trimesh
 
 __all__ = [
     "DEFAULT_MAX_FACES",
@@ -65,6 +66,9 @@ class Mesh:
         gave them; a glTF node transform rotates and renormalises them. Read-only.
     name : str
         The file stem for a path or a named file object, else what the caller gave.
+    material : Material or None
+        The surface material of a glTF/GLB source (`retarget.material`), or what the
+        caller gave; None for the other formats, whose materials are not read.
     """
 
     vertices: np.ndarray
@@ -72,6 +76,7 @@ class Mesh:
     uv: np.ndarray | None = None
     normals: np.ndarray | None = None
     name: str = ""
+    material: Material | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -143,7 +148,8 @@ def load_mesh(
       and the instances are concatenated in the order trimesh's loader walks the node
       tree: depth first, the scene's root nodes last to first, so for a flat scene the
       reverse of the file's node list. The order is fixed for a given file. Points and
-      lines are ignored. trimesh flips glTF's v so that `uv` has OBJ's convention.
+      lines are ignored. trimesh flips glTF's v so that `uv` has OBJ's convention. The
+      material of the first instance is kept (`retarget.material.material_from_trimesh`).
     """
     data, suffix, label, name, resolver = _source_bytes(source, max_bytes)
     kind = _file_type(file_type if file_type is not None else suffix, label)
@@ -185,8 +191,10 @@ def load_mesh(
             f"{n_obj_vertices - len(vertices)} unused ones at the end, which would "
             "change the vertex count: remove them from the file"
         )
+    material = material_from_trimesh(parts[0][0].visual) if kind in ("gltf", "glb") else None
     return _validated(
-        vertices, faces, uv, normals, name, max_vertices, max_faces, where=label
+        vertices, faces, uv, normals, name, max_vertices, max_faces, where=label,
+        material=material,
     )
 
 
@@ -197,6 +205,7 @@ def mesh_from_arrays(
     uv=None,
     normals=None,
     name: str = "",
+    material: Material | None = None,
     max_vertices: int = DEFAULT_MAX_VERTICES,
     max_faces: int = DEFAULT_MAX_FACES,
 ) -> Mesh:
@@ -214,6 +223,8 @@ def mesh_from_arrays(
         Per-vertex normals, stored as given (not renormalised).
     name : str
         Carried on the mesh.
+    material : Material or None
+        Carried on the mesh.
     max_vertices, max_faces : int
         Refuse meshes with more vertices or faces than this.
 
@@ -224,7 +235,8 @@ def mesh_from_arrays(
         is NaN or infinite, or a face index is negative or past the last vertex.
     """
     return _validated(
-        vertices, faces, uv, normals, name, max_vertices, max_faces, where="mesh"
+        vertices, faces, uv, normals, name, max_vertices, max_faces, where="mesh",
+        material=material,
     )
 
 
@@ -361,7 +373,8 @@ def _concatenated(parts):
     )
 
 
-def _validated(vertices, faces, uv, normals, name, max_vertices, max_faces, *, where):
+def _validated(vertices, faces, uv, normals, name, max_vertices, max_faces, *, where,
+               material=None):
     """The checks of `load_mesh` and `mesh_from_arrays`; `where` prefixes messages."""
     try:
         vertices = np.array(vertices, dtype=np.float64)
@@ -417,12 +430,18 @@ def _validated(vertices, faces, uv, normals, name, max_vertices, max_faces, *, w
             f"{where}: faces index vertex {faces.max()} but there are only "
             f"{n_vertices} vertices (valid indices 0..{n_vertices - 1})"
         )
+    if material is not None and not isinstance(material, Material):
+        raise RetargetError(
+            f"{where}: material must be a retarget.material.Material or None, "
+            f"got {type(material).__name__}"
+        )
     return Mesh(
         vertices=_read_only(vertices),
         faces=_read_only(faces.astype(np.int64)),
         uv=_per_vertex(uv, "uv", 2, n_vertices, where),
         normals=_per_vertex(normals, "normals", 3, n_vertices, where),
         name=name,
+        material=material,
     )
 
 

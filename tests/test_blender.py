@@ -1,5 +1,5 @@
-"""Blender imports our glTF export: the armature, vertex groups, shape keys and animation,
-and the positions Blender evaluates equal our linear blend skinning.
+"""Blender imports our glTF export: the armature, vertex groups, shape keys, animation and
+material, and the positions Blender evaluates equal our linear blend skinning.
 
 Blender runs as a Python module (PyPI ``bpy``) in its own interpreter, ``.venv-blender``
 beside ``.venv`` (or the one named by ``RETARGET_BLENDER_PYTHON``), because bpy 5.0 needs
@@ -10,6 +10,7 @@ that makes it.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
@@ -17,10 +18,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from retarget.export import clip_at_rate, export_gltf, joint_names
 from retarget.landmarks import from_vertex_indices
 from retarget.layouts import get_layout
+from retarget.material import Material
 from retarget.mesh import mesh_from_arrays
 from retarget.sample_face import demo_weights, posed_vertices, sample_face
 from retarget.skin import skin_displacements
@@ -45,7 +48,11 @@ def blender_python() -> Path:
 @pytest.fixture(scope="module")
 def face():
     f = sample_face(1)
-    mesh = mesh_from_arrays(f.vertices, f.faces, uv=f.uv, name="sample_face")
+    image = io.BytesIO()
+    Image.new("RGB", (16, 8), (230, 180, 160)).save(image, format="PNG")
+    skin = Material(name="skin", base_color=(0.9, 0.8, 0.7, 1.0), metallic=0.0, roughness=0.6,
+                    base_color_texture=image.getvalue())
+    mesh = mesh_from_arrays(f.vertices, f.faces, uv=f.uv, name="sample_face", material=skin)
     points = from_vertex_indices(f.landmarks68, mesh.n_vertices, "ibug68")
     # a second of the demo around its surprise (3.7 s): jaw open, brows up
     posed = posed_vertices(f, demo_weights(126, FPS)[96:])[:, f.landmarks68]
@@ -109,6 +116,7 @@ def test_blender_builds_an_armature_with_one_bone_per_feature(face, skinned):
     neutral = face["points"].positions(face["mesh"].vertices)
     np.testing.assert_allclose([heads[n] for n in names], neutral, atol=1e-5 * face["size"])
     assert info["actions"] == {"demo": [0.0, FPS - 1]}
+    assert info["materials"] == [{"name": "skin", "images": [[16, 8]]}]
 
 
 def test_blender_skins_like_we_do(face, skinned):

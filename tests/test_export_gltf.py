@@ -361,3 +361,34 @@ def test_reader_refusals(tmp_path):
         read_gltf(plain)
     with pytest.raises(RetargetError, match="truncated"):
         read_gltf(plain[:-40])
+
+
+def test_a_glb_upload_keeps_its_material_uv_and_normals(tmp_path):
+    """A textured glTF upload (load_mesh) exports with its material, image, uv and normals."""
+    from PIL import Image
+
+    from retarget.mesh import load_mesh
+
+    box = trimesh.creation.box()
+    image = Image.new("RGB", (8, 4), (200, 30, 10))
+    material = trimesh.visual.material.PBRMaterial(
+        name="skin", baseColorFactor=[0.8, 0.6, 0.4, 1.0], metallicFactor=0.0,
+        roughnessFactor=0.7, baseColorTexture=image, doubleSided=True)
+    uv = np.random.default_rng(1).uniform(0, 1, (len(box.vertices), 2))
+    box.visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    box.vertex_normals  # noqa: B018 - computed here so the upload carries NORMAL
+    mesh = load_mesh(box.export(file_type="glb"), "glb")
+    assert mesh.material is not None and mesh.normals is not None
+    assert mesh.material.name == "skin" and mesh.material.double_sided
+    np.testing.assert_allclose(mesh.material.base_color, [0.8, 0.6, 0.4, 1.0], atol=1 / 255)
+    points = from_vertex_indices([0, 3], mesh.n_vertices)
+    weights = SkinWeights.from_dense(np.where(np.arange(8)[:, None] == [0, 3], 0.5, 0.0))
+    path = tmp_path / "textured.glb"
+    path.write_bytes(export_gltf(mesh, points, weights))
+    report = assert_valid_gltf(path)
+    assert report["info"]["materialCount"] == 1 and report["info"]["hasTextures"]
+    back = read_gltf(path)
+    assert back.mesh.material == mesh.material
+    assert Image.open(io.BytesIO(back.mesh.material.base_color_texture)).getpixel((3, 2)) == (200, 30, 10)
+    np.testing.assert_allclose(back.mesh.uv, mesh.uv, atol=1e-6)
+    np.testing.assert_allclose(back.mesh.normals, mesh.normals, atol=1e-6)

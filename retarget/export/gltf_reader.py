@@ -2,8 +2,8 @@
 
 The round trip of the export. What comes back, against what went in:
 
-- the mesh: the same vertices (float32-rounded), triangles, uv and unit-length normals
-  (`export_gltf` normalises them), in the same vertex order;
+- the mesh: the same vertices (float32-rounded), triangles, uv, unit-length normals
+  (`export_gltf` normalises them) and material, in the same vertex order;
 - the landmarks from the scene's ``extras.retarget.landmarks``, exactly; a file without
   them gets the joints' neutral positions snapped to the surface;
 - the skin weights: from JOINTS_n / WEIGHTS_n for a skin (the root's share becomes the
@@ -31,6 +31,7 @@ from retarget.export.glb import accessor_array, glb_document
 from retarget.export.influences import weights_from_influences
 from retarget.export.morph import weights_from_targets
 from retarget.landmarks import SurfacePoints, from_positions, landmarks_from_json
+from retarget.material import Material
 from retarget.mesh import Mesh, mesh_from_arrays
 from retarget.skin import SkinWeights
 
@@ -179,7 +180,30 @@ def _mesh(doc: dict, binary: bytes, mesh_node: int, primitive: dict) -> Mesh:
         st = accessor_array(doc, binary, attributes["TEXCOORD_0"]).astype(np.float64)
         uv = np.column_stack([st[:, 0], 1.0 - st[:, 1]])  # back to OBJ's v
     name = doc["nodes"][mesh_node].get("name", "")
-    return mesh_from_arrays(vertices, faces.reshape(-1, 3), uv=uv, normals=normals, name=name)
+    material = _material(doc, binary, primitive["material"]) if "material" in primitive else None
+    return mesh_from_arrays(vertices, faces.reshape(-1, 3), uv=uv, normals=normals, name=name,
+                            material=material)
+
+
+def _material(doc: dict, binary: bytes, index: int) -> Material:
+    """Material `index` as `retarget.material.Material` (base colour image included)."""
+    entry = doc["materials"][index]
+    pbr = entry.get("pbrMetallicRoughness", {})
+    texture = None
+    if "baseColorTexture" in pbr:
+        image = doc["images"][doc["textures"][pbr["baseColorTexture"]["index"]]["source"]]
+        view = doc["bufferViews"][image["bufferView"]]
+        start = view.get("byteOffset", 0)
+        texture = binary[start:start + view["byteLength"]]
+    return Material(
+        name=entry.get("name", ""),
+        base_color=tuple(pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))),
+        metallic=pbr.get("metallicFactor", 1.0),
+        roughness=pbr.get("roughnessFactor", 1.0),
+        double_sided=entry.get("doubleSided", False),
+        alpha_mode=entry.get("alphaMode", "OPAQUE"),
+        base_color_texture=texture,
+    )
 
 
 def _skin_weights(doc, binary, primitive, n_features, method, label) -> SkinWeights:

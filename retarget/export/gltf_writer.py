@@ -1,7 +1,7 @@
 """A rigged, animated target face as one glTF 2.0 binary file (.glb).
 
 `export_gltf` writes the mesh (positions, triangles, and its normals, uv and material
-where it has them), the feature points as joints, the deformation and one animation per
+where it has them; the material's base colour image only with uv), the feature points as joints, the deformation and one animation per
 `Clip`:
 
 - The scene holds two root nodes: the mesh node, and ``root``, a static joint at the
@@ -49,6 +49,7 @@ from retarget.export.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_col
                                    morph_scale, target_names)
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
+from retarget.material import Material
 from retarget.mesh import Mesh
 from retarget.skin import SkinWeights
 
@@ -175,7 +176,27 @@ def _primitive(out: GlbBuilder, mesh: Mesh) -> dict:
     primitive = {"attributes": attributes, "mode": TRIANGLES,
                  "indices": out.accessor(mesh.faces.ravel().astype(index_type),
                                          target=ELEMENT_ARRAY_BUFFER)}
+    if mesh.material is not None:
+        primitive["material"] = _add_material(out, mesh.material, textured=mesh.uv is not None)
     return primitive
+
+
+def _add_material(out: GlbBuilder, material: Material, textured: bool) -> int:
+    """The material (and its base colour image, when the mesh has uv to sample it)."""
+    pbr = {"baseColorFactor": list(material.base_color), "metallicFactor": material.metallic,
+           "roughnessFactor": material.roughness}
+    if material.base_color_texture is not None and textured:
+        doc = out.document
+        doc["images"] = [{"bufferView": out.view(material.base_color_texture),
+                          "mimeType": "image/png"}]
+        doc["samplers"] = [{}]
+        doc["textures"] = [{"source": 0, "sampler": 0}]
+        pbr["baseColorTexture"] = {"index": 0}
+    out.document["materials"] = [{
+        "name": material.name, "pbrMetallicRoughness": pbr,
+        "doubleSided": material.double_sided, "alphaMode": material.alpha_mode,
+    }]
+    return 0
 
 
 def _unit_normals(mesh: Mesh) -> np.ndarray:

@@ -19,7 +19,7 @@ so shape keys get the range [-1, 1] that the exporter's morph weights span.
 OUT.npz holds ``positions`` (frames, V, 3) float64 of the first mesh created, ``rest``
 (V, 3) its undeformed vertices, ``bone_heads`` (B, 3) the armature's bones' rest heads,
 and ``info``, a JSON string: mesh, armature, bone, vertex-group, shape-key and action
-names, and each action's frame range.
+names, each action's frame range, and the mesh's materials with their images' sizes.
 """
 
 import json
@@ -78,6 +78,9 @@ def main(path, out, fps, frames):
         "shape_keys": [b.name for b in keys.key_blocks] if keys else [],
         "actions": {a.name: list(a.frame_range) for a in bpy.data.actions},
         "modifiers": [m.type for m in mesh.modifiers],
+        "materials": [{"name": m.name, "images": [n.image.size[:] for n in m.node_tree.nodes
+                                                  if n.type == "TEX_IMAGE" and n.image]}
+                      for m in mesh.data.materials if m],
     }
     np.savez(out, positions=np.stack(positions), rest=world_vertices(mesh, mesh.data),
              bone_heads=heads, info=json.dumps(info))
