@@ -3,7 +3,7 @@ rendered stereo pair and its rig's exact calibration uploaded through the form, 
 progress bar while the server tracks, the take in the list, and playing it moves the
 face; bad input refused with its message in the page and nothing stored.
 
-Ground truth: `retarget.synthetic.stereo_rig` renders the pair (8 frames of the demo's
+Ground truth: `retarget.synthetic.stereo_rig` renders the pair (6 frames of the demo's
 expressions under head motion, seen by two cameras at 1 m) and gives the exact
 calibration; the tracked take's points are compared with the rendered markers.
 """
@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import io
 
+import cv2
 import numpy as np
 import pytest
 
-from retarget.synthetic.stereo_rig import render_stereo_video, rig_calibration, stereo_cameras
-from tests.e2e.conftest import open_project
+from retarget.sources.stereo import StereoCalibration
+from retarget.synthetic.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
+from tests.e2e.conftest import Server, open_project
 
-N_FRAMES = 8
+N_FRAMES = 6
 
 # Every (hidden, value) state of the source progress bar and every note, from now on.
 _WATCH = """() => {
@@ -40,6 +42,14 @@ _RECORD = """() => {
 
 
 @pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """One server for the module (with the sample project)."""
+    srv = Server(tmp_path_factory.mktemp("data")).start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="module")
 def pair(tmp_path_factory):
     """(left video, right video, calibration .npz, a non-calibration .npz, truth, rig)."""
     folder = tmp_path_factory.mktemp("stereo_ui")
@@ -48,6 +58,21 @@ def pair(tmp_path_factory):
     rig_calibration(*rig).save(folder / "rig.npz")
     np.savez(folder / "points.npz", points=np.zeros((4, 3)))
     return (*truth.videos, folder / "rig.npz", folder / "points.npz", truth, rig)
+
+
+@pytest.fixture(scope="module")
+def boards(tmp_path_factory, pair):
+    """Both cameras' videos of a 9 x 6 checkerboard (25 mm) in 6 poses, lossless."""
+    folder = tmp_path_factory.mktemp("stereo_boards")
+    paths = []
+    for side, frames in zip(("left", "right"), checkerboard_views(*pair[5], 6, seed=0)):
+        path = folder / f"board_{side}.mkv"
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 30.0, (640, 480))
+        for frame in frames:
+            writer.write(frame)
+        writer.release()
+        paths.append(path)
+    return paths
 
 
 def open_form(page) -> None:
@@ -117,7 +142,7 @@ def test_a_stereo_pair_tracked_through_the_form_plays_and_bad_input_is_named(ser
     page.check("#take-loop")
     page.evaluate(_RECORD)
     page.click("#play")
-    page.wait_for_function("() => window.frames.length >= 3 * 8", timeout=30_000)
+    page.wait_for_function("() => window.frames.length >= 24", timeout=30_000)
     frames = page.evaluate("() => window.frames")
     index = np.array([f["index"] for f in frames]) % N_FRAMES  # frame indices go on over loops
     size = np.linalg.norm(np.array([f["d"] for f in frames]).reshape(len(frames), -1, 3), axis=2).max(axis=1)
@@ -127,3 +152,32 @@ def test_a_stereo_pair_tracked_through_the_form_plays_and_bad_input_is_named(ser
     expression = np.linalg.norm(posed - posed[0], axis=2).max(axis=1)  # mm
     assert size.max() > 0.02  # cm on the sample face
     assert np.corrcoef(size, expression[index])[0, 1] > 0.9
+
+
+def test_checkerboard_videos_calibrate_through_the_form(server, page, pair, boards, tmp_path):
+    left, right, _, _, truth, rig = pair
+    sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
+    open_project(page, server, sample["id"])
+    before = server.api("GET", f"/api/projects/{sample['id']}/takes")
+    open_form(page)
+    page.set_input_files("#stereo-left", str(left))
+    page.set_input_files("#stereo-right", str(right))
+    page.check("#stereo-dialog input[value=board]")
+    assert page.is_hidden("#stereo-calibration") and page.is_visible("#stereo-board-left")
+    page.set_input_files("#stereo-board-left", str(boards[0]))
+    page.click("#stereo-track")
+    assert page.inner_text("#stereo-note") == "Choose the right camera's checkerboard video."
+    page.set_input_files("#stereo-board-right", str(boards[1]))
+    page.click("#stereo-track")
+    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=60_000)
+    note = page.inner_text("#source-note")
+    assert "calibration from 6 checkerboard views" in note, note
+    # the calibration it made: the rig's, to be downloaded for the next pairs
+    href = page.get_attribute("#source-note a", "href")
+    (tmp_path / "cal.npz").write_bytes(server.read(href))
+    cal = StereoCalibration.load(tmp_path / "cal.npz")
+    assert cal.baseline == pytest.approx(150.0, rel=0.01) and cal.meta["views"] == 6
+    (take,) = [t for t in server.api("GET", f"/api/projects/{sample['id']}/takes")
+               if t["id"] not in {b["id"] for b in before}]
+    points = np.load(io.BytesIO(server.read(f"/api/projects/{sample['id']}/takes/{take['id']}/points")))
+    assert np.median(np.linalg.norm(points - rig[0].to_camera(truth.points3d), axis=2)) < 1.5  # mm
