@@ -351,9 +351,9 @@ export class SourcePanel {
 				<span class="take-tools">
 					<input class="trim-start" type="number" min="0" step="0.1" title="Trim: start (s)">
 					<input class="trim-stop" type="number" min="0" step="0.1" title="Trim: stop (s)">
-					<button class="quiet rename" title="Rename">✎</button>
+					<button class="quiet rename" title="Rename" aria-label="Rename">✎</button>
 					<a class="button quiet download" title="Download the points (.npy)">⤓</a>
-					<button class="quiet delete" title="Delete">🗑</button>
+					<button class="quiet delete" title="Delete" aria-label="Delete">✕</button>
 				</span>`;
 			const radio = li.querySelector( 'input[type=radio]' );
 			radio.checked = take.id === this.selectedTake;
