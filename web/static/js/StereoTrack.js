@@ -16,15 +16,16 @@ const JOB_POLL_MS = 150;
 
 const FORM = `<form method="dialog">
 	<h3>Track a stereo pair</h3>
-	<p class="muted">Two videos filmed at the same time by two cameras side by side, of coloured
-	markers on the dutreve21 points, and the cameras' calibration.</p>
+	<p class="muted">Two videos filmed at the same time by two cameras side by side, of coloured markers on the dutreve21 points, and the cameras' calibration.</p>
 	<div class="row"><label for="stereo-left">Left</label><input id="stereo-left" type="file" accept="${ VIDEO_ACCEPT }"></div>
 	<div class="row"><label for="stereo-right">Right</label><input id="stereo-right" type="file" accept="${ VIDEO_ACCEPT }"></div>
 	<fieldset>
 		<legend>Calibration</legend>
-		<label class="toggle"><input type="radio" name="stereo-calibration" value="file" checked> calibration file (.npz)</label>
+		<div>
+			<label class="toggle"><input type="radio" name="stereo-calibration" value="file" checked> calibration file (.npz)</label>
+			<label class="toggle"><input type="radio" name="stereo-calibration" value="board"> checkerboard videos</label>
+		</div>
 		<div class="row" data-calibration="file"><label for="stereo-calibration">File</label><input id="stereo-calibration" type="file" accept=".npz"></div>
-		<label class="toggle"><input type="radio" name="stereo-calibration" value="board"> checkerboard videos</label>
 		<div data-calibration="board" hidden>
 			<div class="row"><label for="stereo-board-left">Left</label><input id="stereo-board-left" type="file" accept="${ VIDEO_ACCEPT }"></div>
 			<div class="row"><label for="stereo-board-right">Right</label><input id="stereo-board-right" type="file" accept="${ VIDEO_ACCEPT }"></div>
