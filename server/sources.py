@@ -10,7 +10,10 @@ server only schedules them:
   webcam or a file;
 - `TakeSource`: a stored take replayed at its own frame times (looping or not);
 - `LiveSource`: points pushed by the browser (its webcam tracker) over the WebSocket,
-  retargeted as they arrive; it can record them into a take.
+  retargeted as they arrive.
+
+Every source can record what it plays into a take: the raw source points (before
+conditioning, so a recording can be conditioned again on replay) at their source times.
 
 A source whose points are a subset of the project's layout (21 markers on a 68-point
 project) drives the other joints by interpolation (see `retarget.pipeline`).
@@ -58,6 +61,7 @@ class _Retargeted:
         self.regions = None
         self.neutral = None
         self.retargeter = None
+        self.recording: list | None = None
 
     def set_regions(self, regions) -> None:
         """Partial retargeting: only the named regions/groups/points move (None: all)."""
@@ -80,8 +84,31 @@ class _Retargeted:
         return encode_frame(d, frame_index=index % 2**32, source_time=t,
                             flags=FLAG_LOST_POINTS if lost else 0, head_rotation=quaternion)
 
+    def start_recording(self) -> None:
+        self.recording = []
+
+    def record(self, points: np.ndarray, t: float) -> None:
+        """Keep (N, D) raw source points played at source time `t` s, while recording;
+        a recording keeps its first `MAX_RECORD_SECONDS` (what comes later is not kept,
+        rather than failing the source mid-performance)."""
+        if self.recording is None or (self.recording and t - self.recording[0][1] > MAX_RECORD_SECONDS):
+            return
+        self.recording.append((np.array(points, dtype=np.float32), float(t)))
+
+    def stop_recording(self) -> Take:
+        """The recorded raw frames as a take in the project's layout."""
+        frames, self.recording = self.recording, None
+        if not frames:
+            raise RetargetError("nothing was recorded: no frame was played while recording")
+        points = np.stack([p for p, _ in frames])
+        times = np.array([t for _, t in frames], dtype=np.float64)
+        times -= times[0]
+        fps = (len(times) - 1) / times[-1] if times[-1] > 0 else self.fps
+        return Take(points, self.layout.point_names, float(fps), times=times,
+                    layout=self.layout.name, source=self.kind)
+
     def describe(self) -> dict:
-        return {"source": self.kind, "fps": self.fps}
+        return {"source": self.kind, "fps": self.fps, "recording": self.recording is not None}
 
 
 class DemoSource(_Retargeted):
@@ -101,11 +128,13 @@ class DemoSource(_Retargeted):
         """(N, 3) float32 target feature displacements of frame `index` (looping)."""
         return self.retargeter.displacements(self.frames[index % len(self.frames)])
 
+    def frame(self, index: int) -> bytes:
+        self.record(self.frames[index % len(self.frames)], index / self.fps)
+        return encode_frame(self.displacements(index), frame_index=index, source_time=index / self.fps)
+
     async def run(self, hub: StreamHub, project_id: str) -> None:
         """Publish frames at `fps` until cancelled or the last viewer leaves."""
-        await _play(self, hub, project_id, n_frames=None,
-                    frame=lambda i: encode_frame(self.displacements(i), frame_index=i,
-                                                 source_time=i / self.fps),
+        await _play(self, hub, project_id, n_frames=None, frame=self.frame,
                     time_of=lambda i: i / self.fps)
 
 
@@ -138,9 +167,10 @@ class TakeSource(_Retargeted):
 
     def frame(self, index: int) -> bytes:
         i = index % len(self.points)
-        lap = index // len(self.points)
+        t = float(self.times[i]) + index // len(self.points) * self.duration
         rotation = None if self.rotations is None else self.rotations[i]
-        return self.encode(self.points[i], index, float(self.times[i]) + lap * self.duration, rotation)
+        self.record(self.take.points[i], t)
+        return self.encode(self.points[i], index, t, rotation)
 
     @property
     def duration(self) -> float:
@@ -161,8 +191,7 @@ class LiveSource(_Retargeted):
     """Points pushed by a viewer (the browser's tracker), retargeted as they arrive.
 
     dims : 2 or 3, what the browser sends. The neutral is captured by the conditioner
-    (the first seconds, by default); `recapture()` starts a new capture. Recording keeps
-    the raw pushed points, so a take can be conditioned again on replay.
+    (the first seconds, by default); `recapture()` starts a new capture.
     """
 
     kind = "live"
@@ -174,7 +203,6 @@ class LiveSource(_Retargeted):
             raise RetargetError(f"live points must be 2D or 3D; got dims {dims!r}")
         self.dims = dims
         self.hub = self.project_id = None
-        self.recording: list | None = None
         self.set_settings(settings)
 
     def set_settings(self, settings: ConditionSettings) -> None:
@@ -203,10 +231,7 @@ class LiveSource(_Retargeted):
         if points.shape != (self.layout.n_points, self.dims):
             raise RetargetError(f"live frame must hold {self.layout.n_points} points of "
                                 f"{self.dims} coordinates; got {points.shape}")
-        if self.recording is not None:
-            if self.recording and t - self.recording[0][1] > MAX_RECORD_SECONDS:
-                raise RetargetError(f"recordings stop at {MAX_RECORD_SECONDS:.0f} s; stop and save this one")
-            self.recording.append((points.copy(), t))
+        self.record(points, t)
         conditioned = self.conditioner.push(points, t)
         if conditioned is None:
             return  # still capturing the neutral
@@ -216,21 +241,6 @@ class LiveSource(_Retargeted):
         if self.hub is not None:
             self.hub.publish(self.project_id, self.encode(conditioned, index, t, rotation))
 
-    def start_recording(self) -> None:
-        self.recording = []
-
-    def stop_recording(self) -> Take:
-        """The recorded raw frames as a take in the project's layout."""
-        frames, self.recording = self.recording, None
-        if not frames:
-            raise RetargetError("nothing was recorded: no tracked frame arrived while recording")
-        points = np.stack([p for p, _ in frames]).astype(np.float32)
-        times = np.array([t for _, t in frames], dtype=np.float64)
-        times -= times[0]
-        fps = (len(times) - 1) / times[-1] if times[-1] > 0 else self.fps
-        return Take(points, self.layout.point_names, float(fps), times=times,
-                    layout=self.layout.name, source="live")
-
     async def run(self, hub: StreamHub, project_id: str) -> None:
         self.hub, self.project_id = hub, project_id
         try:
@@ -239,8 +249,7 @@ class LiveSource(_Retargeted):
             self.hub = None
 
     def describe(self) -> dict:
-        return {**super().describe(), "dims": self.dims, "recording": self.recording is not None,
-                "neutral": self.neutral is not None}
+        return {**super().describe(), "dims": self.dims, "neutral": self.neutral is not None}
 
 
 async def _play(source, hub: StreamHub, project_id: str, *, n_frames, frame, time_of) -> None:

@@ -1,6 +1,7 @@
 """The live stream over a real WebSocket (in-process): hello, demo frames, masks, errors."""
 
 import asyncio
+import io
 import time
 
 import numpy as np
@@ -113,7 +114,7 @@ def test_bad_fps_mid_stream_is_an_error_and_frames_keep_coming(app, sample_id):
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
         ws.receive_json()
         ws.send_json({"type": "start", "fps": 120})
-        assert replies(ws, 1) == [{"type": "started", "source": "demo", "fps": 120.0}]
+        assert replies(ws, 1) == [{"type": "started", "source": "demo", "fps": 120.0, "recording": False}]
         before = binary_frames(ws, 2)[-1].frame_index
         for fps in (None, "fast", [60], 0, 1e6):
             ws.send_json({"type": "start", "fps": fps})
@@ -228,3 +229,50 @@ def test_after_a_stall_the_demo_skips_to_the_due_frame_instead_of_a_stale_burst(
     jump = published[before] - published[before - 1]
     assert jump >= 25, f"after a 0.3 s stall the next frame index moved by {jump}, not ~30"
     assert len(published) < before + 25, "the missed frames were published as a burst"
+
+
+def test_any_source_records_its_raw_points_into_a_take(app, sample_id):
+    """Record the demo, then record a replay of that recording: each take holds the raw
+    source points played, in order (a loaded server may skip frames that came due while
+    it was busy, so the frames need not be consecutive)."""
+    from server.sources import _performance68
+
+    fps = 60.0
+    neutral68, frames68 = _performance68(fps)
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "record"})
+        assert "none is running" in replies(ws, 1)[0]["detail"]
+        ws.send_json({"type": "start", "source": "demo", "fps": fps})
+        assert replies(ws, 1)[0]["type"] == "started"
+        ws.send_json({"type": "record"})
+        assert replies(ws, 1)[0]["type"] == "recording"
+        binary_frames(ws, 40)
+        ws.send_json({"type": "record_stop"})
+        demo_take = replies(ws, 1)[0]["take"]
+        assert demo_take["name"] == "demo take" and demo_take["source"] == "demo"
+        recorded = np.load(io.BytesIO(client.get(
+            f"/api/projects/{sample_id}/takes/{demo_take['id']}/points").content))
+        assert recorded.shape[1:] == (68, 3) and len(recorded) >= 30
+        assert_frames_in_order(recorded, frames68)
+
+        ws.send_json({"type": "start", "source": "take", "take": demo_take["id"], "loop": False})
+        assert replies(ws, 1)[0]["type"] == "started"
+        ws.send_json({"type": "record"})
+        assert replies(ws, 1)[0]["type"] == "recording"
+        binary_frames(ws, 10)
+        ws.send_json({"type": "record_stop", "name": "replay"})
+        replay = replies(ws, 1)[0]["take"]
+    again = np.load(io.BytesIO(client.get(f"/api/projects/{sample_id}/takes/{replay['id']}/points").content))
+    assert replay["source"] == "take" and len(again) >= 5
+    assert_frames_in_order(again, recorded)
+
+
+def assert_frames_in_order(recorded: np.ndarray, played: np.ndarray) -> None:
+    """Every recorded (N, 3) frame is one of `played`, and they come in playing order
+    (one wrap-around allowed: the demo loops)."""
+    distance = np.abs(recorded[:, None] - played[None]).max(axis=(2, 3))   # (R, P)
+    index = distance.argmin(axis=1)
+    assert distance[np.arange(len(recorded)), index].max() < 1e-5
+    steps = np.diff(index)
+    assert (steps > 0).sum() >= len(steps) - 1, index

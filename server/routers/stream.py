@@ -16,9 +16,9 @@ are JSON text:
 - ``{"type": "settings", "settings": {...}}``: change the running take or live source's
   conditioning (a live source keeps its captured neutral unless the neutral mode changes);
 - ``{"type": "neutral"}``: a live source captures its neutral again from the next frames;
-- ``{"type": "record"}`` / ``{"type": "record_stop", "name": "..."}``: record the live
-  source's raw points; stopping stores them as a take and answers ``{"type": "recorded",
-  "take": {...}}``;
+- ``{"type": "record"}`` / ``{"type": "record_stop", "name": "..."}``: record the running
+  source's raw points (demo, take or live); stopping stores them as a take and answers
+  ``{"type": "recorded", "take": {...}}``;
 - ``{"type": "stop"}``: stop the source; every viewer then gets a neutral frame (flag bit 0,
   zero displacements) that puts the face back at rest;
 - ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
@@ -183,11 +183,10 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         hub.start_source(project_id, source)
         return {"type": "started", **source.describe()}
     source = hub.source(project_id)
-    if kind in ("settings", "neutral", "record", "record_stop"):
-        wanted = LiveSource if kind != "settings" else (LiveSource, TakeSource)
-        if not isinstance(source, wanted):
-            raise ValueError(f'"{kind}" applies to a running '
-                             f'{"live" if kind != "settings" else "take or live"} source; none is running')
+    wanted = {"settings": ((LiveSource, TakeSource), "take or live"), "neutral": (LiveSource, "live"),
+              "record": (object, "demo, take or live"), "record_stop": (object, "demo, take or live")}
+    if kind in wanted and (source is None or not isinstance(source, wanted[kind][0])):
+        raise ValueError(f'"{kind}" applies to a running {wanted[kind][1]} source; none is running')
     if kind == "settings":
         settings = _settings(msg)
         await asyncio.to_thread(source.set_settings, settings)
@@ -199,11 +198,12 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         source.start_recording()
         return {"type": "recording"}
     if kind == "record_stop":
-        name = msg.get("name") or "live take"
+        default = f"{source.kind} take"
+        name = msg.get("name") or default
         if not isinstance(name, str):
             raise ValueError('"name" must be a string')
         take = source.stop_recording()
-        info = await asyncio.to_thread(store.put_take, project_id, take, name=name.strip()[:200] or "live take")
+        info = await asyncio.to_thread(store.put_take, project_id, take, name=name.strip()[:200] or default)
         return {"type": "recorded", "take": info}
     if kind == "stop":
         hub.stop_source(project_id)
