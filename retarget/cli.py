@@ -48,7 +48,7 @@ from tqdm import tqdm
 
 from retarget import __version__
 from retarget.errors import RetargetError
-from retarget.export import clip_at_rate, export_gltf
+from retarget.export import clip_at_rate, write_gltf
 from retarget.export.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
@@ -403,13 +403,14 @@ def export_gltf_files(
                 d[i:i + chunk] = retargeter.displacements(frames[i:i + chunk])
                 advance((i + chunk) / len(frames))
         clips.append(clip_at_rate(Path(source_frames).stem, d, fps))
+    written = []
     with _bar(100, "glTF", "%", quiet) as advance:
-        data = export_gltf(mesh, points, weights, clips, progress=advance)
-    _write_with(out, lambda f: f.write(data))
+        _write_with(out, lambda f: written.append(
+            write_gltf(f, mesh, points, weights, clips, progress=advance)))
     return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps,
                         "skin" if is_joint_based(weights) else "morph",
                         weights.method or ("rig" if rig is not None else deformer),
-                        time.perf_counter() - start, len(data), out)
+                        time.perf_counter() - start, written[0], out)
 
 
 # ---------------------------------------------------------------------------------------

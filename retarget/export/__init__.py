@@ -1,6 +1,6 @@
 """Export to glTF 2.0 and read the export back.
 
-`export_gltf` writes a target mesh, its feature points as translation-only joints
+`export_gltf` (bytes) and `write_gltf` (to a file) write a target mesh, its feature points as translation-only joints
 (Dutreve §3), its rig (a glTF skin, or morph targets for rigs with negative weights) and
 retargeted takes as animations, as one .glb (`retarget.export.gltf_writer` documents the
 layout and the units). `read_gltf` reads such a file back into the mesh, landmarks, skin
@@ -13,6 +13,7 @@ Modules: `glb` (the binary container), `influences` (weights as JOINTS_n / WEIGH
 
 from retarget.export.clips import Clip, clip_at_rate
 from retarget.export.gltf_reader import RiggedFace, read_gltf
-from retarget.export.gltf_writer import export_gltf, joint_names
+from retarget.export.gltf_writer import export_gltf, joint_names, write_gltf
 
-__all__ = ["Clip", "RiggedFace", "clip_at_rate", "export_gltf", "joint_names", "read_gltf"]
+__all__ = ["Clip", "RiggedFace", "clip_at_rate", "export_gltf", "joint_names", "read_gltf",
+           "write_gltf"]

@@ -52,13 +52,16 @@ class GlbBuilder:
             "bufferViews": [],
             "accessors": [],
         }
-        self._parts: list[bytes] = []
+        self._parts: list[memoryview] = []
         self._length = 0
 
     def view(self, data, target: int | None = None) -> int:
         """Append raw bytes (or an array's little-endian bytes) as a buffer view at a
-        4-byte aligned offset; returns the view's index."""
-        raw = data.tobytes() if isinstance(data, np.ndarray) else bytes(data)
+        4-byte aligned offset; returns the view's index. An array is not copied: it must
+        not change until the file is written."""
+        # arrays are kept as views of their own memory: no copy until the file is written
+        raw = (memoryview(np.ascontiguousarray(data)).cast("B") if isinstance(data, np.ndarray)
+               else memoryview(bytes(data)))
         self._pad()
         view = {"buffer": 0, "byteOffset": self._length, "byteLength": len(raw)}
         if target is not None:
@@ -69,14 +72,15 @@ class GlbBuilder:
         return len(self.document["bufferViews"]) - 1
 
     def accessor(self, array: np.ndarray, *, target: int | None = None,
-                 bounds: bool = False, view: int | None = None, offset: int = 0) -> int:
+                 bounds=False, view: int | None = None, offset: int = 0) -> int:
         """Declare an accessor on `array`, (count,) or (count, k) with k in 2, 3, 4, 16
         (MAT4 as 16 column-major values), of a dtype in `COMPONENT_TYPES`.
 
         view : an existing buffer view the array already lies in at byte `offset`;
             None appends the array as a view of its own (with `target`).
-        bounds : write ``min`` and ``max`` (required for POSITION and animation inputs),
-            from the stored values so they match to the last bit.
+        bounds : write ``min`` and ``max`` (required for POSITION and animation inputs):
+            True computes them from the stored values so they match to the last bit; a
+            (min, max) pair of lists is written as given (a caller that knows them).
         """
         array = np.ascontiguousarray(array, dtype=array.dtype.newbyteorder("<"))
         if view is None:
@@ -89,18 +93,21 @@ class GlbBuilder:
         }
         if offset:
             accessor["byteOffset"] = offset
-        if bounds:
+        if bounds is True:
             accessor["min"], accessor["max"] = _bounds(array)
+        elif bounds:
+            accessor["min"], accessor["max"] = bounds
         return self._add(accessor)
 
     def sparse_accessor(self, count: int, indices: np.ndarray, values: np.ndarray,
-                        *, indices_view: int | None = None, bounds: bool = False) -> int:
+                        *, indices_view: int | None = None, bounds=False) -> int:
         """A (count, k) float32 accessor that is zero except at `indices` (ascending,
         (n,) uint16 or uint32, n may be 0) where it holds `values` (n, k) float32; no
         base view.
 
         indices_view : a view already holding these indices (targets of the same rows
             share it); None appends them.
+        bounds : as for `accessor`.
         """
         k = 1 if values.ndim == 1 else values.shape[1]
         accessor = {
@@ -117,11 +124,13 @@ class GlbBuilder:
                             "componentType": _component_code(indices.dtype)},
                 "values": {"bufferView": self.view(values.astype("<f4"))},
             }
-        if bounds:
+        if bounds is True:
             stored = values.astype("<f4").reshape(len(values), k)
             if len(indices) < count:  # the zeros between the sparse rows count too
                 stored = np.vstack([stored, np.zeros((1, k), np.float32)])
             accessor["min"], accessor["max"] = _bounds(stored)
+        elif bounds:
+            accessor["min"], accessor["max"] = bounds
         return self._add(accessor)
 
     @property
@@ -131,6 +140,14 @@ class GlbBuilder:
 
     def glb_bytes(self) -> bytes:
         """The GLB file: header, JSON chunk, BIN chunk."""
+        return b"".join(self._glb_parts())
+
+    def write(self, file) -> int:
+        """Write the GLB file to a binary file object piece by piece (no copy of the
+        whole file in memory); returns the number of bytes written."""
+        return sum(file.write(part) for part in self._glb_parts())
+
+    def _glb_parts(self) -> list:
         self._pad()
         self.document["buffers"][0]["byteLength"] = self._length
         text = json.dumps(self.document, separators=(",", ":"), allow_nan=False).encode()
@@ -139,16 +156,16 @@ class GlbBuilder:
         if total > _MAX_GLB_BYTES:
             raise RetargetError(f"the glTF would be {total} bytes long, above the GLB "
                                 f"format's limit of {_MAX_GLB_BYTES} bytes")
-        return b"".join([
+        return [
             struct.pack("<4sII", GLB_MAGIC, 2, total),
             struct.pack("<II", len(text), JSON_CHUNK), text,
             struct.pack("<II", self._length, BIN_CHUNK), *self._parts,
-        ])
+        ]
 
     def _pad(self) -> None:
         if self._length % 4:
             pad = 4 - self._length % 4
-            self._parts.append(b"\0" * pad)
+            self._parts.append(memoryview(b"\0" * pad))
             self._length += pad
 
     def _add(self, accessor: dict) -> int:
@@ -241,6 +258,8 @@ def _component_code(dtype: np.dtype) -> int:
 
 def _bounds(array: np.ndarray) -> tuple[list, list]:
     """Per-component min and max as JSON numbers (exact for float32 and integers)."""
-    values = array.reshape(len(array), -1)
+    # column-major: a reduction down each column is then contiguous, several times
+    # faster than down the columns of a (V, 3) row-major array
+    values = np.asfortranarray(array.reshape(len(array), -1))
     cast = float if values.dtype.kind == "f" else int
     return ([cast(x) for x in values.min(0)], [cast(x) for x in values.max(0)])

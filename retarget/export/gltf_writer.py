@@ -46,7 +46,7 @@ from retarget.export.clips import Clip
 from retarget.export.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
 from retarget.export.influences import is_joint_based, joint_influences
 from retarget.export.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
-                                   morph_scale, target_names)
+                                   morph_scale, target_bounds, target_names)
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
 from retarget.material import Material
@@ -75,7 +75,20 @@ def joint_names(points: SurfacePoints) -> list[str]:
 
 def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
                 progress=None) -> bytes:
-    """The .glb bytes of `mesh` rigged with `weights` at `points`, with `clips` animated.
+    """The .glb bytes of `mesh` rigged with `weights` at `points`, with `clips` animated
+    (arguments as for `write_gltf`)."""
+    built = _built(mesh, points, weights, clips, progress)
+    data = built.glb_bytes()
+    if progress is not None:
+        progress(1.0)
+    return data
+
+
+def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
+               progress=None) -> int:
+    """Write the .glb of `mesh` rigged with `weights` at `points`, with `clips` animated,
+    to a binary file object, piece by piece (a large morph-target file is never whole in
+    memory twice); returns the number of bytes written.
 
     mesh : the target, V vertices (units kept, see the module docstring).
     points : its N landmarks; the joints sit at ``points.positions(mesh.vertices)``.
@@ -87,18 +100,27 @@ def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(
     Raises `RetargetError` when the sizes disagree (naming both) or the file would pass
     the GLB format's 4 GiB.
     """
+    built = _built(mesh, points, weights, clips, progress)
+    n_bytes = built.write(file)
+    if progress is not None:
+        progress(1.0)
+    return n_bytes
+
+
+def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
+    """The document and buffer of the export; progress reaches 0.95 (writing is left)."""
     clips = tuple(clips)
     _check_sizes(mesh, points, weights, clips)
     names = joint_names(points)
     neutral = points.positions(mesh.vertices).astype(np.float32)  # (N, 3)
     skinned = is_joint_based(weights)
     report = progress or (lambda fraction: None)
-    steps = 2 + len(clips) + (0 if skinned else points.n_points)
+    steps = 1 + len(clips) + (0 if skinned else points.n_points)
     done = [0]
 
     def step():
         done[0] += 1
-        report(done[0] / steps)
+        report(0.95 * done[0] / steps)
 
     out = GlbBuilder(f"retarget {__version__}")
     doc = out.document
@@ -131,9 +153,7 @@ def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(
         for clip in clips:
             doc["animations"].append(_animation(out, clip, neutral, scale))
             step()
-    data = out.glb_bytes()
-    step()
-    return data
+    return out
 
 
 def _check_sizes(mesh, points, weights, clips) -> None:
@@ -246,24 +266,20 @@ def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, n
     v = weights.n_vertices
     index_type = np.uint16 if v <= 65536 else np.uint32
     targets = []
-    for i in range(weights.n_joints):
-        rows = columns.indices[columns.indptr[i]:columns.indptr[i + 1]]
-        values = columns.data[columns.indptr[i]:columns.indptr[i + 1]] * np.float32(scale)
+    for column in columns:
+        full = column * np.float32(scale)
+        rows = np.flatnonzero(full).astype(index_type)
+        values = full[rows]
         sparse = len(rows) < SPARSE_SHARE * v
-        view = None
-        if sparse and len(rows):
-            view = out.view(rows.astype(index_type))
-        else:
-            full = np.zeros(v, np.float32)
-            full[rows] = values
+        view = out.view(rows) if sparse and len(rows) else None
         for a in range(len(AXES)):
+            bounds = target_bounds(values, v, a)
             if sparse:
-                accessor = out.sparse_accessor(v, rows.astype(index_type),
-                                               axis_offsets(values, a),
-                                               indices_view=view, bounds=True)
+                accessor = out.sparse_accessor(v, rows, axis_offsets(values, a),
+                                               indices_view=view, bounds=bounds)
             else:
                 accessor = out.accessor(axis_offsets(full, a), target=ARRAY_BUFFER,
-                                        bounds=True)
+                                        bounds=bounds)
             targets.append({"POSITION": accessor})
         step()
     gltf_mesh["primitives"][0]["targets"] = targets

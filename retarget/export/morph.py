@@ -19,7 +19,6 @@ face moves further than that) and scaling by it is exact in floating point.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from retarget.errors import RetargetError
 from retarget.skin import SkinWeights
@@ -41,15 +40,27 @@ def morph_scale(clips) -> float:
     return float(2.0 ** np.ceil(np.log2(largest))) if largest > 0 else 1.0
 
 
-def feature_columns(weights: SkinWeights) -> sp.csc_matrix:
-    """(V, N) float32 weight matrix by columns: column i's non-zero rows (ascending) and
-    values are feature i's morph targets."""
-    m = weights.matrix()
-    m = sp.csc_matrix(m, dtype=np.float32)
-    m.sum_duplicates()
-    m.eliminate_zeros()
-    m.sort_indices()
-    return m
+def feature_columns(weights: SkinWeights) -> np.ndarray:
+    """(N, V) float32 W transposed: row i holds feature i's weight at every vertex, the
+    offsets of its three morph targets (built directly from the (V, K) influences)."""
+    v = weights.n_vertices
+    # summed, not assigned: an unused slot (weight 0) may name a joint the row also uses
+    flat = weights.indices.astype(np.int64) * v + np.arange(v)[:, None]
+    total = np.bincount(flat.ravel(), weights=weights.weights.ravel(),
+                        minlength=weights.n_joints * v)
+    return total.astype(np.float32).reshape(weights.n_joints, v)
+
+
+def target_bounds(values: np.ndarray, count: int, axis: int) -> tuple[list, list]:
+    """glTF min and max of a target that moves `values` (n,) float32 along `axis` and
+    the other count - n vertices not at all: exact, without scanning the (count, 3)
+    offsets."""
+    lo = [0.0, 0.0, 0.0]
+    hi = [0.0, 0.0, 0.0]
+    if len(values):
+        lo[axis] = float(min(values.min(), 0.0)) if len(values) < count else float(values.min())
+        hi[axis] = float(max(values.max(), 0.0)) if len(values) < count else float(values.max())
+    return lo, hi
 
 
 def axis_offsets(values: np.ndarray, axis: int) -> np.ndarray:
