@@ -329,6 +329,17 @@ def test_joint_based_rigs(face):
     assert joints[0].tolist() == [1, 2, 0, 0] and influence[0, 2:].tolist() == [0, 0]
 
 
+def test_morph_targets_of_another_kind_are_refused():
+    from retarget.export.morph import weights_from_targets
+
+    unit = [np.eye(3)[a] * np.array([[0.5], [0.0]]) for a in range(3)]
+    assert weights_from_targets(unit, 1).dense().tolist() == [[0.5], [0.0]]
+    with pytest.raises(RetargetError, match="morph target 1 is not feature 0's weights along axis y"):
+        weights_from_targets([unit[0], unit[1] + [[0.1, 0, 0]], unit[2]], 1)
+    with pytest.raises(RetargetError, match="2 morph targets for 1 features"):
+        weights_from_targets(unit[:2], 1)
+
+
 def test_joint_names(face):
     assert joint_names(face["points"]) == list(IBUG.point_names)
     plain = from_vertex_indices(np.arange(120), face["mesh"].n_vertices)

@@ -82,15 +82,17 @@ def weights_from_targets(targets, n_features: int, scale: float = 1.0,
     if len(targets) != 3 * n_features:
         raise RetargetError(f"{len(targets)} morph targets for {n_features} features; "
                             f"expected 3 per feature ({3 * n_features})")
-    stacked = np.stack([np.asarray(t, dtype=np.float32) for t in targets])  # (3N, V, 3)
-    by_axis = stacked.reshape(n_features, 3, -1, 3)
-    w = by_axis[:, 0, :, 0].T / np.float32(scale)  # (V, N)
-    expected = np.zeros_like(by_axis)
-    for a in range(3):
-        expected[:, a, :, a] = by_axis[:, 0, :, 0]
-    if not np.array_equal(by_axis, expected):
-        raise RetargetError("the morph targets are not per-feature unit displacements "
-                            "(target <feature>.<axis> moving along its axis only, the same "
-                            "weights on every axis)")
+    columns = []
+    for i in range(n_features):
+        column = np.asarray(targets[3 * i], dtype=np.float32)[:, 0]
+        for a in range(3):
+            offsets = np.asarray(targets[3 * i + a], dtype=np.float32)
+            if not np.array_equal(offsets[:, a], column) or np.delete(offsets, a, 1).any():
+                raise RetargetError(
+                    f"morph target {3 * i + a} is not feature {i}'s weights along axis "
+                    f"{AXES[a]} (a <feature>.<axis> target moves along its axis only, by "
+                    "the same weights on every axis)")
+        columns.append(column)
+    w = np.stack(columns, 1) / np.float32(scale)  # (V, N)
     k = int((w != 0).sum(1).max()) if w.size else 0
     return SkinWeights.from_dense(w, None if k >= n_features else max(k, 1), method)
