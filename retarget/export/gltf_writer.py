@@ -1,8 +1,8 @@
 """A rigged, animated target face as one glTF 2.0 binary file (.glb).
 
-`export_gltf` writes the mesh (positions, triangles, and its normals, uv and material
-where it has them; the material's base colour image only with uv), the feature points as joints, the deformation and one animation per
-`Clip`:
+`export_gltf` (bytes) and `write_gltf` (to a file) write the mesh (positions, triangles,
+and its normals, uv and material where it has them; the material's base colour image
+only with uv), the feature points as joints, the deformation and one animation per `Clip`:
 
 - The scene holds two root nodes: the mesh node, and ``root``, a static joint at the
   origin whose children are the N feature joints, one per feature point, named after
