@@ -34,9 +34,9 @@ MARKER_FRAMES = 16
 
 # Collects every stream frame and control message the page receives, from now on.
 _RECORD = """() => {
-    window.frames = [];
+    window.streamFrames = [];
     window.messages = [];
-    window.app.stream.addEventListener('frame', (e) => window.frames.push({
+    window.app.stream.addEventListener('frame', (e) => window.streamFrames.push({
         index: e.detail.frameIndex, time: e.detail.sourceTime,
         d: Array.from(e.detail.displacements)}));
     window.app.stream.addEventListener('message', (e) => window.messages.push(e.detail));
@@ -46,7 +46,8 @@ _RECORD = """() => {
 _WATCH_PROGRESS = """() => {
     const bar = document.getElementById('source-progress');
     window.progress = [];
-    for (const [proto, key] of [[HTMLElement.prototype, 'hidden'], [HTMLProgressElement.prototype, 'value']]) {
+    const properties = [[HTMLElement.prototype, 'hidden'], [HTMLProgressElement.prototype, 'value']];
+    for (const [proto, key] of properties) {
         const property = Object.getOwnPropertyDescriptor(proto, key);
         Object.defineProperty(bar, key, {configurable: true, get() { return property.get.call(this); },
             set(v) { property.set.call(this, v); window.progress.push([this.hidden, this.value]); }});
@@ -95,13 +96,14 @@ def page(shared_page, request):
     shared_page.evaluate("() => window.app.errors.clear()")
     yield shared_page
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    shared_page.screenshot(path=str(ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', request.node.name)}.png"))
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", request.node.name)
+    shared_page.screenshot(path=str(ARTIFACTS / f"{name}.png"))
     errors, shared_page.console_errors[:] = list(shared_page.console_errors), []
     assert not errors, "browser reported errors:\n" + "\n".join(errors)
 
 
 @pytest.fixture(scope="module")
-def jaw_take(tmp_path_factory) -> Take:
+def jaw_take() -> Take:
     """The sample face's 68 landmarks (cm) at 30 fps opening and closing the jaw."""
     face = sample_face(1)
     t = np.arange(N_FRAMES) / FPS
@@ -152,13 +154,13 @@ def take_row(page, take_id: str):
 def play_to_the_end(page) -> tuple[dict, list[dict]]:
     """Play the selected take once (no loop); the 'started' message and every frame
     received up to its last one."""
-    page.evaluate("() => { window.frames.length = 0; window.messages.length = 0; }")
+    page.evaluate("() => { window.streamFrames.length = 0; window.messages.length = 0; }")
     page.click("#play")
     page.wait_for_function("() => window.messages.some(m => m.type === 'started')", timeout=15_000)
     started = page.evaluate("() => window.messages.find(m => m.type === 'started')")
-    page.wait_for_function("n => window.frames.some(f => f.index === n - 1)", arg=started["frames"],
-                           timeout=30_000)
-    return started, page.evaluate("() => window.frames")
+    page.wait_for_function("n => window.streamFrames.some(f => f.index === n - 1)",
+                           arg=started["frames"], timeout=30_000)
+    return started, page.evaluate("() => window.streamFrames")
 
 
 def motion(frames: list[dict]) -> tuple[np.ndarray, np.ndarray]:
@@ -220,12 +222,13 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     row = take_row(page, info["id"])
     row.locator(".trim-start").fill(str(TRIM[0]))
     row.locator(".trim-start").press("Enter")
-    page.wait_for_function("id => window.app.sources.takes.find(t => t.id === id).trim[0] > 0", arg=info["id"])
+    page.wait_for_function("id => window.app.sources.takes.find(t => t.id === id).trim[0] > 0",
+                           arg=info["id"])
     row = take_row(page, info["id"])
     row.locator(".trim-stop").fill(str(TRIM[1]))
     row.locator(".trim-stop").press("Enter")
-    page.wait_for_function("([id, stop]) => window.app.sources.takes.find(t => t.id === id).trim[1] === stop",
-                           arg=[info["id"], TRIM[1]])
+    page.wait_for_function("([id, stop]) => window.app.sources.takes.find(t => t.id === id)"
+                           ".trim[1] === stop", arg=[info["id"], TRIM[1]])
     (trimmed,) = takes(server, page)
     assert trimmed["trim"] == [pytest.approx(TRIM[0]), pytest.approx(TRIM[1])]
     span = jaw_take.trimmed(*TRIM)
@@ -254,7 +257,6 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     assert float(row.locator(".trim-start").input_value()) == pytest.approx(TRIM[0])
     assert float(row.locator(".trim-stop").input_value()) == pytest.approx(TRIM[1])
     assert page.locator("#take-list li").count() == len(takes(server, page))
-    page.evaluate(_RECORD)
 
     # delete, after confirming
     take_row(page, info["id"]).locator(".delete").click()
@@ -264,12 +266,14 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     assert page.is_visible("#takes-empty")
 
 
-def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(server, page, marker_video):
+def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(server, page,
+                                                                              marker_video):
     before = takes(server, page)
     page.select_option("#video-method", "markers")
     page.evaluate(_WATCH_PROGRESS)
     page.set_input_files("#video-file", str(marker_video))
-    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=30_000)
+    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1,
+                           timeout=30_000)
     page.wait_for_selector("#source-progress", state="hidden")
     (info,) = [t for t in takes(server, page) if t["id"] not in {b["id"] for b in before}]
     assert info["name"] == "markers" and info["source"] == "markers"
@@ -302,11 +306,19 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     page.fill("#neutral-value", "0")
     page.evaluate(_RECORD)
     page.click("#play")
-    page.wait_for_function("() => window.frames.length >= 20 || !document.querySelector('#error').hidden",
-                           timeout=30_000)
+    page.wait_for_function("() => window.streamFrames.length >= 20 || "
+                           "!document.querySelector('#error').hidden", timeout=30_000)
     assert page.inner_text("#error-text") == ""
-    _, size = motion(page.evaluate("() => window.frames"))
+    _, size = motion(page.evaluate("() => window.streamFrames"))
     assert size.max() > 0.05
+    # and the face on screen is deformed by them (its skinned vertices leave the rest pose)
+    page.wait_for_function("""() => {
+        const face = window.app.face, rest = face.mesh.geometry.attributes.position.array;
+        const now = face.deformedPositions();
+        let most = 0;
+        for (let i = 0; i < rest.length; i++) most = Math.max(most, Math.abs(now[i] - rest[i]));
+        return most > 0.05;
+    }""", polling=200)
     page.click("#stop")
 
 
@@ -353,7 +365,8 @@ def _unlabelled_c3d(tmp_path, marker_video):
     of them a point of the project's layout."""
     import ezc3d
 
-    points = sample_face(1).vertices[sample_face(1).landmarks68] * 10  # mm
+    face = sample_face(1)
+    points = face.vertices[face.landmarks68] * 10  # mm
     c3d = ezc3d.c3d()
     c3d["parameters"]["POINT"]["RATE"]["value"] = [FPS]
     c3d["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
@@ -380,14 +393,17 @@ def _garbage_take(tmp_path, marker_video):
     return path
 
 
-# name: (the file, input, video method, what the message must say)
+# name: (the file, its input, the video method, what the message must say)
 BAD = {
-    "truncated video": (_cut_video, "#video-file", "markers", r"cut\.avi.*cut off: only \d+ of the 16 frames"),
+    "truncated video": (_cut_video, "#video-file", "markers",
+                        rf"cut\.avi.*cut off: only \d+ of the {MARKER_FRAMES} frames"),
     "not a video": (_text_video, "#video-file", "markers", r"notes\.mp4.* is not a video"),
     "no markers": (_plain_video, "#video-file", "markers", r"plain\.avi.*found 0 ring markers"),
-    "unknown labels": (_unlabelled_c3d, "#take-file", None, r"vicon\.c3d.* lacks 68 of the 68 points of layout 'ibug68'"),
+    "unknown labels": (_unlabelled_c3d, "#take-file", None,
+                       r"vicon\.c3d.* lacks 68 of the 68 points of layout 'ibug68'"),
     "empty take": (_empty_take, "#take-file", None, r"empty\.csv.* is empty"),
-    "garbage take": (_garbage_take, "#take-file", None, r"garbage\.c3d' refused: 'garbage\.c3d' is not a C3D file"),
+    "garbage take": (_garbage_take, "#take-file", None,
+                     r"garbage\.c3d' refused: 'garbage\.c3d' is not a C3D file"),
     "no face": (_faceless_video, "#video-file", "markerless", r"no face was found in noise\.webm"),
 }
 
@@ -417,10 +433,12 @@ def test_bad_input_says_what_is_wrong_and_keeps_the_project(server, page, kept_t
     make, control, method, expected = BAD[case]
     project_path = f"/api/projects/{page.sample['id']}"
     project, before = server.api("GET", project_path), takes(server, page)
+    assert kept_take["id"] in {t["id"] for t in before}
     path = make(tmp_path, marker_video)
     if method:
         page.select_option("#video-method", method)
-    page.evaluate("() => { document.getElementById('source-note').textContent = ''; }")
+    page.evaluate("() => { const note = document.getElementById('source-note'); "
+                  "note.textContent = ''; note.className = 'note'; }")
     page.set_input_files(control, str(path))
 
     # the message names the file and the problem: in the error banner, or for a cut-off
