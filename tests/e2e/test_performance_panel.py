@@ -296,12 +296,21 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     job = runs[1]
     assert job[0] == 0 and job[-1] == 1 and job == sorted(job), job
 
-    # it is selected; playing it (neutral: its first frame, as it is shorter than the
-    # default half-second capture) moves the face
+    # it is selected; it is no longer than the default neutral capture (its first half
+    # second), so Play says what to change instead of playing nothing
     assert page.input_value("#source-select") == "take"
     assert take_row(page, info["id"]).get_attribute("class") == "selected"
     page.check("#take-loop")
     open_conditioning(page)
+    page.select_option("#neutral-mode", "first_seconds")
+    page.fill("#neutral-value", "0.5")
+    page.click("#play")
+    page.wait_for_selector("#error", state="visible")
+    assert re.search(r'"markers" lasts 0\.50 s, no longer than the neutral capture .* frame number',
+                     page.inner_text("#error-text")), page.inner_text("#error-text")
+    page.evaluate("() => window.app.errors.clear()")
+
+    # with the neutral from its first frame, playing it moves the face
     page.select_option("#neutral-mode", "frame")
     page.fill("#neutral-value", "0")
     page.evaluate(_RECORD)

@@ -106,7 +106,18 @@ export class SourcePanel {
 		if ( kind === 'take' ) {
 
 			if ( ! this.selectedTake ) throw new Error( 'No take selected: import a file, track a video or record one first.' );
-			return { type: 'start', source: 'take', take: this.selectedTake, loop: $( 'take-loop' ).checked, settings: this.settings() };
+			const settings = this.settings();
+			const take = this.takes.find( ( t ) => t.id === this.selectedTake );
+			const span = take ? take.trim[ 1 ] - take.trim[ 0 ] : Infinity;
+			// the first seconds of a take are its neutral capture, which the player does not
+			// show: a take no longer than that has nothing left to play
+			if ( settings.neutral.mode === 'first_seconds' && span <= settings.neutral.seconds ) {
+
+				throw new Error( `"${ take.name }" lasts ${ span.toFixed( 2 ) } s, no longer than the neutral capture of its first ${ settings.neutral.seconds } s: under Conditioning, take the neutral from a frame number instead, or capture it over fewer seconds.` );
+
+			}
+
+			return { type: 'start', source: 'take', take: this.selectedTake, loop: $( 'take-loop' ).checked, settings };
 
 		}
 
