@@ -179,6 +179,7 @@ export class SkinnedFace {
 		};
 
 		this._displacements = null; // Float32Array( 4 * skinQuads * 4 ), RGBA texels
+		this._rigUploaded = false; // the rig's attributes or texture reached the GPU
 		this._setDefine( null );
 
 	}
@@ -253,6 +254,103 @@ export class SkinnedFace {
 		this._skinUniforms.skinQuads.value = quads;
 		this.nJoints = nJoints;
 		this.nInfluences = k;
+		this._rigUploaded = false;
+		this._version ++;
+
+	}
+
+	/**
+	 * Change the weights of some vertices of the current rig, as painting does: their rows
+	 * are read from `indices` and `weights` (the (V*k) arrays of `setRig`'s form, k the
+	 * rig's nInfluences) and only the span of attribute or texture rows they fall in is
+	 * uploaded again. The pose and the heat map follow at the next draw.
+	 * @param {ArrayLike<number>} vertices - vertex indices whose rows changed.
+	 * @param {Uint16Array} indices - (V*k) joint indices, each below nJoints.
+	 * @param {Float32Array} weights - (V*k) weights.
+	 */
+	updateWeights( vertices, indices, weights ) {
+
+		const k = this.nInfluences;
+		if ( k === 0 ) throw new Error( 'SkinnedFace.updateWeights: the face has no rig.' );
+		if ( indices.length !== this.nVertices * k || weights.length !== this.nVertices * k ) {
+
+			throw new TypeError( `SkinnedFace.updateWeights: indices and weights must hold ${ this.nVertices } x ${ k } values; got ${ describe( indices ) } and ${ describe( weights ) }.` );
+
+		}
+
+		if ( vertices.length === 0 ) return;
+		let first = Infinity, last = - Infinity;
+		for ( let n = 0; n < vertices.length; n ++ ) {
+
+			const i = vertices[ n ];
+			if ( ! ( i >= 0 && i < this.nVertices ) ) throw new RangeError( `SkinnedFace.updateWeights: vertex ${ i } is not one of the ${ this.nVertices } vertices.` );
+			for ( let s = i * k; s < i * k + k; s ++ ) {
+
+				if ( indices[ s ] >= this.nJoints ) throw new RangeError( `SkinnedFace.updateWeights: joint index ${ indices[ s ] } at slot ${ s } is not below nJoints = ${ this.nJoints }.` );
+
+			}
+
+			first = Math.min( first, i );
+			last = Math.max( last, i );
+
+		}
+
+		// before the rig's first upload a partial range would leave the rest uninitialised
+		const partial = this._rigUploaded;
+		if ( k <= MAX_SPARSE_INFLUENCES ) {
+
+			const geometry = this.mesh.geometry;
+			const slots = [ geometry.getAttribute( 'skinIndex' ), geometry.getAttribute( 'skinIndex1' ) ];
+			const values = [ geometry.getAttribute( 'skinWeight' ), geometry.getAttribute( 'skinWeight1' ) ];
+			for ( let n = 0; n < vertices.length; n ++ ) {
+
+				const i = vertices[ n ];
+				for ( let s = 0; s < 8; s ++ ) {
+
+					const half = s >> 2, lane = 4 * i + ( s & 3 );
+					slots[ half ].array[ lane ] = s < k ? indices[ i * k + s ] : 0;
+					values[ half ].array[ lane ] = s < k ? weights[ i * k + s ] : 0;
+
+				}
+
+			}
+
+			for ( const attribute of [ ...slots, ...values ] ) {
+
+				if ( partial ) attribute.addUpdateRange( 4 * first, 4 * ( last - first + 1 ) );
+				attribute.needsUpdate = true;
+
+			}
+
+		} else {
+
+			const texture = this._skinUniforms.skinWeightTexture.value;
+			const dense = texture.image.data;
+			const stride = 4 * this._skinUniforms.skinQuads.value;
+			for ( let n = 0; n < vertices.length; n ++ ) {
+
+				const i = vertices[ n ], row = i * stride, slot = i * k;
+				dense.fill( 0, row, row + stride );
+				for ( let s = 0; s < k; s ++ ) dense[ row + indices[ slot + s ] ] += weights[ slot + s ];
+
+			}
+
+			if ( partial ) {
+
+				// update ranges may not cross a texture row: whole rows from the first vertex's to the last's
+				const texelsPerRow = 4 * SKIN_TEXTURE_WIDTH;
+				for ( let r = Math.floor( first * stride / texelsPerRow ); r <= Math.floor( ( ( last + 1 ) * stride - 1 ) / texelsPerRow ); r ++ ) {
+
+					texture.addUpdateRange( r * texelsPerRow, texelsPerRow );
+
+				}
+
+			}
+
+			texture.needsUpdate = true;
+
+		}
+
 		this._version ++;
 
 	}
@@ -384,6 +482,7 @@ export class SkinnedFace {
 			}
 
 			pass.done.set( renderer, this._version );
+			this._rigUploaded = this.nInfluences > 0;
 
 		} finally {
 

@@ -2,6 +2,7 @@ import { ApiError, api } from './api.js';
 import { ErrorBanner, ask } from './dialogs.js';
 import { LandmarkPicker } from './LandmarkPicker.js';
 import { LayoutGuide } from './LayoutGuide.js';
+import { PaintPanel } from './PaintPanel.js';
 import { regionColor } from './palette.js';
 import { SkinnedFace } from './SkinnedFace.js';
 import { StreamClient } from './StreamClient.js';
@@ -46,6 +47,8 @@ class App {
 		this._draftTimer = 0;
 		this._streaming = false;
 		this.sources = new SourcePanel( this );
+		this.paint = new PaintPanel( this );
+		this.paint.painter.addEventListener( 'change', () => this._updateHint() );
 
 	}
 
@@ -133,6 +136,7 @@ class App {
 		try {
 
 			await this._flushDraft();
+			await this.paint.flush();
 			this._closeProject();
 			this.projectId = id;
 			$( 'project-select' ).value = id;
@@ -207,6 +211,7 @@ class App {
 		this.sources.stopWebcam();
 		this.picker.setMesh( null );
 		this.picker.setDisplacements( null );
+		this.paint.setRig( null, null );
 		if ( this.face ) {
 
 			this.viewer.setObject( null );
@@ -320,6 +325,7 @@ class App {
 		$( 'heatmap-select' ).disabled = false;
 		this.rigInfo = info;
 		this._updateRigInfo();
+		this.paint.setRig( info, weights );
 
 	}
 
@@ -513,6 +519,7 @@ class App {
 			this.rigInfo = null;
 			this.face?.setRig( null );
 			this.face?.setHeatmap( null );
+			this.paint.setRig( null, null );
 			this._fillLandmarkLists( this.project );
 			this._updateRigInfo();
 			$( 'landmarks-note' ).textContent = 'Saved. Compute the rig to animate the face.';
@@ -564,6 +571,7 @@ class App {
 		let text = '';
 		if ( ! this.project ) text = 'Create a project to start.';
 		else if ( ! this.face ) text = '';
+		else if ( this.paint.active ) text = this.paint.hint();
 		else if ( hovered >= 0 && layout ) text = `${ layout.points[ hovered ].name } · drag to slide it over the surface`;
 		else if ( layout && this.picker.next >= 0 ) text = `Click the mesh to place ${ layout.points[ this.picker.next ].name } · drag a marker to move it · Shift+click selects`;
 		else if ( this.picker.selected >= 0 && layout ) text = `${ layout.points[ this.picker.selected ].name } selected · Delete removes it`;
@@ -975,6 +983,13 @@ class App {
 		}
 
 		if ( typing ) return;
+		if ( this.paint.key( event ) ) {
+
+			event.preventDefault();
+			return;
+
+		}
+
 		if ( mod && key === 'z' ) {
 
 			event.preventDefault();

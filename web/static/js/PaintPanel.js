@@ -1,0 +1,201 @@
+import { WeightPainter } from './WeightPainter.js';
+
+const $ = ( id ) => document.getElementById( id );
+const RADIUS_RANGE = [ 0.005, 0.5 ]; // brush radius slider ends, in bounding-sphere radii
+const RADIUS_STEPS = 1000; // the slider is logarithmic: fine control for small brushes
+
+/**
+ * The rig panel's weight painting controls (index.html #paint-*): the Paint weights toggle,
+ * feature, brush, radius, strength, set weight, mirror, undo, redo, resets and the save
+ * state, driving a `WeightPainter`. While painting, the heat map shows the painted feature.
+ */
+export class PaintPanel {
+
+	/**
+	 * @param {{viewer: object, picker: object, face: object, projectId: string, project: object,
+	 *   layouts: object[], errors: {show: function}}} app - the page (main.js).
+	 */
+	constructor( app ) {
+
+		this.app = app;
+		this.painter = new WeightPainter( app.viewer, app.picker );
+		this._bind();
+		this._update();
+
+	}
+
+	/** Whether pointer drags paint. */
+	get active() {
+
+		return this.painter.active;
+
+	}
+
+	/**
+	 * Paint the app's face with this rig; null when the project has none (or it changed).
+	 * Unsaved strokes of the previous rig are dropped: `flush` first.
+	 * @param {{version: number, painted_vertices: number}|null} info - GET .../rig.
+	 * @param {object|null} weights - `api.rigWeights`.
+	 */
+	setRig( info, weights ) {
+
+		const app = this.app;
+		const layout = app.layouts.find( ( l ) => l.name === app.project?.landmarks?.layout ) || null;
+		this.painter.setRig( weights && app.face, app.projectId, info, weights, layout );
+		const names = [ ...$( 'heatmap-select' ).options ].filter( ( o ) => o.value !== '' );
+		$( 'paint-joint' ).replaceChildren( ...names.map( ( o ) => new Option( o.textContent, o.value ) ) );
+		this._update();
+
+	}
+
+	/** Save unsaved strokes now; the failure is shown, not thrown. */
+	async flush( options ) {
+
+		await this.painter.flush( options );
+
+	}
+
+	/**
+	 * @param {KeyboardEvent} event
+	 * @returns {boolean} whether painting took the key.
+	 */
+	key( event ) {
+
+		return this.painter.key( event );
+
+	}
+
+	/** The viewport hint while painting. */
+	hint() {
+
+		const painter = this.painter;
+		const name = $( 'paint-joint' ).selectedOptions[ 0 ]?.textContent ?? `feature ${ painter.joint }`;
+		return `Drag on the face to ${ painter.brush } ${ name } · Ctrl+click picks the nearest feature · [ ] radius · Alt+drag orbits`;
+
+	}
+
+	_bind() {
+
+		const painter = this.painter, app = this.app;
+		const guard = ( fn ) => async ( ...args ) => {
+
+			try {
+
+				await fn( ...args );
+
+			} catch ( error ) {
+
+				app.errors.show( error );
+
+			}
+
+		};
+
+		$( 'paint-toggle' ).addEventListener( 'click', () => {
+
+			painter.setActive( ! painter.active );
+			if ( painter.active ) this._showHeatmap();
+
+		} );
+		$( 'paint-joint' ).addEventListener( 'change', ( event ) => painter.setJoint( Number( event.target.value ) ) );
+		$( 'heatmap-select' ).addEventListener( 'change', ( event ) => {
+
+			if ( painter.active && event.target.value !== '' ) painter.setJoint( Number( event.target.value ) );
+
+		} );
+		for ( const input of document.querySelectorAll( 'input[name="paint-brush"]' ) ) {
+
+			input.addEventListener( 'change', () => painter.configure( { brush: input.value } ) );
+
+		}
+
+		$( 'paint-radius' ).addEventListener( 'input', ( event ) => painter.configure( { radius: this._radiusOf( Number( event.target.value ) ) } ) );
+		$( 'paint-strength' ).addEventListener( 'input', ( event ) => painter.configure( { strength: Number( event.target.value ) } ) );
+		$( 'paint-value' ).addEventListener( 'input', ( event ) => painter.configure( { value: Number( event.target.value ) } ) );
+		$( 'paint-mirror' ).addEventListener( 'change', ( event ) => painter.configure( { mirror: event.target.checked } ) );
+		$( 'paint-undo' ).addEventListener( 'click', () => painter.undo() );
+		$( 'paint-redo' ).addEventListener( 'click', () => painter.redo() );
+		$( 'paint-retry' ).addEventListener( 'click', guard( () => painter.retry() ) );
+		$( 'paint-reset-joint' ).addEventListener( 'click', guard( () => painter.reset( [ painter.joint ] ) ) );
+		$( 'paint-reset-all' ).addEventListener( 'click', guard( () => painter.reset( null ) ) );
+		painter.addEventListener( 'change', () => this._update() );
+		window.addEventListener( 'beforeunload', () => {
+
+			if ( painter.saveState === 'unsaved' ) painter.flush( { keepalive: true } );
+
+		} );
+
+	}
+
+	/** The face's heat map shows the painted feature. */
+	_showHeatmap() {
+
+		const face = this.app.face, joint = this.painter.joint;
+		if ( ! face || ! face.nJoints ) return;
+		face.setHeatmap( joint );
+		$( 'heatmap-select' ).value = String( joint );
+
+	}
+
+	_update() {
+
+		const painter = this.painter, rig = painter.rig;
+		const toggle = $( 'paint-toggle' );
+		toggle.disabled = ! rig;
+		toggle.setAttribute( 'aria-pressed', String( painter.active ) );
+		toggle.classList.toggle( 'primary', painter.active );
+		$( 'paint-panel' ).hidden = ! painter.active;
+		$( 'paint-state' ).textContent = rig && rig.painted ? `painted · ${ rig.painted.toLocaleString( 'en' ) } vertices` : '';
+		if ( ! rig ) return;
+
+		$( 'paint-joint' ).value = String( painter.joint );
+		for ( const input of document.querySelectorAll( 'input[name="paint-brush"]' ) ) input.checked = input.value === painter.brush;
+		$( 'paint-value' ).closest( '.row' ).hidden = painter.brush !== 'set';
+		$( 'paint-radius' ).value = String( this._sliderOf( painter.radius ) );
+		$( 'paint-radius-out' ).textContent = `${ painter.radius.toPrecision( 2 ) } units`;
+		$( 'paint-strength' ).value = String( painter.strength );
+		$( 'paint-strength-out' ).textContent = painter.strength.toFixed( 2 );
+		$( 'paint-value' ).value = String( painter.value );
+		$( 'paint-value-out' ).textContent = painter.value.toFixed( 2 );
+		$( 'paint-mirror' ).checked = painter.mirror;
+		$( 'paint-mirror' ).disabled = ! painter.canMirror;
+		$( 'paint-undo' ).disabled = ! painter.canUndo;
+		$( 'paint-redo' ).disabled = ! painter.canRedo;
+
+		const state = painter.saveState;
+		const note = $( 'paint-note' );
+		note.textContent = {
+			saved: rig.painted ? `Saved · ${ rig.painted.toLocaleString( 'en' ) } vertices differ from the automatic rig.` : 'Saved · the automatic rig.',
+			unsaved: 'Unsaved strokes…',
+			saving: 'Saving…',
+			failed: `Not saved: ${ painter.saveError } · your strokes are kept; Retry saves them.`,
+		}[ state ];
+		note.className = 'note' + ( state === 'failed' ? ' warn' : '' );
+		note.dataset.state = state;
+		$( 'paint-retry' ).hidden = state !== 'failed';
+		if ( painter.active ) this._showHeatmap();
+
+	}
+
+	_boundsRadius() {
+
+		return this.app.face?.mesh.geometry.boundingSphere.radius ?? 1;
+
+	}
+
+	_radiusOf( step ) {
+
+		const [ low, high ] = RADIUS_RANGE;
+		return this._boundsRadius() * low * ( high / low ) ** ( step / RADIUS_STEPS );
+
+	}
+
+	_sliderOf( radius ) {
+
+		const [ low, high ] = RADIUS_RANGE;
+		const t = Math.log( radius / ( this._boundsRadius() * low ) ) / Math.log( high / low );
+		return Math.round( Math.min( 1, Math.max( 0, t ) ) * RADIUS_STEPS );
+
+	}
+
+}
