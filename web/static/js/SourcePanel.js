@@ -78,6 +78,7 @@ export class SourcePanel {
 	async setProject( project ) {
 
 		this.stopWebcam();
+		this._abort?.abort( new Error( 'Video tracking stopped: another project was opened.' ) );
 		this.takes = [];
 		this.selectedTake = null;
 		this._regionRows( project?.landmarks?.layout || 'ibug68' );
@@ -203,9 +204,10 @@ export class SourcePanel {
 
 		const method = $( 'video-method' ).value;
 		if ( method === 'markers' ) return this._trackOnServer( file );
+		const id = this.app.projectId;
 		const layout = this._layout();
 		const controller = new AbortController();
-		this._abort = controller;
+		this._abort = controller; // another project stops it (setProject)
 		const result = await this._withProgress( `Tracking ${ file.name } in this page…`, ( progress ) => trackVideo( file, {
 			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
 			signal: controller.signal,
@@ -218,8 +220,10 @@ export class SourcePanel {
 		} ) );
 		if ( result.faces === 0 ) throw new Error( `No face was found in ${ file.name } (${ result.n_frames } frames): nothing to keep.` );
 		const npy = new File( [ npyBytes( result.points, [ result.n_frames, result.n_points, 3 ] ) ], file.name.replace( /\.[^.]*$/, '' ) + '.npy' );
-		const info = await api.uploadTake( this.app.projectId, npy, { layout: layout.name, fps: result.fps, name: file.name.replace( /\.[^.]*$/, '' ) } );
-		this._note( `Tracked "${ info.name }": ${ result.n_frames } frames at ${ ( result.n_frames / result.seconds ).toFixed( 1 ) } fps, a face in ${ ( 100 * result.faces / result.n_frames ).toFixed( 0 ) } %.` );
+		const info = await api.uploadTake( id, npy, { layout: layout.name, fps: result.fps, name: file.name.replace( /\.[^.]*$/, '' ) } );
+		if ( id !== this.app.projectId ) return; // kept in its project; this one lists its own takes
+		const share = result.faces / result.n_frames;
+		this._note( `Tracked "${ info.name }": ${ result.n_frames } frames at ${ +result.fps.toFixed( 3 ) } fps, a face in ${ ( 100 * share ).toFixed( 0 ) } % of them (${ ( result.n_frames / result.seconds ).toFixed( 1 ) } frames tracked a second).`, share < 0.9 );
 		this.selectedTake = info.id;
 		$( 'source-select' ).value = 'take';
 		await this.refreshTakes();
