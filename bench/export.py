@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench.stream import machine  # noqa: E402
 from retarget.export import clip_at_rate, export_gltf, read_gltf  # noqa: E402
-from retarget.export.glb import glb_document  # noqa: E402
+from retarget.gltf_document import GltfDocument  # noqa: E402
 from retarget.landmarks import from_vertex_indices  # noqa: E402
 from retarget.layouts import get_layout  # noqa: E402
 from retarget.mesh import mesh_from_arrays  # noqa: E402
@@ -55,30 +55,30 @@ def median_seconds(fn, repeats: int):
 
 def byte_split(data: bytes) -> dict[str, int]:
     """Bytes of the BIN chunk by what they hold: mesh, rig, animation."""
-    doc, _ = glb_document(data, "the export")
+    doc = GltfDocument(data, "the export", None).doc
     owner = {}
-    primitive = doc["meshes"][0]["primitives"][0]
-    for name, accessor in primitive["attributes"].items():
-        owner[accessor] = "rig" if name.startswith(("JOINTS_", "WEIGHTS_")) else "mesh"
-    owner[primitive["indices"]] = "mesh"
-    for target in primitive.get("targets", []):
+    primitive = doc.meshes[0].primitives[0]
+    for name, accessor in vars(primitive.attributes).items():
+        if accessor is not None:
+            owner[accessor] = "rig" if name.startswith(("JOINTS_", "WEIGHTS_")) else "mesh"
+    owner[primitive.indices] = "mesh"
+    for target in primitive.targets or []:
         owner[target["POSITION"]] = "rig"
-    for skin in doc.get("skins", []):
-        owner[skin["inverseBindMatrices"]] = "rig"
-    for animation in doc.get("animations", []):
-        for sampler in animation["samplers"]:
-            owner[sampler["input"]] = owner[sampler["output"]] = "animation"
+    for skin in doc.skins or []:
+        owner[skin.inverseBindMatrices] = "rig"
+    for animation in doc.animations or []:
+        for sampler in animation.samplers:
+            owner[sampler.input] = owner[sampler.output] = "animation"
     views: dict[int, str] = {}
     for index, part in owner.items():
-        accessor = doc["accessors"][index]
-        used = [accessor.get("bufferView")]
-        if "sparse" in accessor:
-            used += [accessor["sparse"]["indices"]["bufferView"],
-                     accessor["sparse"]["values"]["bufferView"]]
+        accessor = doc.accessors[index]
+        used = [accessor.bufferView]
+        if accessor.sparse is not None:
+            used += [accessor.sparse.indices.bufferView, accessor.sparse.values.bufferView]
         views.update({v: part for v in used if v is not None})
     split = {"mesh": 0, "rig": 0, "animation": 0}
     for view, part in views.items():
-        split[part] += doc["bufferViews"][view]["byteLength"]
+        split[part] += doc.bufferViews[view].byteLength
     return split
 
 

@@ -1,17 +1,15 @@
 """glTF export (retarget.export): structure, the Khronos validator, glTF's own skinning and
-morphing evaluated in numpy from the file against `skin_displacements`, and the round trip.
+morphing evaluated from the file against `skin_displacements`, and the round trip.
 
-The glTF evaluator here parses the GLB and decodes accessors itself, so it shares no code
-with the exporter or our reader: it checks that what a glTF viewer computes from the file (node hierarchy, animation sampling, inverse bind matrices, JOINTS/WEIGHTS,
-morph targets) is Dutreve's ``v0 + W d``.
+What a glTF viewer computes from the file (node hierarchy, animation sampling, inverse
+bind matrices, JOINTS/WEIGHTS, morph targets) is evaluated by `retarget.gltf_animation`,
+which shares no code with the exporter, and must be Dutreve's ``v0 + W d``.
 """
 
 from __future__ import annotations
 
 import functools
 import io
-import json
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -21,10 +19,14 @@ import trimesh
 from retarget.errors import RetargetError
 from retarget.export import Clip, clip_at_rate, export_gltf, joint_names, read_gltf
 from retarget.export.influences import is_joint_based, joint_influences
+from retarget.gltf_animation import (animated_weights, animation_channels, mesh_instances,
+                                       node_transforms, posed_vertices)
+from retarget.gltf_document import GltfDocument
 from retarget.landmarks import from_vertex_indices
 from retarget.layouts import get_layout
 from retarget.mesh import mesh_from_arrays
-from retarget.sample_face import demo_weights, posed_vertices, sample_face
+from retarget.sample_face import demo_weights, sample_face
+from retarget.sample_face import posed_vertices as face_vertices
 from retarget.skin import SkinWeights, skin_displacements
 from retarget.weights import compute_weights
 from tests.gltf_check import assert_valid_gltf
@@ -39,7 +41,7 @@ def face():
     f = sample_face(1)
     mesh = mesh_from_arrays(f.vertices, f.faces, uv=f.uv, name="sample_face")
     points = from_vertex_indices(f.landmarks68, mesh.n_vertices, "ibug68")
-    posed = posed_vertices(f, demo_weights(45, FPS))[:, f.landmarks68]
+    posed = face_vertices(f, demo_weights(45, FPS))[:, f.landmarks68]
     d = (posed - f.vertices[f.landmarks68]).astype(np.float32)
     clips = [clip_at_rate("demo", d[:30], FPS),
              Clip("uneven", d[30:], np.cumsum(np.linspace(0.02, 0.06, 15)))]
@@ -61,101 +63,39 @@ def exported(face, tmp_path_factory):
 
 
 # ---------------------------------------------------------------------------------------
-# an independent glTF evaluator (pygltflib + numpy)
-
-_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+# what a glTF viewer draws: retarget.gltf_animation, the glTF 2.0 specification's morphing
+# and skinning (§3.7) and animation sampling (§3.11), written to read animated takes. It
+# shares no code with the exporter (GltfDocument parses, GlbBuilder writes), so it checks
+# the file, not the exporter's own idea of it; three.js (tests/e2e/test_export_threejs.py)
+# and Blender (tests/test_blender.py) check it again.
 
 
 @functools.lru_cache(maxsize=8)
-def _load(path) -> tuple[dict, bytes]:
-    """(glTF JSON, BIN chunk) of a GLB, parsed here from the spec's layout (cached: each
-    test writes its own paths and never rewrites one)."""
-    data = Path(path).read_bytes()
-    magic, version, total = struct.unpack_from("<4sII", data)
-    assert (magic, version, total) == (b"glTF", 2, len(data))
-    json_length, json_type = struct.unpack_from("<II", data, 12)
-    bin_at = 20 + json_length
-    bin_length, bin_type = struct.unpack_from("<II", data, bin_at)
-    assert (json_type, bin_type) == (0x4E4F534A, 0x004E4942)
-    return json.loads(data[20:bin_at]), data[bin_at + 8:bin_at + 8 + bin_length]
+def _load(path) -> GltfDocument:
+    """The parsed file (cached: each test writes its own paths and never rewrites one)."""
+    return GltfDocument(Path(path).read_bytes(), Path(path).name, None)
 
 
-def _elements(doc, blob, view_index, dtype, width, count, offset=0) -> np.ndarray:
-    view = doc["bufferViews"][view_index]
-    assert "byteStride" not in view
-    start = view.get("byteOffset", 0) + offset
-    return np.frombuffer(blob, dtype, count * width, start).reshape(count, width)
-
-
-def _accessor(doc, blob, index) -> np.ndarray:
-    a = doc["accessors"][index]
-    dtype, width = _DTYPES[a["componentType"]], _WIDTH[a["type"]]
-    if "bufferView" not in a:
-        out = np.zeros((a["count"], width), dtype)
-    else:
-        out = _elements(doc, blob, a["bufferView"], dtype, width, a["count"],
-                        a.get("byteOffset", 0)).copy()
-    if "sparse" in a:
-        sparse = a["sparse"]
-        rows = _elements(doc, blob, sparse["indices"]["bufferView"],
-                         _DTYPES[sparse["indices"]["componentType"]], 1, sparse["count"])[:, 0]
-        out[rows] = _elements(doc, blob, sparse["values"]["bufferView"], dtype, width,
-                              sparse["count"])
-    return out
+@functools.lru_cache(maxsize=8)
+def _instance(path) -> dict:
+    (instance,) = mesh_instances(_load(path))
+    return instance
 
 
 def _sample(times, values, t) -> np.ndarray:
-    """LINEAR glTF sampling of (F, k) keyed `values` at time t (clamped at the ends)."""
+    """LINEAR sampling of (F, k) keyed `values` at time t (clamped at the ends)."""
     return np.array([np.interp(t, times, values[:, c]) for c in range(values.shape[1])])
 
 
 def _gltf_vertices(path, animation: int, t: float) -> np.ndarray:
     """(V, 3) float64 positions a glTF viewer draws at time t of an animation."""
-    doc, blob = _load(path)
-    nodes = doc["nodes"]
-    translation = {i: np.array(n.get("translation", (0.0, 0.0, 0.0))) for i, n in enumerate(nodes)}
-    assert not any(key in n for n in nodes for key in ("rotation", "scale", "matrix"))
-    mesh_node = next(i for i, n in enumerate(nodes) if "mesh" in n)
-    gmesh = doc["meshes"][nodes[mesh_node]["mesh"]]
-    morph = np.array(gmesh.get("weights", []), dtype=np.float64)
-    anim = doc["animations"][animation]
-    for channel in anim["channels"]:
-        sampler = anim["samplers"][channel["sampler"]]
-        assert sampler["interpolation"] == "LINEAR"
-        times = _accessor(doc, blob, sampler["input"])[:, 0]
-        values = _accessor(doc, blob, sampler["output"]).astype(np.float64)
-        target = channel["target"]
-        if target["path"] == "translation":
-            translation[target["node"]] = _sample(times, values, t)
-        else:
-            assert target["path"] == "weights" and target["node"] == mesh_node
-            morph = _sample(times, values.reshape(len(times), -1), t)
-    parent = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
-
-    def world(i):
-        m = np.eye(4)
-        m[:3, 3] = translation[i]
-        return world(parent[i]) @ m if i in parent else m
-
-    primitive = gmesh["primitives"][0]
-    attributes = primitive["attributes"]
-    v = _accessor(doc, blob, attributes["POSITION"]).astype(np.float64)
-    for k, target in enumerate(primitive.get("targets", [])):
-        v = v + morph[k] * _accessor(doc, blob, target["POSITION"])
-    if "skin" not in nodes[mesh_node]:
-        return v @ world(mesh_node)[:3, :3].T + world(mesh_node)[:3, 3]
-    skin = doc["skins"][nodes[mesh_node]["skin"]]
-    ibm = _accessor(doc, blob, skin["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
-    matrices = np.stack([world(j) @ ibm[k] for k, j in enumerate(skin["joints"])])
-    out = np.zeros_like(v)
-    for s in range(len([a for a in attributes if a.startswith("JOINTS_")])):
-        j = _accessor(doc, blob, attributes[f"JOINTS_{s}"]).astype(np.int64)
-        w = _accessor(doc, blob, attributes[f"WEIGHTS_{s}"]).astype(np.float64)
-        for c in range(4):
-            m = matrices[j[:, c]]
-            out += w[:, c, None] * (np.einsum("vij,vj->vi", m[:, :3, :3], v) + m[:, :3, 3])
-    return out
+    gltf, instance = _load(path), _instance(path)
+    channels = animation_channels(gltf, gltf.doc.animations[animation])
+    times = np.array([t], dtype=np.float64)
+    world = node_transforms(gltf, gltf.doc.nodes, channels, times)
+    rows = np.arange(len(instance["positions"]))
+    return posed_vertices(gltf, instance, rows, world, animated_weights(gltf, channels, times),
+                          times)[0]
 
 
 def _expected(face, weights, clip, t) -> np.ndarray:
@@ -178,50 +118,54 @@ def test_exports_pass_the_khronos_validator(exported, method):
 
 
 def test_skin_structure(face, exported):
-    doc, blob = _load(exported["ellipsoid"])
-    nodes, n = doc["nodes"], face["points"].n_points
-    skin = doc["skins"][0]
-    assert [nodes[j]["name"] for j in skin["joints"]] == ["root"] + list(IBUG.point_names)
-    assert nodes[skin["joints"][0]]["children"] == skin["joints"][1:]
+    gltf = _load(exported["ellipsoid"])
+    doc, n = gltf.doc, face["points"].n_points
+    nodes, skin = doc.nodes, doc.skins[0]
+    assert [nodes[j].name for j in skin.joints] == ["root"] + list(IBUG.point_names)
+    assert nodes[skin.joints[0]].children == skin.joints[1:]
+    assert all(node.rotation is None and node.scale is None and node.matrix is None
+               for node in nodes)  # translation-only joints
     neutral = face["points"].positions(face["mesh"].vertices)
-    joints_at = np.array([nodes[j]["translation"] for j in skin["joints"][1:]])
+    joints_at = np.array([nodes[j].translation for j in skin.joints[1:]])
     np.testing.assert_allclose(joints_at, neutral, atol=1e-5)
-    ibm = _accessor(doc, blob, skin["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
+    ibm = gltf.accessor(skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
     np.testing.assert_array_equal(ibm[0], np.eye(4))
     np.testing.assert_array_equal(ibm[1:, :3, 3], -joints_at.astype(np.float32))
-    attributes = doc["meshes"][0]["primitives"][0]["attributes"]
+    attributes = {k: v for k, v in vars(doc.meshes[0].primitives[0].attributes).items()
+                  if v is not None}
     # four features + the root need two sets of four
     assert sorted(a for a in attributes if a[:7] in ("JOINTS_", "WEIGHTS")) == \
         ["JOINTS_0", "JOINTS_1", "WEIGHTS_0", "WEIGHTS_1"]
-    assert doc["accessors"][attributes["JOINTS_0"]]["componentType"] == 5121  # 69 joints: bytes
-    w = np.hstack([_accessor(doc, blob, attributes[f"WEIGHTS_{s}"]) for s in (0, 1)])
-    np.testing.assert_allclose(w.astype(np.float64).sum(1), 1.0, atol=1e-6)
+    assert doc.accessors[attributes["JOINTS_0"]].componentType == 5121  # 69 joints: bytes
+    w = np.hstack([gltf.accessor(attributes[f"WEIGHTS_{s}"]) for s in (0, 1)])
+    np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-6)
     assert (w >= 0).all()
-    anim = doc["animations"][0]
-    assert anim["name"] == "demo" and len(anim["channels"]) == n
-    times = _accessor(doc, blob, anim["samplers"][0]["input"])[:, 0]
+    anim = doc.animations[0]
+    assert anim.name == "demo" and len(anim.channels) == n
+    assert {sampler.interpolation for sampler in anim.samplers} == {"LINEAR"}
+    times = gltf.accessor(anim.samplers[0].input)[:, 0]
     np.testing.assert_allclose(times, np.arange(30) / FPS, rtol=1e-6)
 
 
 def test_morph_structure(face, exported):
-    doc, blob = _load(exported["rbf"])
-    gmesh, n = doc["meshes"][0], face["points"].n_points
-    targets = gmesh["primitives"][0]["targets"]
-    assert "skins" not in doc and len(targets) == 3 * n
-    assert gmesh["extras"]["targetNames"][:4] == \
+    gltf = _load(exported["rbf"])
+    gmesh, n = gltf.doc.meshes[0], face["points"].n_points
+    targets = gmesh.primitives[0].targets
+    assert not gltf.doc.skins and len(targets) == 3 * n
+    assert gmesh.extras["targetNames"][:4] == \
         [f"{IBUG.point_names[0]}.{a}" for a in "xyz"] + [f"{IBUG.point_names[1]}.x"]
     # target (i, y) is feature i's weights along y only, times a power of two that puts
     # the animated weights (displacements over it) within [-1, 1]
-    scale = gmesh["extras"]["targetScale"]
+    scale = gmesh.extras["targetScale"]
     largest = max(np.abs(c.displacements).max() for c in face["clips"])
     assert largest <= scale < 2 * largest and np.log2(scale) % 1 == 0
     dense = face["rigs"]["rbf"].dense()
-    target = _accessor(doc, blob, targets[3 * 5 + 1]["POSITION"])
+    target = gltf.accessor(targets[3 * 5 + 1]["POSITION"])
     np.testing.assert_array_equal(target[:, [0, 2]], 0)
     np.testing.assert_allclose(target[:, 1], scale * dense[:, 5], atol=1e-7)
     largest_weight = max(
-        np.abs(_accessor(doc, blob, a["samplers"][a["channels"][-1]["sampler"]]["output"])).max()
-        for a in doc["animations"])
+        np.abs(gltf.accessor(a.samplers[a.channels[-1].sampler].output)).max()
+        for a in gltf.doc.animations)
     assert 0.5 < largest_weight <= 1
 
 
@@ -301,14 +245,14 @@ def test_many_joints_and_a_sparse_morph_rig(tmp_path):
         path = tmp_path / f"{name}.glb"
         path.write_bytes(export_gltf(mesh, points, rig, [clip]))
         assert_valid_gltf(path)
-        doc, _ = _load(path)
-        primitive = doc["meshes"][0]["primitives"][0]
+        doc = _load(path).doc
+        primitive = doc.meshes[0].primitives[0]
         if name == "short":
-            assert doc["accessors"][primitive["attributes"]["JOINTS_0"]]["componentType"] == 5123
+            assert doc.accessors[primitive.attributes.JOINTS_0].componentType == 5123
         else:
-            stored = [doc["accessors"][t["POSITION"]] for t in primitive["targets"]]
-            assert all("sparse" in a or "bufferView" not in a for a in stored)
-            assert any("bufferView" not in a and "sparse" not in a for a in stored)
+            stored = [doc.accessors[t["POSITION"]] for t in primitive.targets]
+            assert all(a.sparse is not None or a.bufferView is None for a in stored)
+            assert any(a.bufferView is None and a.sparse is None for a in stored)
         back = read_gltf(path)
         np.testing.assert_allclose(back.weights.dense(), rig.dense(), atol=1e-7)
         got = _gltf_vertices(path, 0, clip.times[2])

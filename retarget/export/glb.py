@@ -1,12 +1,11 @@
-"""The GLB container (glTF 2.0 binary): writing buffer views and accessors, reading them back.
+"""The GLB container (glTF 2.0 binary): writing buffer views and accessors.
 
 A GLB file is a 12-byte header, a JSON chunk (the glTF document) and one BIN chunk (the
 buffer), each chunk padded to 4 bytes (glTF 2.0 spec, "GLB File Format Specification").
 `GlbBuilder` appends arrays to the BIN chunk as buffer views, each at a 4-byte aligned
 offset so that every accessor is aligned to its component size, and declares accessors
-on them; `glb_bytes` joins the document and the buffer. `glb_document` splits a GLB
-back and `accessor_array` decodes an accessor (dense or sparse, tightly packed or
-strided) into a numpy array.
+on them; `glb_bytes` joins the document and the buffer. Reading glTF is
+`retarget.gltf_document.GltfDocument`'s.
 """
 
 from __future__ import annotations
@@ -33,7 +32,6 @@ COMPONENT_TYPES = {
     5126: np.dtype("<f4"),
 }
 _COMPONENT_CODES = {dtype: code for code, dtype in COMPONENT_TYPES.items()}
-TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 _TYPES_BY_SIZE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
 _MAX_GLB_BYTES = 2**32 - 1  # the header's uint32 length
 
@@ -171,82 +169,6 @@ class GlbBuilder:
     def _add(self, accessor: dict) -> int:
         self.document["accessors"].append(accessor)
         return len(self.document["accessors"]) - 1
-
-
-def glb_document(data: bytes, label: str) -> tuple[dict, bytes]:
-    """(glTF JSON document, BIN chunk bytes) of a GLB file; `label` names it in errors."""
-    data = bytes(data)
-    if len(data) < 20 or data[:4] != GLB_MAGIC:
-        raise RetargetError(f"{label} is not a GLB file (it does not start with 'glTF')")
-    _, version, total = struct.unpack_from("<4sII", data)
-    if version != 2:
-        raise RetargetError(f"{label} is GLB version {version}; only glTF 2.0 is read")
-    if total > len(data):
-        raise RetargetError(f"{label} is truncated: the header says {total} bytes, "
-                            f"the file has {len(data)}")
-    document, binary, at = None, b"", 12
-    while at + 8 <= total:
-        length, kind = struct.unpack_from("<II", data, at)
-        chunk = data[at + 8:at + 8 + length]
-        if len(chunk) != length:
-            raise RetargetError(f"{label} is truncated inside a chunk at byte {at}")
-        if kind == JSON_CHUNK and document is None:
-            try:
-                document = json.loads(chunk)
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise RetargetError(f"{label}: its JSON chunk is not valid JSON: {exc}") from exc
-        elif kind == BIN_CHUNK and not binary:
-            binary = chunk
-        at += 8 + length
-    if not isinstance(document, dict):
-        raise RetargetError(f"{label} has no JSON chunk holding a glTF object")
-    return document, binary
-
-
-def accessor_array(document: dict, binary: bytes, index: int) -> np.ndarray:
-    """Accessor `index` as an array: (count,) for SCALAR, else (count, k); its component
-    dtype (normalized integers are returned as stored, not scaled)."""
-    try:
-        accessor = document["accessors"][index]
-        dtype = COMPONENT_TYPES[accessor["componentType"]]
-        k = TYPE_SIZES[accessor["type"]]
-        count = int(accessor["count"])
-        if "bufferView" in accessor:
-            out = _view_elements(document, binary, accessor["bufferView"], dtype, k, count,
-                                 int(accessor.get("byteOffset", 0)))
-        else:
-            out = np.zeros((count, k), dtype)
-        sparse = accessor.get("sparse")
-        if sparse:
-            n = int(sparse["count"])
-            rows = _view_elements(document, binary, sparse["indices"]["bufferView"],
-                                  COMPONENT_TYPES[sparse["indices"]["componentType"]], 1, n,
-                                  int(sparse["indices"].get("byteOffset", 0)))[:, 0]
-            values = _view_elements(document, binary, sparse["values"]["bufferView"], dtype,
-                                    k, n, int(sparse["values"].get("byteOffset", 0)))
-            out[rows.astype(np.int64)] = values
-    except (KeyError, IndexError, TypeError, ValueError) as exc:
-        raise RetargetError(f"glTF accessor {index} cannot be read: "
-                            f"{type(exc).__name__}: {exc}") from exc
-    return out[:, 0] if k == 1 else out
-
-
-def _view_elements(document, binary, view_index, dtype, k, count, offset) -> np.ndarray:
-    """(count, k) elements of a buffer view from byte `offset`, honouring byteStride."""
-    view = document["bufferViews"][view_index]
-    if view.get("buffer", 0) != 0:
-        raise ValueError("only the GLB's own buffer (0) is read")
-    start = int(view.get("byteOffset", 0)) + offset
-    element = dtype.itemsize * k
-    stride = int(view.get("byteStride", element))
-    end = start + stride * (count - 1) + element if count else start
-    if end > int(view.get("byteOffset", 0)) + int(view["byteLength"]) or end > len(binary):
-        raise ValueError(f"{count} elements run past the end of buffer view {view_index}")
-    if stride == element:
-        return np.frombuffer(binary, dtype, count * k, start).reshape(count, k).copy()
-    rows = np.frombuffer(binary, np.uint8, end - start, start)
-    rows = np.lib.stride_tricks.as_strided(rows, (count, element), (stride, 1))
-    return np.ascontiguousarray(rows).view(dtype).reshape(count, k)
 
 
 def _component_code(dtype: np.dtype) -> int:

@@ -12,9 +12,11 @@ The round trip of the export. What comes back, against what went in:
 - one `Clip` per animation: the feature joints' translations minus their neutral
   positions, at the animation's key times.
 
-Files of another layout (not one skin or morph-target primitive beside a static root of
-translation-only feature joints) are refused with a `RetargetError` saying what is
-missing, rather than read approximately.
+The file is parsed and its accessors read by `retarget.gltf_document.GltfDocument`
+(bounds-checked), its animation channels by `retarget.gltf_animation`. Files of another
+layout (not one skin or morph-target primitive beside a static root of translation-only
+feature joints) are refused with a `RetargetError` saying what is missing, rather than
+read approximately.
 """
 
 from __future__ import annotations
@@ -27,9 +29,10 @@ import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.export.clips import Clip
-from retarget.export.glb import accessor_array, glb_document
 from retarget.export.influences import weights_from_influences
 from retarget.export.morph import weights_from_targets
+from retarget.gltf_animation import animation_channels
+from retarget.gltf_document import GltfDocument
 from retarget.landmarks import SurfacePoints, from_positions, landmarks_from_json
 from retarget.material import Material
 from retarget.mesh import Mesh, mesh_from_arrays
@@ -56,25 +59,28 @@ class RiggedFace:
     deformation: str
 
 
+
 def read_gltf(source) -> RiggedFace:
     """Read an `export_gltf` .glb from a path, bytes or a binary file object."""
     data, label = _source_bytes(source)
-    doc, binary = glb_document(data, label)
-    nodes = doc.get("nodes", [])
-    extras = _retarget_extras(doc)
-    mesh_node = _mesh_node(doc, label)
-    primitive = _primitive(doc, nodes[mesh_node], label)
-    root, features = _feature_nodes(doc, mesh_node, label)
+    gltf = _document(data, label)
+    nodes = gltf.doc.nodes or []
+    extras = _retarget_extras(gltf)
+    mesh_node = _mesh_node(nodes, label)
+    primitive = _primitive(gltf, nodes[mesh_node])
+    root, features = _feature_nodes(gltf, mesh_node)
     neutral = np.array([_translation(nodes[i]) for i in features]) + _translation(nodes[root])
-    names = tuple(str(nodes[i].get("name", f"feature_{k}")) for k, i in enumerate(features))
-    mesh = _mesh(doc, binary, mesh_node, primitive)
+    names = tuple(str(nodes[i].name or f"feature_{k}") for k, i in enumerate(features))
+    mesh = _mesh(gltf, nodes[mesh_node], primitive)
     method = str(extras.get("method", ""))
-    if "skin" in nodes[mesh_node]:
-        weights = _skin_weights(doc, binary, primitive, len(features), method, label)
+    if nodes[mesh_node].skin is not None:
+        weights = _skin_weights(gltf, primitive, len(features), method)
         deformation = "skin"
-    elif primitive.get("targets"):
-        targets = [accessor_array(doc, binary, t["POSITION"]) for t in primitive["targets"]]
-        scale = doc["meshes"][nodes[mesh_node]["mesh"]].get("extras", {}).get("targetScale", 1.0)
+    elif primitive.targets:
+        # target by target: a dense rig's 3N (V, 3) offsets are never stacked
+        targets = [gltf.accessor(_index(t.get("POSITION"), label, "a morph target's POSITION"))
+                   for t in primitive.targets]
+        scale = gltf.doc.meshes[nodes[mesh_node].mesh].extras.get("targetScale", 1.0)
         weights = weights_from_targets(targets, len(features), float(scale), method)
         deformation = "morph"
     else:
@@ -90,8 +96,7 @@ def read_gltf(source) -> RiggedFace:
     else:
         points = from_positions(neutral, mesh.vertices, mesh.faces)
     joint_position = {node: p for node, p in zip(features, neutral.astype(np.float32))}
-    clips = tuple(_clip(doc, binary, k, joint_position, label)
-                  for k in range(len(doc.get("animations", []))))
+    clips = tuple(_clip(gltf, k, joint_position) for k in range(len(gltf.doc.animations or [])))
     return RiggedFace(mesh, points, weights, clips, names, deformation)
 
 
@@ -112,143 +117,168 @@ def _source_bytes(source) -> tuple[bytes, str]:
                         f"got {type(source).__name__}")
 
 
-def _retarget_extras(doc: dict) -> dict:
-    scenes = doc.get("scenes", [])
-    scene = scenes[doc.get("scene", 0)] if scenes else {}
-    extras = scene.get("extras", {}) if isinstance(scene, dict) else {}
+def _document(data: bytes, label: str) -> GltfDocument:
+    """The parsed GLB (the export is always binary); a truncated file is named as such."""
+    if len(data) < 12 or data[:4] != b"glTF":
+        raise RetargetError(f"{label} is not a GLB file (it does not start with 'glTF')")
+    declared = int.from_bytes(data[8:12], "little")
+    if declared > len(data):
+        raise RetargetError(f"{label} is truncated: the header says {declared} bytes, "
+                            f"the file has {len(data)}")
+    return GltfDocument(data, label, None)
+
+
+def _index(value, label: str, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise RetargetError(f"{label}: {what} is not an accessor index ({value!r})")
+    return value
+
+
+def _retarget_extras(gltf: GltfDocument) -> dict:
+    scenes = gltf.doc.scenes or []
+    scene = gltf.item(scenes, gltf.doc.scene or 0, "scene") if scenes else None
+    extras = scene.extras if scene is not None else {}
     found = extras.get("retarget", {}) if isinstance(extras, dict) else {}
     return found if isinstance(found, dict) else {}
 
 
-def _mesh_node(doc: dict, label: str) -> int:
-    with_mesh = [i for i, node in enumerate(doc.get("nodes", [])) if "mesh" in node]
+def _mesh_node(nodes, label: str) -> int:
+    with_mesh = [i for i, node in enumerate(nodes) if node.mesh is not None]
     if len(with_mesh) != 1:
         raise RetargetError(f"{label}: expected one node with a mesh, found {len(with_mesh)}")
     return with_mesh[0]
 
 
-def _primitive(doc: dict, node: dict, label: str) -> dict:
-    primitives = doc["meshes"][node["mesh"]].get("primitives", [])
-    if len(primitives) != 1 or primitives[0].get("mode", 4) != 4:
-        raise RetargetError(f"{label}: expected a mesh of one triangle primitive")
-    if "POSITION" not in primitives[0].get("attributes", {}):
-        raise RetargetError(f"{label}: its mesh has no POSITION attribute")
+def _primitive(gltf: GltfDocument, node):
+    primitives = gltf.item(gltf.doc.meshes, node.mesh, "mesh").primitives
+    if len(primitives) != 1 or (primitives[0].mode if primitives[0].mode is not None else 4) != 4:
+        raise RetargetError(f"{gltf.label}: expected a mesh of one triangle primitive")
+    if primitives[0].attributes.POSITION is None:
+        raise RetargetError(f"{gltf.label}: its mesh has no POSITION attribute")
     return primitives[0]
 
 
-def _feature_nodes(doc: dict, mesh_node: int, label: str) -> tuple[int, list[int]]:
+def _feature_nodes(gltf: GltfDocument, mesh_node: int) -> tuple[int, list[int]]:
     """(root node, feature nodes in joint order): the skin's joints after its root, or
     the children of the scene's other root node for a morph-target mesh."""
-    nodes = doc["nodes"]
-    skin = nodes[mesh_node].get("skin")
+    nodes, label = gltf.doc.nodes, gltf.label
+    skin = nodes[mesh_node].skin
     if skin is not None:
-        joints = doc["skins"][skin]["joints"]
+        joints = gltf.item(gltf.doc.skins, skin, "skin").joints
+        if not joints:
+            raise RetargetError(f"{label}: skin {skin} has no joints")
         root, features = joints[0], list(joints[1:])
-        if sorted(nodes[root].get("children", [])) != sorted(features):
+        gltf.item(nodes, root, "skin joint")
+        if sorted(nodes[root].children or []) != sorted(features):
             raise RetargetError(f"{label}: the skin's first joint is not the parent of the "
                                 "others (not a static root with feature joints)")
     else:
-        scenes = doc.get("scenes", [])
-        roots = scenes[doc.get("scene", 0)]["nodes"] if scenes else []
-        parents = [i for i in roots if i != mesh_node and nodes[i].get("children")]
+        scenes = gltf.doc.scenes or []
+        roots = scenes[gltf.doc.scene or 0].nodes if scenes else []
+        parents = [i for i in roots
+                   if i != mesh_node and gltf.item(nodes, i, "scene node").children]
         if len(parents) != 1:
             raise RetargetError(f"{label}: expected one root node holding the feature "
                                 f"joints beside the mesh, found {len(parents)}")
-        root, features = parents[0], list(nodes[parents[0]]["children"])
+        root, features = parents[0], list(nodes[parents[0]].children)
     for i in [root, *features]:
-        if any(key in nodes[i] for key in ("rotation", "scale", "matrix")):
-            raise RetargetError(f"{label}: joint node {i} ({nodes[i].get('name', '')!r}) is "
+        node = gltf.item(nodes, i, "joint node")
+        if any(value is not None for value in (node.rotation, node.scale, node.matrix)):
+            raise RetargetError(f"{label}: joint node {i} ({node.name or ''!r}) is "
                                 "not translation-only")
     return root, features
 
 
-def _translation(node: dict) -> np.ndarray:
-    return np.array(node.get("translation", (0.0, 0.0, 0.0)), dtype=np.float64)
+def _translation(node) -> np.ndarray:
+    return np.array(node.translation or (0.0, 0.0, 0.0), dtype=np.float64)
 
 
-def _mesh(doc: dict, binary: bytes, mesh_node: int, primitive: dict) -> Mesh:
-    attributes = primitive["attributes"]
-    vertices = accessor_array(doc, binary, attributes["POSITION"])
-    if "indices" in primitive:
-        faces = accessor_array(doc, binary, primitive["indices"]).astype(np.int64)
+def _mesh(gltf: GltfDocument, node, primitive) -> Mesh:
+    attributes = primitive.attributes
+    vertices = gltf.accessor(attributes.POSITION)
+    if primitive.indices is not None:
+        faces = gltf.accessor(primitive.indices)[:, 0].astype(np.int64)
     else:
         faces = np.arange(len(vertices), dtype=np.int64)
+    if len(faces) % 3:
+        raise RetargetError(f"{gltf.label}: its triangle indices are not a multiple of 3")
     normals = uv = None
-    if "NORMAL" in attributes:
-        normals = accessor_array(doc, binary, attributes["NORMAL"])
-    if "TEXCOORD_0" in attributes:
-        st = accessor_array(doc, binary, attributes["TEXCOORD_0"]).astype(np.float64)
+    if attributes.NORMAL is not None:
+        normals = gltf.accessor(attributes.NORMAL)
+    if attributes.TEXCOORD_0 is not None:
+        st = gltf.accessor(attributes.TEXCOORD_0)
         uv = np.column_stack([st[:, 0], 1.0 - st[:, 1]])  # back to OBJ's v
-    name = doc["nodes"][mesh_node].get("name", "")
-    material = _material(doc, binary, primitive["material"]) if "material" in primitive else None
-    return mesh_from_arrays(vertices, faces.reshape(-1, 3), uv=uv, normals=normals, name=name,
-                            material=material)
+    material = None if primitive.material is None else _material(gltf, primitive.material)
+    return mesh_from_arrays(vertices, faces.reshape(-1, 3), uv=uv, normals=normals,
+                            name=node.name or "", material=material)
 
 
-def _material(doc: dict, binary: bytes, index: int) -> Material:
+def _material(gltf: GltfDocument, index: int) -> Material:
     """Material `index` as `retarget.material.Material` (base colour image included)."""
-    entry = doc["materials"][index]
-    pbr = entry.get("pbrMetallicRoughness", {})
+    entry = gltf.item(gltf.doc.materials, index, "material")
+    pbr = entry.pbrMetallicRoughness
     texture = None
-    if "baseColorTexture" in pbr:
-        image = doc["images"][doc["textures"][pbr["baseColorTexture"]["index"]]["source"]]
-        view = doc["bufferViews"][image["bufferView"]]
-        start = view.get("byteOffset", 0)
-        texture = binary[start:start + view["byteLength"]]
+    if pbr is not None and pbr.baseColorTexture is not None:
+        source = gltf.item(gltf.doc.textures, pbr.baseColorTexture.index, "texture").source
+        image = gltf.item(gltf.doc.images, source, "image")
+        texture = _view_bytes(gltf, image.bufferView)
     return Material(
-        name=entry.get("name", ""),
-        base_color=tuple(pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))),
-        metallic=pbr.get("metallicFactor", 1.0),
-        roughness=pbr.get("roughnessFactor", 1.0),
-        double_sided=entry.get("doubleSided", False),
-        alpha_mode=entry.get("alphaMode", "OPAQUE"),
+        name=entry.name or "",
+        base_color=tuple(pbr.baseColorFactor if pbr is not None else (1.0, 1.0, 1.0, 1.0)),
+        metallic=pbr.metallicFactor if pbr is not None else 1.0,
+        roughness=pbr.roughnessFactor if pbr is not None else 1.0,
+        double_sided=bool(entry.doubleSided),
+        alpha_mode=entry.alphaMode or "OPAQUE",
         base_color_texture=texture,
     )
 
 
-def _skin_weights(doc, binary, primitive, n_features, method, label) -> SkinWeights:
-    attributes = primitive["attributes"]
-    sets = sorted(int(key.split("_")[1]) for key in attributes if key.startswith("JOINTS_"))
+def _view_bytes(gltf: GltfDocument, index) -> bytes:
+    """The bytes of buffer view `index` (an embedded image)."""
+    view = gltf.item(gltf.doc.bufferViews, index, "image bufferView")
+    data = gltf.item(gltf.buffers, view.buffer, f"bufferView {index}: buffer")
+    start = view.byteOffset or 0
+    if start + view.byteLength > len(data):
+        raise RetargetError(f"{gltf.label}: bufferView {index} reads past the end of its buffer")
+    return bytes(data[start:start + view.byteLength])
+
+
+def _skin_weights(gltf: GltfDocument, primitive, n_features: int, method: str) -> SkinWeights:
+    attributes = vars(primitive.attributes)
+    sets = sorted(int(key.split("_")[1]) for key, value in attributes.items()
+                  if key.startswith("JOINTS_") and value is not None)
     if not sets or sets != list(range(len(sets))):
-        raise RetargetError(f"{label}: its skinned mesh has JOINTS sets {sets}; expected "
+        raise RetargetError(f"{gltf.label}: its skinned mesh has JOINTS sets {sets}; expected "
                             "JOINTS_0 onwards")
-    try:
-        joints = np.hstack([accessor_array(doc, binary, attributes[f"JOINTS_{s}"]) for s in sets])
-        influence = np.hstack([accessor_array(doc, binary, attributes[f"WEIGHTS_{s}"]) for s in sets])
-    except KeyError as exc:
-        raise RetargetError(f"{label}: {exc.args[0]} is missing beside its JOINTS set") from None
-    if influence.dtype != np.float32:
-        raise RetargetError(f"{label}: its skin weights are {influence.dtype}; float weights "
-                            "are read")
-    return weights_from_influences(joints, influence, n_features, method)
+    missing = [f"WEIGHTS_{s}" for s in sets if attributes.get(f"WEIGHTS_{s}") is None]
+    if missing:
+        raise RetargetError(f"{gltf.label}: {missing[0]} is missing beside its JOINTS set")
+    joints = np.hstack([gltf.accessor(attributes[f"JOINTS_{s}"]) for s in sets])
+    influence = np.hstack([gltf.accessor(attributes[f"WEIGHTS_{s}"]) for s in sets])
+    return weights_from_influences(joints.astype(np.int64), influence, n_features, method)
 
 
-def _clip(doc, binary, k, joint_position, label) -> Clip:
+def _clip(gltf: GltfDocument, k: int, joint_position: dict) -> Clip:
     """Animation k as a Clip: feature translations minus neutral, at the shared times."""
-    animation = doc["animations"][k]
-    name = str(animation.get("name", f"animation_{k}"))
-    samplers = animation.get("samplers", [])
+    animation = gltf.doc.animations[k]
+    name = str(animation.name or f"animation_{k}")
     times, moved = None, {}
-    for channel in animation.get("channels", []):
-        target = channel.get("target", {})
-        node = target.get("node")
-        if target.get("path") != "translation" or node not in joint_position:
+    for node, path, keys, values, interpolation in animation_channels(gltf, animation):
+        if path != "translation" or node not in joint_position:
             continue
-        sampler = samplers[channel["sampler"]]
-        if sampler.get("interpolation", "LINEAR") != "LINEAR":
-            raise RetargetError(f"{label}: animation {name!r} interpolates "
-                                f"{sampler['interpolation']}; LINEAR keys are read")
-        t = accessor_array(doc, binary, sampler["input"])
+        if interpolation != "LINEAR":
+            raise RetargetError(f"{gltf.label}: animation {name!r} interpolates "
+                                f"{interpolation}; LINEAR keys are read")
         if times is None:
-            times = t
-        elif not np.array_equal(times, t):
-            raise RetargetError(f"{label}: animation {name!r} keys its joints at different "
-                                "times; one set of key times is read")
-        moved[node] = accessor_array(doc, binary, sampler["output"])
+            times = keys
+        elif not np.array_equal(times, keys):
+            raise RetargetError(f"{gltf.label}: animation {name!r} keys its joints at "
+                                "different times; one set of key times is read")
+        moved[node] = values
     if times is None:
-        raise RetargetError(f"{label}: animation {name!r} moves no feature joint")
+        raise RetargetError(f"{gltf.label}: animation {name!r} moves no feature joint")
     displacements = np.zeros((len(times), len(joint_position), 3), np.float32)
     for i, (node, rest) in enumerate(joint_position.items()):
         if node in moved:
             displacements[:, i] = moved[node] - rest
-    return Clip(name, displacements, times.astype(np.float64))
+    return Clip(name, displacements, times)
