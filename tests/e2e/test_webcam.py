@@ -33,10 +33,18 @@ CAMERA_SIZE = 240  # px; MediaPipe's detector looks at 128 px and its mesh at 19
 RECORD_S = 2.0
 
 # Logs, in the page, the points messages and controls it sends (in sending order, which
-# is the order the server handles them in) and the frames and messages it receives.
+# is the order the server handles them in), the frames and messages it receives, and the
+# camera streams it opens.
 _LOG = """() => {
     const stream = window.app.stream;
     window.log = { sent: [], frames: [], messages: [] };
+    window.cameras = [];
+    const getUserMedia = navigator.mediaDevices.getUserMedia.bind(navigator.mediaDevices);
+    navigator.mediaDevices.getUserMedia = async (constraints) => {
+        const camera = await getUserMedia(constraints);
+        window.cameras.push(camera);
+        return camera;
+    };
     const sendPoints = stream.sendPoints.bind(stream);
     stream.sendPoints = (buffer) => {
         const view = new DataView(buffer);
@@ -99,9 +107,10 @@ def open_sample(server, page) -> dict:
     return sample
 
 
-def play_webcam(page) -> None:
+def play_webcam(page, clicks: int = 1) -> None:
     page.select_option("#source-select", "webcam")
-    page.click("#play")
+    for _ in range(clicks):
+        page.click("#play")
     page.wait_for_function("() => window.log.messages.some(m => m.type === 'started' && m.source === 'live')",
                            timeout=60_000)
 
@@ -124,12 +133,12 @@ def press(page, selector: str) -> None:
 
 
 def stop_releases_the_camera_and_rests(page, server, project_id: str) -> None:
-    """Stop: the camera track ends, the video lets go of it, no more points go out, and
-    the face is back at rest."""
-    page.evaluate("() => { window.cameraStream = window.app.sources.webcam.stream; }")
+    """Stop: the one camera the page opened ends, the video lets go of it, no more points
+    go out, and the face is back at rest."""
     press(page, "#stop")
-    page.wait_for_function("() => window.cameraStream.getTracks().every(t => t.readyState === 'ended')",
+    page.wait_for_function("() => window.cameras.every(c => c.getTracks().every(t => t.readyState === 'ended'))",
                            timeout=10_000)
+    assert page.evaluate("() => window.cameras.length") == 1
     assert page.evaluate("() => document.getElementById('webcam-video').srcObject === null")
     assert page.is_hidden("#webcam-box")
     page.wait_for_function("() => window.log.frames.length > 0 && window.log.frames.at(-1).flags & 1",
@@ -195,9 +204,10 @@ def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page
     page.wait_for_timeout(RECORD_S * 1000)
     press(page, "#record")
     page.wait_for_selector("#take-list li:has-text('webcam e2e')", timeout=20_000)
+    # a tracked frame after the recording stopped bounds its end (below)
     page.wait_for_function("() => { const s = window.log.sent;"
-                           " return s.slice(s.findLastIndex(m => m.control === 'record_stop')).some(m => 'index' in m); }",
-                           timeout=10_000)
+                           " const stop = s.findLastIndex(m => m.control === 'record_stop');"
+                           " return s.slice(stop).some(m => 'index' in m); }", timeout=10_000)
     log = page.evaluate("() => window.log.sent")
     start, stop = (max(i for i, s in enumerate(log) if s.get("control") == c) for c in ("record", "record_stop"))
     recorded = [s for s in log[start + 1:stop] if "index" in s]
@@ -227,7 +237,7 @@ def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page
 def test_a_camera_without_a_face_says_so_and_leaves_the_face_at_rest(server, page):
     sample = open_sample(server, page)
     before = [server.api("GET", f"/api/projects/{sample['id']}{part}") for part in ("", "/takes")]
-    play_webcam(page)
+    play_webcam(page, clicks=2)  # impatient: again while the camera and the tracker load
     page.wait_for_function("() => document.getElementById('source-note').textContent.includes('no face')",
                            timeout=60_000)
     assert page.inner_text("#source-note") == \

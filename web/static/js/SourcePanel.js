@@ -31,7 +31,7 @@ export class SourcePanel {
 		this.app = app;
 		this.takes = [];
 		this.selectedTake = null;
-		this.webcam = null; // {stop()} while the webcam runs
+		this.webcam = null; // a Promise of {stop()} from the moment the webcam starts
 		this.recording = false;
 		this.stereo = new StereoTrack( {
 			projectId: () => this.app.projectId,
@@ -122,7 +122,9 @@ export class SourcePanel {
 
 		}
 
-		await this.startWebcam();
+		const webcam = this.startWebcam();
+		await webcam;
+		if ( webcam !== this.webcam ) throw new Error( 'The webcam was stopped before it started.' );
 		return { type: 'start', source: 'live', dims: 3, fps: 30, settings: this.settings() };
 
 	}
@@ -153,9 +155,23 @@ export class SourcePanel {
 
 	// webcam
 
-	async startWebcam() {
+	/** Start the webcam once: Play again while it starts waits for the same camera. */
+	startWebcam() {
 
-		if ( this.webcam ) return;
+		if ( this.webcam ) return this.webcam;
+		const webcam = this.webcam = this._openWebcam();
+		webcam.catch( () => {
+
+			if ( this.webcam === webcam ) this.webcam = null;
+
+		} );
+		return webcam;
+
+	}
+
+	async _openWebcam() {
+
+		this._note( 'Webcam: starting the camera and the face tracker…' );
 		const { startWebcam } = await import( './tracking/webcam.js' );
 		const layout = this._layout();
 		const encoder = new PointsEncoder();
@@ -163,7 +179,7 @@ export class SourcePanel {
 		$( 'webcam-box' ).hidden = false;
 		let index = 0;
 		const lost = new Float32Array( 3 * layout.points.length ).fill( NaN );
-		this.webcam = await startWebcam( video, ( { points, time } ) => {
+		return startWebcam( video, ( { points, time } ) => {
 
 			// a frame without a face goes as lost points, so the stream knows the time
 			this.app.stream?.sendPoints( encoder.encode( points ?? lost, 3, index ++, time ) );
@@ -178,7 +194,7 @@ export class SourcePanel {
 
 	stopWebcam() {
 
-		this.webcam?.stop();
+		this.webcam?.then( ( webcam ) => webcam.stop(), () => {} ); // one still starting stops once it runs
 		this.webcam = null;
 		$( 'webcam-box' ).hidden = true;
 		this._setRecording( false );
