@@ -140,7 +140,7 @@ def stop_releases_the_camera_and_rests(page, server, project_id: str) -> None:
                            timeout=10_000)
     assert page.evaluate("() => window.cameras.length") == 1
     assert page.evaluate("() => document.getElementById('webcam-video').srcObject === null")
-    assert page.is_hidden("#webcam-box")
+    assert page.is_hidden("#webcam-box") and not page.inner_text("#source-note").startswith("Webcam:")
     page.wait_for_function("() => window.log.frames.length > 0 && window.log.frames.at(-1).flags & 1",
                            timeout=10_000)
     sent = page.evaluate("() => window.log.sent.length")

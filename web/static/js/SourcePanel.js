@@ -196,6 +196,7 @@ export class SourcePanel {
 
 		this.webcam?.then( ( webcam ) => webcam.stop(), () => {} ); // one still starting stops once it runs
 		this.webcam = null;
+		if ( $( 'source-note' ).textContent.startsWith( 'Webcam:' ) ) this._note( '' ); // not tracking any more
 		$( 'webcam-box' ).hidden = true;
 		this._setRecording( false );
 
