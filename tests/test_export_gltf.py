@@ -17,7 +17,8 @@ import pytest
 import trimesh
 
 from retarget.errors import RetargetError
-from retarget.export import Clip, clip_at_rate, export_gltf, joint_names, read_gltf
+from retarget.export import (Clip, clip_at_rate, export_gltf, export_mesh_gltf, joint_names,
+                             read_gltf, take_clip)
 from retarget.export.influences import is_joint_based, joint_influences
 from retarget.gltf_animation import (animated_weights, animation_channels, mesh_instances,
                                        node_transforms, posed_vertices)
@@ -28,6 +29,7 @@ from retarget.mesh import mesh_from_arrays
 from retarget.sample_face import demo_weights, sample_face
 from retarget.sample_face import posed_vertices as face_vertices
 from retarget.skin import SkinWeights, skin_displacements
+from retarget.sources.take import Take
 from retarget.weights import compute_weights
 from tests.gltf_check import assert_valid_gltf
 
@@ -347,3 +349,73 @@ def test_a_glb_upload_keeps_its_material_uv_and_normals(tmp_path):
     assert Image.open(io.BytesIO(back.mesh.material.base_color_texture)).getpixel((3, 2)) == (200, 30, 10)
     np.testing.assert_allclose(back.mesh.uv, mesh.uv, atol=1e-6)
     np.testing.assert_allclose(back.mesh.normals, mesh.normals, atol=1e-6)
+
+
+def test_mesh_alone_loads_back_as_the_same_mesh(face, tmp_path):
+    """export_mesh_gltf: what load_mesh reads back is the mesh (order, uv, normals, material)."""
+    from PIL import Image
+
+    from retarget.material import Material
+    from retarget.mesh import load_mesh
+
+    plain = face["mesh"]
+    png = io.BytesIO()
+    Image.new("RGB", (4, 4), (10, 200, 30)).save(png, format="PNG")
+    box = trimesh.creation.box()
+    textured = mesh_from_arrays(
+        box.vertices, box.faces, uv=np.random.default_rng(2).uniform(0, 1, (8, 2)),
+        normals=box.vertex_normals, name="box",
+        material=Material(name="skin", base_color=(0.5, 0.25, 1.0, 1.0), metallic=0.0,
+                          roughness=0.5, double_sided=True, base_color_texture=png.getvalue()))
+    for mesh in (plain, textured):
+        path = tmp_path / f"{mesh.name}.glb"
+        path.write_bytes(export_mesh_gltf(mesh))
+        report = assert_valid_gltf(path)
+        assert report["info"]["animationCount"] == 0 and not report["info"]["hasSkins"]
+        back = load_mesh(path)
+        np.testing.assert_array_equal(back.vertices, mesh.vertices.astype(np.float32))
+        np.testing.assert_array_equal(back.faces, mesh.faces)
+        np.testing.assert_allclose(back.uv, mesh.uv, atol=1e-6)
+        assert back.name == mesh.name
+    # uv without a material: glTF's default material carries them
+    assert load_mesh(tmp_path / "sample_face.glb").material == Material()
+    np.testing.assert_allclose(back.normals, textured.normals, atol=1e-6)
+    assert back.material.name == "skin" and back.material.double_sided
+    # trimesh keeps the colour factor in 8 bits
+    np.testing.assert_allclose(back.material.base_color, textured.material.base_color, atol=1 / 255)
+    assert Image.open(io.BytesIO(back.material.base_color_texture)).getpixel((1, 1)) == (10, 200, 30)
+
+
+def _performance(face, seconds_between):
+    """A take of the target's own landmarks performing the fixture's clip: a rest frame,
+    then T0 + d_f, at the given gaps (s); and those d_f (F, 68, 3)."""
+    rest = face["points"].positions(face["mesh"].vertices)
+    d = np.concatenate([np.zeros((1, 68, 3)), face["clips"][0].displacements])
+    times = np.concatenate([[0.0], np.cumsum(seconds_between[:len(d) - 1])])
+    take = Take(rest + d, IBUG.point_names, FPS, times=times, layout="ibug68", source="test")
+    return take, d, times
+
+
+def test_a_take_retargeted_onto_its_own_face_is_its_motion(face):
+    """take_clip: a take of the target's own feature points, its neutral the first frame,
+    retargets to exactly its own displacements (the space transform of S0 = T0 is the
+    identity) at the take's own times; a region mask keeps the other points still."""
+    gaps = np.random.default_rng(3).uniform(0.02, 0.05, 40)
+    take, d, times = _performance(face, gaps)
+    settings = {"neutral": {"mode": "frame", "frame": 0}, "head_pose": "keep", "filter": "none"}
+    rest = face["points"].positions(face["mesh"].vertices)
+    clip = take_clip("own", take, rest, "ibug68", settings)
+    assert clip.name == "own" and clip.n_frames == len(d)
+    np.testing.assert_allclose(clip.times, times, rtol=1e-12)
+    np.testing.assert_allclose(clip.displacements, d, atol=1e-5 * face["size"])
+    assert np.abs(d).max() > 0.05  # the take does move
+    mouth = IBUG.region_mask("mouth")
+    partial = take_clip("mouth", take, rest, "", settings, regions=["mouth"])
+    np.testing.assert_allclose(partial.displacements[:, mouth], d[:, mouth], atol=1e-5 * face["size"])
+    assert not partial.displacements[:, ~mouth].any()
+    # the default conditioning captures the neutral over the first 0.5 s, which are not kept
+    default = take_clip("default", take, rest, "ibug68")
+    kept = times[times > 0.5]
+    np.testing.assert_allclose(default.times, kept - kept[0], atol=1e-12)
+    with pytest.raises(RetargetError, match="ends before its neutral capture"):
+        take_clip("short", take, rest, "ibug68", {"neutral": {"mode": "first_seconds", "seconds": 5.0}})

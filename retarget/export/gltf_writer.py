@@ -37,6 +37,8 @@ the rig's method and the deformation kind for that round trip.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import trimesh
 
@@ -105,6 +107,23 @@ def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, cl
     if progress is not None:
         progress(1.0)
     return n_bytes
+
+
+def export_mesh_gltf(mesh: Mesh) -> bytes:
+    """The .glb bytes of `mesh` alone, one node without rig or animation: its positions,
+    triangles, normals, uv and material as `export_gltf` writes them, so that
+    `retarget.mesh.load_mesh` reads back the same vertices in the same order (how an
+    imported export becomes a project's mesh file). A mesh with uv but no material gets
+    glTF's default one (`Material()`): trimesh's reader drops TEXCOORD_0 without one."""
+    out = GlbBuilder(f"retarget {__version__}")
+    name = mesh.name or "face"
+    if mesh.uv is not None and mesh.material is None:
+        mesh = dataclasses.replace(mesh, material=Material())
+    out.document["meshes"] = [{"name": name, "primitives": [_primitive(out, mesh)]}]
+    out.document["nodes"] = [{"name": name, "mesh": 0}]
+    out.document["scene"] = 0
+    out.document["scenes"] = [{"name": name, "nodes": [MESH_NODE]}]
+    return out.glb_bytes()
 
 
 def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
