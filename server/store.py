@@ -5,8 +5,9 @@ Layout on disk::
     <data_dir>/index.sqlite                      the index (WAL mode): one row per project
     <data_dir>/projects/<id>/mesh-r<R>.<ext>     the upload's bytes exactly as uploaded
     <data_dir>/projects/<id>/landmarks-r<R>.json
-    <data_dir>/projects/<id>/rig-r<R>-<hex>.npz  `retarget.skin.SkinWeights.save`: the
-                                                 automatic rig and, once painted, the painted one
+    <data_dir>/projects/<id>/rig-r<R>-<hex>.npz  `retarget.skin.SkinWeights.save`: the automatic rig
+    <data_dir>/projects/<id>/paint-r<R>-<hex>.npz `retarget.weights.painting.WeightEdit.save`:
+                                                 the rows painted over it, if any
     <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
 
 R is the project revision the file was written for. The index is the source of truth:
@@ -18,10 +19,11 @@ A crash at any step leaves the old or the new state whole (never a new mesh with
 old mesh's landmarks); files no row names are swept when the store opens, and a new
 `ProjectStore` on the same folder finds everything a previous one committed.
 
-The automatic rig stays when the rig is painted: the row names the rig in use
-(``rig_file``) and the automatic one (``auto_rig_file``, the same file until a paint), so
-a reset goes back to it. ``rig_version`` counts every change of the rig (computed,
-painted, reset), so a paint made on an older rig is refused (`StaleRig`).
+A painted rig is stored as the automatic rig (``rig_file``, kept for resets) plus the
+rows that differ from it (``painted_file``), so a save writes only the painted rows.
+``rig_version`` counts every change of the rig (computed, painted, reset), so a paint
+made on an older rig is refused (`StaleRig`). Rig files are never rewritten under the
+same name, so the automatic rigs last read are kept in memory.
 
 Takes (recorded performances) belong to the project, not to its mesh: they are source
 points, so a new mesh or new landmarks keep them. A take's file is written once; renaming
@@ -50,6 +52,7 @@ from pathlib import Path
 from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 from retarget.sources.take import Take
+from retarget.weights.painting import WeightEdit, painted_rig
 
 __all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig",
            "TAKE_ID_PATTERN", "TakeNotFound"]
@@ -60,9 +63,13 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
 MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf")
 """File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads)."""
 
-_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "auto_rig_file")
-_FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz|\.tmp-.*)")
+_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file")
+_FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz"
+                           r"|paint-r\d+-[0-9a-f]+\.npz|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
+
+_RIG_CACHE_SIZE = 2
+"""Automatic rigs kept in memory (a dense rig of 100k vertices and 68 joints is 55 MB)."""
 
 TAKE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{16}")
 """What `secrets.token_urlsafe(12)` returns: a take id."""
@@ -85,8 +92,8 @@ CREATE TABLE IF NOT EXISTS projects (
     settings      TEXT NOT NULL DEFAULT '{}',
     mesh_file     TEXT,              -- current file names in the project folder
     landmarks_file TEXT,
-    rig_file      TEXT,              -- the rig in use: the automatic one or a painted one
-    auto_rig_file TEXT,              -- the automatic rig, kept for resets
+    rig_file      TEXT,              -- the automatic rig
+    painted_file  TEXT,              -- rows painted over it, NULL = none
     rig_version   INTEGER NOT NULL DEFAULT 0,  -- bumped by every new rig, paint or reset
     rig_painted   INTEGER NOT NULL DEFAULT 0   -- vertices whose rows differ from the automatic rig's
 );
@@ -195,6 +202,7 @@ class ProjectStore:
         shutil.rmtree(self.scratch_dir, ignore_errors=True)
         self.scratch_dir.mkdir()
         self._lock = threading.RLock()
+        self._rig_cache: dict[Path, SkinWeights] = {}
         self._db = sqlite3.connect(
             self.data_dir / "index.sqlite", check_same_thread=False, isolation_level=None
         )
@@ -224,9 +232,6 @@ class ProjectStore:
         for column in ("rig_version", "rig_painted"):
             if column not in columns:
                 db.execute(f"ALTER TABLE projects ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0")
-        # rigs from before painting are automatic ones
-        db.execute("UPDATE projects SET auto_rig_file = rig_file "
-                   "WHERE auto_rig_file IS NULL AND rig_file IS NOT NULL")
 
     def _sweep(self, project_id: str, row: sqlite3.Row | None = None) -> None:
         """Delete the store's files in the project's folder that its row does not name:
@@ -399,7 +404,7 @@ class ProjectStore:
             db.execute(
                 "UPDATE projects SET mesh_filename = ?, mesh_format = ?, n_vertices = ?, "
                 "n_faces = ?, layout = NULL, n_landmarks = NULL, rig_method = NULL, "
-                "mesh_file = ?, landmarks_file = NULL, rig_file = NULL, auto_rig_file = NULL, "
+                "mesh_file = ?, landmarks_file = NULL, rig_file = NULL, painted_file = NULL, "
                 "rig_painted = 0, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
                 (filename[:255], extension, n_vertices, n_faces, name, _now(), project_id),
@@ -443,7 +448,7 @@ class ProjectStore:
             write_atomic(folder / name, json.dumps(landmarks).encode())
             db.execute(
                 "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
-                "landmarks_file = ?, rig_file = NULL, auto_rig_file = NULL, rig_painted = 0, "
+                "landmarks_file = ?, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
                 (layout, n_points, name, _now(), project_id),
             )
@@ -461,7 +466,7 @@ class ProjectStore:
 
     def put_rig(self, project_id: str, weights: SkinWeights, *, revision: int) -> dict:
         """Store an automatic rig computed from the mesh and landmarks of `revision`
-        (it replaces any painted one); raises `StaleRig` if either changed since."""
+        (its painted rows go); raises `StaleRig` if either changed since."""
         folder = self.folder(project_id)
         with self._transaction() as db:
             row = self._row(project_id)
@@ -469,21 +474,21 @@ class ProjectStore:
                 raise StaleRig(
                     "the mesh or landmarks changed while the rig was computed; start it again"
                 )
-            name = self._write_rig(folder, weights, revision)
+            # a rig may be recomputed at the same revision (another method): new name each time
+            name = f"rig-r{revision}-{secrets.token_hex(4)}.npz"
+            write_atomic(folder / name, writer=weights.save)
             db.execute(
-                "UPDATE projects SET rig_method = ?, rig_file = ?, auto_rig_file = ?, "
+                "UPDATE projects SET rig_method = ?, rig_file = ?, painted_file = NULL, "
                 "rig_version = rig_version + 1, rig_painted = 0, updated = ? WHERE id = ?",
-                (weights.method, name, name, _now(), project_id),
+                (weights.method, name, _now(), project_id),
             )
         self._sweep(project_id)
         return self.get(project_id)
 
-    def put_painted_rig(self, project_id: str, weights: SkinWeights | None, *, version: int,
-                        painted: int) -> dict:
-        """Store a painted rig in place of the current one, keeping the automatic rig;
-        None goes back to the automatic rig. `version` is the rig version the paint was
-        made on and `painted` the number of vertices it changed; raises `StaleRig` if the
-        rig changed since `version`. Answers `rig_status`."""
+    def put_painting(self, project_id: str, painted: WeightEdit | None, *, version: int) -> dict:
+        """Store the rows painted over the automatic rig (`painted_rows`; None or no rows:
+        the automatic rig again). `version` is the rig version the paint was made on;
+        raises `StaleRig` if the rig changed since. Answers `rig_status`."""
         folder = self.folder(project_id)
         with self._transaction() as db:
             row = self._row(project_id)
@@ -491,30 +496,22 @@ class ProjectStore:
                 raise StaleRig(f"project {project_id!r} has no rig any more")
             if row["rig_version"] != version:
                 raise StaleRig.painted_on(version, row["rig_version"])
-            name = (row["auto_rig_file"] if weights is None
-                    else self._write_rig(folder, weights, row["revision"]))
+            name = None
+            if painted is not None and painted.n_rows:
+                name = f"paint-r{row['revision']}-{secrets.token_hex(4)}.npz"
+                write_atomic(folder / name, writer=painted.save)
             db.execute(
-                "UPDATE projects SET rig_file = ?, rig_version = rig_version + 1, "
+                "UPDATE projects SET painted_file = ?, rig_version = rig_version + 1, "
                 "rig_painted = ?, updated = ? WHERE id = ?",
-                (name, 0 if weights is None else int(painted), _now(), project_id),
+                (name, 0 if name is None else painted.n_rows, _now(), project_id),
             )
         self._sweep(project_id)
         return self.rig_status(project_id)
 
-    @staticmethod
-    def _write_rig(folder: Path, weights: SkinWeights, revision: int) -> str:
-        # rigs are rewritten at one revision (another method, a paint): a new name each time
-        name = f"rig-r{revision}-{secrets.token_hex(4)}.npz"
-        write_atomic(folder / name, writer=weights.save)
-        return name
-
     def rig(self, project_id: str) -> SkinWeights | None:
-        """The rig in use (painted or automatic), or None when there is none."""
-        with self._lock:
-            row = self._row(project_id)
-            if row["rig_method"] is None:
-                return None
-            return SkinWeights.load(self.folder(project_id) / row["rig_file"])
+        """The rig in use (the automatic rig with its painted rows), or None."""
+        found = self.rigs(project_id)
+        return None if found is None else found[0]
 
     def rigs(self, project_id: str) -> tuple[SkinWeights, SkinWeights, int] | None:
         """(rig in use, automatic rig, rig version) read together, or None without a rig."""
@@ -523,10 +520,24 @@ class ProjectStore:
             if row["rig_method"] is None:
                 return None
             folder = self.folder(project_id)
-            automatic = SkinWeights.load(folder / row["auto_rig_file"])
-            current = (automatic if row["rig_file"] == row["auto_rig_file"]
-                       else SkinWeights.load(folder / row["rig_file"]))
-            return current, automatic, row["rig_version"]
+            automatic = self._automatic_rig(folder / row["rig_file"])
+            painted = None if row["painted_file"] is None else WeightEdit.load(folder / row["painted_file"])
+            version = row["rig_version"]
+        current = automatic if painted is None else painted_rig(automatic, painted)
+        return current, automatic, version
+
+    def _automatic_rig(self, path: Path) -> SkinWeights:
+        """`SkinWeights.load(path)`, from memory when it was read lately (a rig file is
+        never rewritten under its name; painting reads the automatic rig on every save)."""
+        rig = self._rig_cache.pop(path, None)
+        if rig is None:
+            rig = SkinWeights.load(path)
+            for array in (rig.indices, rig.weights):
+                array.flags.writeable = False  # shared: a change would reach later readers
+        self._rig_cache[path] = rig  # most recent last
+        while len(self._rig_cache) > _RIG_CACHE_SIZE:
+            self._rig_cache.pop(next(iter(self._rig_cache)))
+        return rig
 
     def rig_status(self, project_id: str) -> dict | None:
         """``{version, painted_vertices}`` of the rig, or None when there is none."""

@@ -293,6 +293,10 @@ def test_a_painted_edit_is_stored_normalised_and_survives_a_restart(rigged, tmp_
     others = np.setdiff1d(np.arange(len(after)), vertices)
     np.testing.assert_array_equal(after[others], auto.dense()[others])
 
+    from retarget.weights.painting import WeightEdit
+    stored, = (tmp_path / "data" / "projects" / pid).glob("paint-*.npz")  # only the painted rows
+    assert WeightEdit.load(stored).n_rows == r.json()["painted_vertices"]
+
     again = TestClient(create_app(tmp_path / "data", sample=False))  # a restart on the same data
     assert again.get(f"/api/projects/{pid}/rig").json() == r.json()
     np.testing.assert_array_equal(stored_rig(again, pid).dense(), after)
@@ -402,8 +406,8 @@ def test_resetting_one_joint_then_all_goes_back_to_the_automatic_rig(rigged, tmp
     r = client.post(f"/api/projects/{pid}/rig/reset", json={"joints": None, "version": version + 3})
     assert r.status_code == 200 and r.json()["painted_vertices"] == 0
     np.testing.assert_array_equal(stored_rig(client, pid).dense(), auto.dense())
-    rig_files = sorted(p.name for p in (tmp_path / "data" / "projects" / pid).glob("rig-*.npz"))
-    assert len(rig_files) == 1  # the painted files are gone, the automatic one stays
+    folder = tmp_path / "data" / "projects" / pid
+    assert len(list(folder.glob("rig-*.npz"))) == 1 and not list(folder.glob("paint-*"))  # painted rows gone
 
 
 @pytest.mark.parametrize("body, code, detail", [
@@ -462,7 +466,7 @@ def test_a_store_from_before_painting_keeps_its_rig_as_the_automatic_one(rigged,
     client, pid, auto = rigged
     client.app.state.store.close()
     db = sqlite3.connect(tmp_path / "data" / "index.sqlite")
-    db.execute("ALTER TABLE projects DROP COLUMN auto_rig_file")
+    db.execute("ALTER TABLE projects DROP COLUMN painted_file")
     db.execute("ALTER TABLE projects DROP COLUMN rig_version")
     db.execute("ALTER TABLE projects DROP COLUMN rig_painted")
     db.commit()

@@ -172,6 +172,22 @@ def test_merging_an_edit_replaces_only_its_rows():
     assert painted.n_influences == rig.n_influences and painted.method == rig.method
 
 
+def test_a_painted_rig_is_its_automatic_rig_plus_its_painted_rows(tmp_path):
+    from retarget.weights.painting import WeightEdit, painted_rows
+    rig = convex_rig()
+    painted = paint(rig, rig, [3, 12, 20], 5, [0.9, 0.7, 0.4])
+    rows = painted_rows(painted, rig)
+    assert list(rows.vertices) == [3, 12, 20]
+    rows.save(tmp_path / "rows.npz")
+    again = painted_rig(rig, WeightEdit.load(tmp_path / "rows.npz"))
+    assert np.array_equal(again.indices, painted.indices) and np.array_equal(again.weights, painted.weights)
+    np.savez(tmp_path / "bad.npz", vertices=np.arange(2), joint_indices=np.zeros((3, 2)), weights=np.zeros((3, 2)))
+    with pytest.raises(RetargetError, match=r"painted rows .*bad.npz' are inconsistent"):
+        WeightEdit.load(tmp_path / "bad.npz")
+    with pytest.raises(RetargetError, match=r"could not read painted rows"):
+        WeightEdit.load(tmp_path / "missing.npz")
+
+
 # -- reset ---------------------------------------------------------------------------------
 
 def paint(rig, automatic, vertices, joint, values):

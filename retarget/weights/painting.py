@@ -61,6 +61,24 @@ class WeightEdit:
     def n_rows(self) -> int:
         return len(self.vertices)
 
+    def save(self, file) -> None:
+        """Write an .npz with ``vertices`` (R,) int64, ``joint_indices`` (R, k) int32 and
+        ``weights`` (R, k) float32."""
+        np.savez_compressed(file, vertices=self.vertices, joint_indices=self.indices,
+                            weights=self.weights)
+
+    @classmethod
+    def load(cls, path) -> "WeightEdit":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                v, idx, w = z["vertices"], z["joint_indices"], z["weights"]
+        except (OSError, KeyError, ValueError) as exc:
+            raise RetargetError(f"could not read painted rows {str(path)!r}: {exc}") from exc
+        if v.ndim != 1 or idx.ndim != 2 or idx.shape != w.shape or len(idx) != len(v):
+            raise RetargetError(f"painted rows {str(path)!r} are inconsistent: vertices {v.shape}, "
+                                f"joint_indices {idx.shape}, weights {w.shape}")
+        return cls(v.astype(np.int64), idx.astype(np.int32), w.astype(np.float32))
+
 
 def weight_edit(vertices, indices, weights, automatic: SkinWeights) -> WeightEdit:
     """A validated, normalised edit of a rig whose automatic rig is `automatic`.
@@ -207,6 +225,13 @@ def reset_joints(rig: SkinWeights, automatic: SkinWeights, joints=None) -> SkinW
         kept = SkinWeights.from_dense(reset, rig.n_influences)
         current = painted_rig(current, WeightEdit(vertices, kept.indices, kept.weights))
     return current
+
+
+def painted_rows(rig: SkinWeights, automatic: SkinWeights) -> WeightEdit:
+    """The rows of `rig` that differ from the automatic rig's: what turns `automatic`
+    into `rig` by `painted_rig` (so a painted rig is stored as its painted rows)."""
+    vertices = painted_vertices(rig, automatic)
+    return WeightEdit(vertices, rig.indices[vertices], rig.weights[vertices])
 
 
 def painted_vertices(rig: SkinWeights, automatic: SkinWeights) -> np.ndarray:

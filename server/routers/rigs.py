@@ -35,7 +35,7 @@ or ``application/octet-stream``, little-endian::
 
 An edit made on an older rig version is refused with 409. ``POST .../rig/reset``
 ``{"joints": [j, ...] | null}`` paints joints back to the automatic rig (null: all).
-The automatic rig is kept beside the painted one, so both survive a restart.
+The painted rows are stored beside the automatic rig, so both survive a restart.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
-from retarget.weights.painting import painted_rig, painted_vertices, reset_joints, weight_edit
+from retarget.weights.painting import painted_rig, painted_rows, reset_joints, weight_edit
 from server.deps import JobsDep, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.jobs import JobBusy
 from server.store import StaleRig
@@ -182,9 +182,7 @@ def _rigs(project: dict, store) -> tuple[SkinWeights, SkinWeights, int]:
 
 def _store_painted(store, project_id: str, rig: SkinWeights, automatic: SkinWeights,
                    version: int) -> dict:
-    painted = len(painted_vertices(rig, automatic))
-    rig_status = store.put_painted_rig(project_id, rig if painted else None, version=version,
-                                       painted=painted)
+    rig_status = store.put_painting(project_id, painted_rows(rig, automatic), version=version)
     return rig_info(rig, rig_status)
 
 
