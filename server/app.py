@@ -19,7 +19,7 @@ from retarget.errors import RetargetError
 from server.deps import Limits
 from server.jobs import JobRegistry
 from server.hub import StreamHub
-from server.routers import info, landmarks, layouts, meshes, projects, rigs, stream, takes
+from server.routers import exports, info, landmarks, layouts, meshes, projects, rigs, stream, takes
 from server.sample import ensure_sample_project
 from server.store import ProjectNotFound, ProjectStore, StaleRig, TakeNotFound
 from server.web import mount_web
@@ -69,7 +69,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     async def _stale(request: Request, exc: StaleRig) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status.HTTP_409_CONFLICT)
 
-    for module in (projects, meshes, landmarks, rigs, takes, stream, layouts, info):
+    for module in (projects, meshes, landmarks, rigs, takes, exports, stream, layouts, info):
         app.include_router(module.router)
     mount_web(app)
     return app

@@ -1,0 +1,150 @@
+"""A project as a glTF 2.0 binary, and a project from one.
+
+    GET  /api/projects/{id}/export.glb[?takes=<id>,<id>|all][&settings=<JSON>][&regions=<a>,<b>]
+    POST /api/projects/import          multipart: file (.glb), name (optional)
+
+The export (`retarget.export.export_gltf`) holds the project's mesh, landmarks and the rig
+in use (painted weights included): a glTF skin for a joint-based rig (ellipsoid,
+geodesic), morph targets for the interpolating ones (biharmonic, rbf, region_rbf,
+laplacian). Each take named in ``takes`` becomes one animation named after the take, its
+frames retargeted as the take player plays them (`retarget.export.take_clip`: conditioned
+by ``settings``, the Performance panel's ConditionSettings JSON, defaults when absent;
+``regions`` moves only those regions, groups or points). It answers as an attachment
+named after the project. A plain request: the sample face with a 30 s take at 30 fps
+exports in well under a second.
+
+The import reads a .glb this app exported (`retarget.export.read_gltf`) into a new
+project: its mesh (stored as a mesh-only .glb, `retarget.export.export_mesh_gltf`), its
+landmarks and its rig, which becomes the new project's automatic rig (a painted rig
+comes in as painted, with nothing to reset to). Animations are not imported: they hold
+the target's feature displacements, not a performer's points, so they cannot be takes;
+the answer names them. A file another tool made, a corrupt one or one over the upload
+limit is refused (415 for another extension, 413 over the limit, 422 with the reason)
+and no project is made.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile, status
+
+from retarget.errors import RetargetError
+from retarget.export import export_gltf, export_mesh_gltf, read_gltf, take_clip
+from retarget.landmarks import landmarks_from_json
+from retarget.mesh import load_mesh
+from server.deps import LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.routers.meshes import read_capped, upload_extension
+
+router = APIRouter(tags=["exports"])
+
+GLB_MEDIA_TYPE = "model/gltf-binary"
+
+
+@router.get("/api/projects/{project_id}/export.glb", response_class=Response,
+            responses={200: {"content": {GLB_MEDIA_TYPE: {}}}})
+def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
+                   takes: str = Query(default="", description="take ids, comma-separated, or 'all'"),
+                   settings: str = Query(default="", description="ConditionSettings JSON"),
+                   regions: str = Query(default="", description="regions that move, comma-separated")) -> Response:
+    """The project rigged and animated as a .glb download (see the module docstring)."""
+    landmarks = store.landmarks(project["id"])
+    weights = store.rig(project["id"])
+    if landmarks is None or weights is None:
+        missing = "landmarks" if landmarks is None else "rig"
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"project {project['name']!r} has no {missing} yet: place the landmarks "
+                            "and compute the rig before exporting")
+    points = landmarks_from_json(landmarks, mesh.vertices, mesh.faces)
+    target, layout = points.positions(mesh.vertices), landmarks.get("layout") or ""
+    conditioning = _settings(settings)
+    moving = [r.strip() for r in regions.split(",") if r.strip()] or None
+    clips, names = [], set()
+    for info in _takes(store, project["id"], takes):
+        name = _unique(info["name"], names)
+        try:
+            clips.append(take_clip(name, store.take(project["id"], info["id"]), target, layout,
+                                   conditioning, regions=moving))
+        except RetargetError as exc:
+            raise RetargetError(f"take {info['name']!r}: {exc}") from exc
+    data = export_gltf(mesh, points, weights, clips)
+    return Response(data, media_type=GLB_MEDIA_TYPE, headers={
+        "Content-Disposition": f'attachment; filename="{_file_name(project["name"])}.glb"'})
+
+
+@router.post("/api/projects/import", status_code=status.HTTP_201_CREATED)
+def import_project(store: StoreDep, limits: LimitsDep,
+                   file: UploadFile = File(description="a .glb exported by this app"),
+                   name: str | None = Form(default=None, max_length=200)) -> dict:
+    """A new project from an exported .glb, named `name` or after the file; answers
+    ``{project, deformation, animations}`` (the animation names, which are not imported)."""
+    upload_extension(file.filename, ("glb",))
+    data = read_capped(file, limits.max_upload_bytes)
+    shown = (file.filename or "upload.glb").replace("\\", "/").rsplit("/", 1)[-1]
+    if not data:
+        raise RetargetError(f"the uploaded file {shown!r} is empty")
+    try:
+        face = read_gltf(data)
+    except RetargetError as exc:
+        text = str(exc).replace("the given bytes", "the file")
+        raise RetargetError(f"{shown!r} cannot be imported (only a .glb exported by this app "
+                            f"can): {text}") from exc
+    mesh = face.mesh
+    if mesh.n_vertices > limits.max_vertices:
+        raise RetargetError(f"{shown!r} has a mesh of {mesh.n_vertices} vertices, over the "
+                            f"server's limit of {limits.max_vertices}")
+    mesh_file = export_mesh_gltf(mesh)
+    stored = load_mesh(mesh_file, "glb")  # what the project will read back, checked first
+    if stored.n_vertices != mesh.n_vertices:
+        raise RetargetError(f"{shown!r}: its mesh does not read back as {mesh.n_vertices} vertices")
+    layout = face.points.layout or ""
+    project = store.create((name or "").strip() or shown.rsplit(".", 1)[0] or "imported")
+    try:
+        project = store.put_mesh(project["id"], mesh_file, "glb", filename=shown,
+                                 n_vertices=mesh.n_vertices, n_faces=mesh.n_faces)
+        project = store.put_landmarks(project["id"], face.points.to_json(),
+                                      n_points=face.points.n_points, layout=layout,
+                                      revision=project["revision"])
+        project = store.put_rig(project["id"], face.weights, revision=project["revision"])
+    except BaseException:
+        store.delete(project["id"])  # no half-imported project
+        raise
+    return {"project": project, "deformation": face.deformation,
+            "animations": [clip.name for clip in face.clips]}
+
+
+def _takes(store, project_id: str, wanted: str) -> list[dict]:
+    """The infos of the takes named in `wanted` ('all', or ids separated by commas), in
+    that order; an unknown id is `TakeNotFound` (404)."""
+    if wanted.strip() == "all":
+        return store.takes(project_id)
+    ids = [t.strip() for t in wanted.split(",") if t.strip()]
+    return [store.take_info(project_id, take_id) for take_id in dict.fromkeys(ids)]
+
+
+def _settings(text: str):
+    if not text:
+        return None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RetargetError(f"query parameter 'settings' is not JSON: {exc}") from exc
+
+
+def _unique(name: str, taken: set) -> str:
+    """`name`, or ``name (2)``... when an earlier animation has it (glTF viewers pick
+    clips by name)."""
+    unique, n = name, 1
+    while unique in taken:
+        n += 1
+        unique = f"{name} ({n})"
+    taken.add(unique)
+    return unique
+
+
+def _file_name(project_name: str) -> str:
+    """A file name safe in any file system and header: the project name's letters,
+    digits, dots, dashes and underscores, other runs as one dash."""
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "-", project_name).strip(".-")[:100]
+    return safe or "project"
