@@ -43,7 +43,7 @@ function detailOf( body, fallback ) {
 
 }
 
-async function request( method, url, { json, binary = false, keepalive = false } = {} ) {
+async function request( method, url, { json, binary = false, keepalive = false, raw = false } = {} ) {
 
 	let response;
 	try {
@@ -79,6 +79,7 @@ async function request( method, url, { json, binary = false, keepalive = false }
 
 	}
 
+	if ( raw ) return response;
 	if ( response.status === 204 ) return null;
 	return binary ? response.arrayBuffer() : response.json();
 
@@ -220,6 +221,30 @@ export const api = {
 
 	/** URL of a stereo take's calibration (.npz, as `retarget calibrate` writes it) */
 	takeCalibrationUrl: ( id, takeId ) => `/api/projects/${ id }/takes/${ takeId }/calibration`,
+
+	/**
+	 * The project as a glTF binary (server/routers/exports.py), its takes as animations.
+	 * @param {{takes?: string, settings?: object|null, regions?: string[]|null}} [options] -
+	 *   takes: ids joined by commas, or 'all'; settings: ConditionSettings JSON; regions: the
+	 *   regions that move (null: all).
+	 * @returns {Promise<{blob: Blob, filename: string}>} the file and the server's name for it
+	 */
+	async exportGltf( id, { takes = '', settings = null, regions = null } = {} ) {
+
+		const query = new URLSearchParams( { takes } );
+		if ( settings ) query.set( 'settings', JSON.stringify( settings ) );
+		if ( regions ) query.set( 'regions', regions.join( ',' ) );
+		const response = await request( 'GET', `/api/projects/${ id }/export.glb?${ query }`, { raw: true } );
+		const disposition = response.headers.get( 'Content-Disposition' ) ?? '';
+		return { blob: await response.blob(), filename: /filename="([^"]+)"/.exec( disposition )?.[ 1 ] ?? 'project.glb' };
+
+	},
+
+	/**
+	 * Upload a .glb exported by this app as a new project, with progress.
+	 * @returns {Promise<{project: object, deformation: string, animations: string[]}>}
+	 */
+	importProject: ( file, onProgress ) => upload( 'POST', '/api/projects/import', file, {}, onProgress ),
 
 };
 
