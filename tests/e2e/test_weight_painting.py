@@ -142,10 +142,13 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
     # mirrored subtract on the right eye's inner corner while the demo plays
     page.click("#play")
     page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=30_000)
-    page.select_option("#paint-joint", "39")
+    corner = landmarks[39]
+    page.keyboard.down("Control")  # Ctrl+click picks the feature point nearest the click
+    page.mouse.click(*screen(page, corner + [0.05, 0.0, 0.0]))
+    page.keyboard.up("Control")
+    assert page.input_value("#paint-joint") == "39" and page.input_value("#heatmap-select") == "39"
     page.check("input[name='paint-brush'][value='subtract']")
     page.check("#paint-mirror")
-    corner = landmarks[39]
     stroke(page, [corner, corner + [0.0, 0.05, 0.0]])
     wait_saved(page, version + 4)
     frames = page.evaluate("() => window.app.stream.stats.frames")
@@ -165,6 +168,8 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
 
     # reset the nose tip: its stroke is undone exactly; the eyes stay painted
     page.click("#paint-toggle")
+    assert page.inner_text("#paint-strength-out") == "1.00" and page.is_checked("#paint-mirror")  # brush kept
+    page.uncheck("#paint-mirror")
     page.select_option("#paint-joint", "30")
     page.click("#paint-reset-joint")
     wait_saved(page, version + 5)
@@ -178,13 +183,29 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
     np.testing.assert_array_equal(server_weights(server, pid), automatic)
     assert page.inner_text("#paint-note") == "Saved · the automatic rig." and page.inner_text("#paint-state") == ""
 
+    # set the chin to a quarter; smooth the nose tip's peak
+    page.select_option("#paint-joint", "8")
+    page.check("input[name='paint-brush'][value='set']")
+    set_range(page, "#paint-value", 0.25)
+    chin = landmarks[8]
+    stroke(page, [chin, chin + [0.02, 0.0, 0.0]])
+    wait_saved(page, version + 7)
+    page.select_option("#paint-joint", "30")
+    page.check("input[name='paint-brush'][value='smooth']")
+    stroke(page, [tip, tip + [0.0, -0.05, 0.0], tip])
+    wait_saved(page, version + 8)
+    brushed = server_weights(server, pid)
+    chin_vertex, tip_vertex = np.argmin(np.linalg.norm(rest - chin, axis=1)), np.argmin(np.linalg.norm(rest - tip, axis=1))
+    assert abs(brushed[chin_vertex, 8] - 0.25) < 0.02 and automatic[chin_vertex, 8] > 0.9
+    assert brushed[tip_vertex, 30] < automatic[tip_vertex, 30] - 0.05  # a peak smoothed down
+
     # a save the server refuses (the rig changed behind the page's back) says why and keeps the stroke
     server.api("POST", f"/api/projects/{pid}/rig/reset", {"joints": None})
     page.check("input[name='paint-brush'][value='add']")
     stroke(page, [tip, base])
     page.wait_for_function("() => window.app.paint.painter.saveState === 'failed'", timeout=20_000)
     note = page.inner_text("#paint-note")
-    assert f"the rig changed (now version {version + 7}) since version {version + 6}" in note
+    assert f"the rig changed (now version {version + 9}) since version {version + 8}" in note
     assert page.is_visible("#paint-retry")
     assert np.abs(page_weights(page) - automatic).max() > 0.2  # the local stroke is kept
     np.testing.assert_array_equal(server_weights(server, pid), automatic)

@@ -3,6 +3,7 @@ import { WeightPainter } from './WeightPainter.js';
 const $ = ( id ) => document.getElementById( id );
 const RADIUS_RANGE = [ 0.005, 0.5 ]; // brush radius slider ends, in bounding-sphere radii
 const RADIUS_STEPS = 1000; // the slider is logarithmic: fine control for small brushes
+const SETTINGS_KEY = 'retarget.paint'; // brush settings kept across reloads (radius in bounding-sphere radii)
 
 /**
  * The rig panel's weight painting controls (index.html #paint-*): the Paint weights toggle,
@@ -41,7 +42,9 @@ export class PaintPanel {
 
 		const app = this.app;
 		const layout = app.layouts.find( ( l ) => l.name === app.project?.landmarks?.layout ) || null;
+		const settings = localStorage.getItem( SETTINGS_KEY ); // before setRig's change event stores the current ones
 		this.painter.setRig( weights && app.face, app.projectId, info, weights, layout );
+		if ( weights ) this._restoreSettings( settings );
 		const names = [ ...$( 'heatmap-select' ).options ].filter( ( o ) => o.value !== '' );
 		$( 'paint-joint' ).replaceChildren( ...names.map( ( o ) => new Option( o.textContent, o.value ) ) );
 		this._update();
@@ -162,6 +165,11 @@ export class PaintPanel {
 		$( 'paint-undo' ).disabled = ! painter.canUndo;
 		$( 'paint-redo' ).disabled = ! painter.canRedo;
 
+		localStorage.setItem( SETTINGS_KEY, JSON.stringify( {
+			brush: painter.brush, strength: painter.strength, value: painter.value, mirror: painter.mirror,
+			radius: painter.radius / this._boundsRadius(),
+		} ) );
+
 		const state = painter.saveState;
 		const note = $( 'paint-note' );
 		note.textContent = {
@@ -174,6 +182,25 @@ export class PaintPanel {
 		note.dataset.state = state;
 		$( 'paint-retry' ).hidden = state !== 'failed';
 		if ( painter.active ) this._showHeatmap();
+
+	}
+
+	/**
+	 * Brush settings stored by an earlier session.
+	 * @param {string|null} text - their JSON.
+	 */
+	_restoreSettings( text ) {
+
+		try {
+
+			const settings = JSON.parse( text );
+			if ( settings ) this.painter.configure( { ...settings, radius: settings.radius * this._boundsRadius() } );
+
+		} catch ( error ) {
+
+			console.warn( 'retarget: stored brush settings ignored:', error.message );
+
+		}
 
 	}
 

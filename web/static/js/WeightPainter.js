@@ -118,7 +118,7 @@ export class WeightPainter extends EventTarget {
 	setRig( face, projectId, info, weights, layout ) {
 
 		clearTimeout( this._saveTimer );
-		this._stroke = null;
+		this._endStroke();
 		this._undo = [];
 		this._redo = [];
 		this._dirty.clear();
@@ -223,10 +223,10 @@ export class WeightPainter extends EventTarget {
 
 	}
 
-	/** Undo the last stroke or reset; false when there is none. */
+	/** Undo the last stroke or reset; false when there is none (or a stroke is under way). */
 	undo() {
 
-		const step = this._undo.pop();
+		const step = this._stroke ? null : this._undo.pop();
 		if ( ! step ) return false;
 		this._redo.push( step );
 		this._apply( step.vertices, step.before );
@@ -237,7 +237,7 @@ export class WeightPainter extends EventTarget {
 	/** Redo the last undone stroke or reset; false when there is none. */
 	redo() {
 
-		const step = this._redo.pop();
+		const step = this._stroke ? null : this._redo.pop();
 		if ( ! step ) return false;
 		this._undo.push( step );
 		this._apply( step.vertices, step.after );
