@@ -44,7 +44,8 @@ const shaderSources = new Map(); // base URL -> Promise of { file name: GLSL wit
  *
  * Rigs with at most 8 influences per vertex go in vertex attributes; denser ones (the
  * default biharmonic rig weights every vertex by every joint) in an RGBA32F texture. Both
- * upload once per rig; a pose updates only the N-texel displacement texture.
+ * upload once per rig, and painting (`updateWeights`) uploads only the span of rows it
+ * changed; a pose updates only the N-texel displacement texture.
  */
 export class SkinnedFace {
 
