@@ -68,8 +68,9 @@ _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-
                            r"|paint-r\d+-[0-9a-f]+\.npz|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
 
-_RIG_CACHE_SIZE = 2
-"""Automatic rigs kept in memory (a dense rig of 100k vertices and 68 joints is 55 MB)."""
+_RIG_CACHE_BYTES = 512 * 2**20
+"""Memory for automatic rigs read lately (a dense rig of 100k vertices and 68 joints takes
+55 MB); the last one read stays whatever its size."""
 
 TAKE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{16}")
 """What `secrets.token_urlsafe(12)` returns: a take id."""
@@ -535,7 +536,8 @@ class ProjectStore:
             for array in (rig.indices, rig.weights):
                 array.flags.writeable = False  # shared: a change would reach later readers
         self._rig_cache[path] = rig  # most recent last
-        while len(self._rig_cache) > _RIG_CACHE_SIZE:
+        while len(self._rig_cache) > 1 and sum(
+                r.indices.nbytes + r.weights.nbytes for r in self._rig_cache.values()) > _RIG_CACHE_BYTES:
             self._rig_cache.pop(next(iter(self._rig_cache)))
         return rig
 
