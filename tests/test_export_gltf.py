@@ -135,11 +135,12 @@ def test_skin_structure(face, exported):
     np.testing.assert_array_equal(ibm[1:, :3, 3], -joints_at.astype(np.float32))
     attributes = {k: v for k, v in vars(doc.meshes[0].primitives[0].attributes).items()
                   if v is not None}
-    # four features + the root need two sets of four
-    assert sorted(a for a in attributes if a[:7] in ("JOINTS_", "WEIGHTS")) == \
-        ["JOINTS_0", "JOINTS_1", "WEIGHTS_0", "WEIGHTS_1"]
+    # rows with four features sum to 1 (to float32 rounding): the root gets no share and
+    # one set of four holds every vertex, the one set three.js reads
+    assert sorted(a for a in attributes if a[:7] in ("JOINTS_", "WEIGHTS")) == ["JOINTS_0", "WEIGHTS_0"]
+    assert (face["rigs"]["ellipsoid"].weights != 0).sum(1).max() == 4
     assert doc.accessors[attributes["JOINTS_0"]].componentType == 5121  # 69 joints: bytes
-    w = np.hstack([gltf.accessor(attributes[f"WEIGHTS_{s}"]) for s in (0, 1)])
+    w = gltf.accessor(attributes["WEIGHTS_0"])
     np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-6)
     assert (w >= 0).all()
     anim = doc.animations[0]
@@ -269,10 +270,18 @@ def test_joint_based_rigs(face):
     twice = SkinWeights(np.array([[3, 3]], np.int32), np.array([[0.2, 0.3]], np.float32), 5)
     with pytest.raises(RetargetError, match="vertex 0 name feature 3 twice"):
         joint_influences(twice)
-    # rows that overshoot 1 by float32 rounding are scaled to 1: no root share
-    ulp = SkinWeights(np.array([[0, 1]], np.int32), np.array([[0.5, 0.50000006]], np.float32), 2)
+    # rows that miss 1 by float32 rounding, above or below, are scaled to 1: no root share
+    ulp = SkinWeights(np.array([[0, 1], [0, 1]], np.int32),
+                      np.array([[0.5, 0.50000006], [0.5, 0.49999997]], np.float32), 2)
     joints, influence = joint_influences(ulp)
-    assert joints[0].tolist() == [1, 2, 0, 0] and influence[0, 2:].tolist() == [0, 0]
+    assert joints.tolist() == [[1, 2, 0, 0]] * 2 and not influence[:, 2:].any()
+    np.testing.assert_allclose(influence.sum(1, dtype=np.float64), 1.0, atol=1e-7)
+    # five features, or four and a root share, need a second set
+    five = SkinWeights(np.array([[0, 1, 2, 3, 4], [0, 1, 2, 3, 0]], np.int32),
+                       np.array([[0.2] * 5, [0.2] * 4 + [0.0]], np.float32), 5)
+    joints, influence = joint_influences(five)
+    assert joints.tolist() == [[1, 2, 3, 4, 5, 0, 0, 0], [1, 2, 3, 4, 0, 0, 0, 0]]
+    np.testing.assert_allclose(influence[1, :5], [0.2, 0.2, 0.2, 0.2, 0.2], rtol=1e-6)
 
 
 def test_morph_targets_of_another_kind_are_refused():

@@ -21,8 +21,11 @@ from retarget.errors import RetargetError
 from retarget.skin import SkinWeights
 
 ROW_SUM_TOLERANCE = 1e-5
-"""How far above 1 a row may sum and still count as a skin: float32 sums of sparse rigs
-overshoot by a few ulp (ellipsoid rows reach 1 + 1.3e-7); such rows are scaled to 1."""
+"""How far from 1 a row may sum and still count as summing to 1: float32 sums of sparse
+rigs miss by a few ulp either way (ellipsoid rows that reach 1 sum to 1 ± 1.3e-7). Such
+rows are scaled to 1, so a row above 1 still fits a skin, and a row just below 1 leaves
+the root no share: a 1e-7 root share would make a four-feature vertex a five-influence
+one, needing a second JOINTS/WEIGHTS set that three.js ignores."""
 
 
 def is_joint_based(weights: SkinWeights) -> bool:
@@ -39,7 +42,9 @@ def joint_influences(weights: SkinWeights) -> tuple[np.ndarray, np.ndarray]:
     uint8 when the skin has at most 256 joints (features + root), else uint16; joint 0
     is the root, feature i is joint i + 1. influence is float32, each row's non-zero
     entries first (the rig's order, then the root) and summing to 1 in float64; unused
-    slots are joint 0 with weight 0.
+    slots are joint 0 with weight 0. Rows within `ROW_SUM_TOLERANCE` of 1 are scaled to
+    1 (no root share), so a rig of at most four influences needs one set, the most
+    three.js reads.
 
     Raises `RetargetError` if the weights are not joint-based (see `is_joint_based`) or
     a vertex names one feature twice.
@@ -49,9 +54,9 @@ def joint_influences(weights: SkinWeights) -> tuple[np.ndarray, np.ndarray]:
                             "1, which a glTF skin cannot hold; export them as morph targets")
     w = weights.weights.astype(np.float64)
     total = w.sum(1, keepdims=True)
-    over = total[:, 0] > 1.0
-    w[over] /= total[over]
-    rest = 1.0 - np.minimum(total, 1.0)
+    whole = np.abs(total[:, 0] - 1.0) <= ROW_SUM_TOLERANCE
+    w[whole] /= total[whole]
+    rest = np.where(whole[:, None], 0.0, 1.0 - total)
     joints = np.concatenate([weights.indices.astype(np.int64) + 1, np.zeros_like(rest, np.int64)], 1)
     influence = np.concatenate([w, rest], 1).astype(np.float32)
     used = influence != 0
