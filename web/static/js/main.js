@@ -1,5 +1,6 @@
 import { ApiError, api } from './api.js';
 import { ErrorBanner, ask } from './dialogs.js';
+import { ExportPanel } from './ExportPanel.js';
 import { LandmarkPicker } from './LandmarkPicker.js';
 import { LayoutGuide } from './LayoutGuide.js';
 import { PaintPanel } from './PaintPanel.js';
@@ -48,6 +49,7 @@ class App {
 		this._streaming = false;
 		this.sources = new SourcePanel( this );
 		this.paint = new PaintPanel( this );
+		this.exports = new ExportPanel( this );
 		this.paint.painter.addEventListener( 'change', () => this._updateHint() );
 
 	}
@@ -173,6 +175,7 @@ class App {
 			this._updateLive();
 			if ( project.landmarks ) this._connectStream();
 			await this.sources.setProject( project );
+			await this.exports.setProject( project );
 			return true;
 
 		} catch ( error ) {
@@ -209,6 +212,7 @@ class App {
 
 		this._streaming = false;
 		this.sources.stopWebcam();
+		this.exports.setProject( null );
 		this.picker.setMesh( null );
 		this.picker.setDisplacements( null );
 		this.paint.setRig( null, null );

@@ -1,0 +1,259 @@
+"""The glTF export in the browser: stock three.js plays it as our app draws it, and the
+Export panel downloads and imports it.
+
+three.js proof: the server's export of the sample project (biharmonic rig: morph targets)
+and of the same face with an ellipsoid rig (a true glTF skin) is loaded with three.js's
+own GLTFLoader, its AnimationMixer is set to a key time and to a time between keys, and
+the posed vertices are read the stock way (`Mesh.getVertexPosition`: morph targets, and
+for a SkinnedMesh `applyBoneTransform` on top). They must equal, within 1e-4 of the mesh
+size, both the library's linear blend skinning (`retarget.skin.skin_displacements`) and
+our app's skinning shader (`SkinnedFace.deformedPositions()`) on the project's rig with
+the clip's feature displacements at that time. three.js reads one JOINTS_0/WEIGHTS_0 set
+(four influences), so the skin must need no second set.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import struct
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from retarget.export import read_gltf
+from retarget.gltf_document import GltfDocument
+from retarget.sample_face import demo_weights, sample_face
+from retarget.skin import SkinWeights, skin_displacements
+from tests.e2e.conftest import Server, open_project
+
+TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal
+FPS = 30.0
+
+PAGE = """<!doctype html><meta charset="utf-8"><title>three.js export check</title>
+<script type="importmap">{"imports": {"three": "/vendor/three/build/three.module.js",
+  "three/addons/": "/vendor/three/examples/jsm/"}}</script>
+<script type="module">
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { SkinnedFace } from '/static/js/SkinnedFace.js';
+
+const encoded = ( array ) => btoa( String.fromCharCode( ...new Uint8Array( array.buffer ) ) );
+const decoded = ( text ) => Uint8Array.from( atob( text ), ( c ) => c.charCodeAt( 0 ) ).buffer;
+
+async function fetchBinary( url ) {
+	const response = await fetch( url );
+	if ( ! response.ok ) throw new Error( `${ url }: HTTP ${ response.status }` );
+	return response.arrayBuffer();
+}
+
+window.check = {
+	// three.js: the stock loader, mixer and CPU vertex evaluation
+	async load( url ) {
+		this.gltf = await new GLTFLoader().loadAsync( url );
+		this.mixer = new THREE.AnimationMixer( this.gltf.scene );
+		this.mesh = null;
+		this.gltf.scene.traverse( ( object ) => { if ( object.isMesh ) this.mesh = object; } );
+		const geometry = this.mesh.geometry;
+		return {
+			skinned: this.mesh.isSkinnedMesh === true,
+			morphs: geometry.morphAttributes.position?.length ?? 0,
+			skinAttributes: Object.keys( geometry.attributes ).filter( ( name ) => name.startsWith( 'skin' ) ).sort(),
+			vertices: geometry.attributes.position.count,
+			animations: this.gltf.animations.map( ( clip ) => [ clip.name, clip.duration ] ),
+		};
+	},
+	posed( t ) {
+		this.mixer.stopAllAction();
+		const action = this.mixer.clipAction( this.gltf.animations[ 0 ] );
+		action.setLoop( THREE.LoopOnce );
+		action.clampWhenFinished = true;
+		action.play();
+		this.mixer.setTime( t );
+		this.gltf.scene.updateMatrixWorld( true );
+		const out = new Float32Array( 3 * this.mesh.geometry.attributes.position.count );
+		const v = new THREE.Vector3();
+		for ( let i = 0; i < out.length / 3; i ++ ) {
+			this.mesh.getVertexPosition( i, v );
+			v.applyMatrix4( this.mesh.matrixWorld );
+			out.set( [ v.x, v.y, v.z ], 3 * i );
+		}
+		return encoded( out );
+	},
+	// our app's shader (web/shaders/skinning.glsl) on the project's mesh and rig
+	async loadFace( projectId ) {
+		const mesh = await fetchBinary( `/api/projects/${ projectId }/mesh/arrays` );
+		const view = new DataView( mesh );
+		const [ v, f ] = [ view.getUint32( 8, true ), view.getUint32( 12, true ) ];
+		this.face?.dispose();
+		this.face = await SkinnedFace.create( {
+			positions: new Float32Array( mesh, 16, 3 * v ), faces: new Uint32Array( mesh, 16 + 12 * v, 3 * f ) } );
+		const rig = await fetchBinary( `/api/projects/${ projectId }/rig/weights` );
+		const r = new DataView( rig );
+		const [ rv, k, n ] = [ r.getUint32( 8, true ), r.getUint32( 12, true ), r.getUint32( 16, true ) ];
+		const weightsAt = 20 + 2 * rv * k + ( ( 2 * rv * k ) % 4 );
+		this.face.setRig( { nJoints: n, nInfluences: k, indices: new Uint16Array( rig.slice( 20, 20 + 2 * rv * k ) ),
+			weights: new Float32Array( rig, weightsAt, rv * k ) } );
+	},
+	shaded( displacements ) {
+		this.face.setDisplacements( new Float32Array( decoded( displacements ) ) );
+		return encoded( this.face.deformedPositions() );
+	},
+};
+window.ready = true;
+</script>
+"""
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """One server for the module, on a fresh data dir with the sample project."""
+    srv = Server(tmp_path_factory.mktemp("export") / "data").start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="module")
+def sample(server):
+    """The sample project with a take of another identity performing the demo: (project
+    id, take info)."""
+    pid = next(p["id"] for p in server.api("GET", "/api/projects") if p["settings"].get("sample"))
+    face = sample_face(identity=np.array([0.8, 0.5, -0.6, 1.0, 0.3]))
+    lm = np.asarray(face.landmarks68)
+    frames = face.vertices[lm] + np.tensordot(demo_weights(45, FPS), face.expressions[:, lm], axes=1)
+    buffer = io.BytesIO()
+    np.save(buffer, frames.astype(np.float32))
+    r = httpx.post(f"{server.url}/api/projects/{pid}/takes", timeout=30,
+                   files={"file": ("talk.npy", buffer.getvalue())}, data={"layout": "ibug68", "fps": str(FPS)})
+    assert r.status_code == 201, r.text
+    return pid, r.json()
+
+
+def _decoded(text: str) -> np.ndarray:
+    return np.frombuffer(base64.b64decode(text), np.float32).reshape(-1, 3).astype(np.float64)
+
+
+def _server_rig(server, pid) -> SkinWeights:
+    """The project's rig from GET rig/weights (the RTSW format of server/routers/rigs.py)."""
+    data = server.read(f"/api/projects/{pid}/rig/weights")
+    v, k, n = struct.unpack_from("<III", data, 8)
+    at = 20 + 2 * v * k + (2 * v * k) % 4
+    return SkinWeights(np.frombuffer(data, "<u2", v * k, 20).reshape(v, k).astype(np.int32),
+                       np.frombuffer(data, "<f4", v * k, at).reshape(v, k), n)
+
+
+def _rest(server, pid) -> np.ndarray:
+    data = server.read(f"/api/projects/{pid}/mesh/arrays")
+    v = struct.unpack_from("<I", data, 8)[0]
+    return np.frombuffer(data, "<f4", 3 * v, 16).reshape(v, 3).astype(np.float64)
+
+
+def _rig(server, pid, method: str) -> None:
+    job = server.api("POST", f"/api/projects/{pid}/rig", {"method": method})
+    deadline = time.monotonic() + 120
+    while job["state"] == "running":
+        assert time.monotonic() < deadline, job
+        time.sleep(0.1)
+        job = server.api("GET", f"/api/jobs/{job['id']}")
+    assert job["state"] == "done", job
+
+
+def _three_matches_ours(page, server, pid, take) -> dict:
+    """Load the project's export with its take in three.js and compare its posed vertices
+    with our LBS and our shader at a key time and between keys; what three.js loaded."""
+    url = f"/api/projects/{pid}/export.glb?takes={take['id']}"
+    clip = read_gltf(server.read(url)).clips[0]
+    loaded = page.evaluate("(url) => check.load(url)", url)
+    assert loaded["animations"] == [[take["name"], pytest.approx(clip.duration, abs=1e-6)]]
+    page.evaluate("(id) => check.loadFace(id)", pid)
+    rest, rig = _rest(server, pid), _server_rig(server, pid)
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    key = min(int(np.abs(clip.displacements).max(axis=(1, 2)).argmax()), clip.n_frames - 2)  # the widest pose
+    for t in (clip.times[key], 0.5 * (clip.times[key] + clip.times[key + 1])):
+        d = np.stack([np.interp(t, clip.times, clip.displacements[:, i, a])
+                      for i in range(clip.displacements.shape[1]) for a in range(3)]).reshape(-1, 3)
+        lbs = rest + skin_displacements(rig, d)
+        three = _decoded(page.evaluate("(t) => check.posed(t)", float(t)))
+        shaded = _decoded(page.evaluate("(d) => check.shaded(d)",
+                                        base64.b64encode(d.astype("<f4").tobytes()).decode()))
+        moved = float(np.abs(lbs - rest).max()) / size
+        three_lbs = float(np.abs(three - lbs).max()) / size
+        three_shader = float(np.abs(three - shaded).max()) / size
+        print(f"{rig.n_influences} influences, t = {t:.4f} s: |three.js - LBS| = {three_lbs:.1e}, "
+              f"|three.js - shader| = {three_shader:.1e} of the mesh size (moved up to {moved:.3f})")
+        assert moved > 0.01, "the frame barely moves the face"
+        assert three_lbs < TOLERANCE and three_shader < TOLERANCE
+    return loaded
+
+
+def test_three_js_plays_the_export_as_our_app_draws_it(server, page, sample):
+    pid, take = sample
+    page.route(server.url + "/three-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
+    page.goto(server.url + "/three-check")
+    page.wait_for_function("window.ready === true")
+
+    # the sample's biharmonic rig has negative weights: morph targets, 3 per feature
+    loaded = _three_matches_ours(page, server, pid, take)
+    assert not loaded["skinned"] and loaded["morphs"] == 3 * 68 and loaded["vertices"] == 8430
+
+    # an ellipsoid rig is a true skin; three.js reads its one set of four influences
+    _rig(server, pid, "ellipsoid")
+    glb = server.read(f"/api/projects/{pid}/export.glb")
+    attributes = vars(GltfDocument(glb, "export", None).doc.meshes[0].primitives[0].attributes)
+    assert attributes["JOINTS_0"] is not None and "JOINTS_1" not in attributes
+    loaded = _three_matches_ours(page, server, pid, take)
+    assert loaded["skinned"] and loaded["morphs"] == 0
+    assert loaded["skinAttributes"] == ["skinIndex", "skinWeight"]
+
+
+def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
+    """Export glTF with a ticked take downloads what the server exports for the panel's
+    conditioning; Import .glb makes and opens a project with the same mesh, landmarks and
+    rig; refusals show the server's reason."""
+    pid, take = sample
+    open_project(page, server, pid)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    box = page.locator(f"#export-takes input[data-take='{take['id']}']")
+    box.check()
+    with page.expect_download() as download:
+        page.click("#export-gltf")
+    assert download.value.suggested_filename == "Sample-face.glb"
+    path = tmp_path / "exported.glb"
+    download.value.save_as(path)
+    page.wait_for_function("() => document.getElementById('export-note').textContent.startsWith('Saved')")
+    assert "Sample-face.glb" in page.inner_text("#export-note") and "1 animation" in page.inner_text("#export-note")
+    settings = page.evaluate("() => JSON.stringify(window.app.sources.settings())")
+    expected = httpx.get(f"{server.url}/api/projects/{pid}/export.glb", timeout=60,
+                         params={"takes": take["id"], "settings": settings}).content
+    assert path.read_bytes() == expected
+    (clip,) = read_gltf(path).clips
+    assert clip.name == take["name"] and np.abs(clip.displacements).max() > 0.1
+
+    # import: a new project, opened, with the exported mesh, landmarks and rig
+    before = {p["id"] for p in server.api("GET", "/api/projects")}
+    page.set_input_files("#import-file", str(path))
+    page.wait_for_function("(id) => window.app.projectId && window.app.projectId !== id "
+                           "&& window.app.face && window.app.face.nJoints === 68", arg=pid, timeout=30_000)
+    page.evaluate("() => window.app.ready")
+    new = page.evaluate("() => window.app.projectId")
+    assert new not in before and page.input_value("#project-name") == "exported"
+    assert "Its 1 animation was not imported" in page.inner_text("#export-note")
+    np.testing.assert_array_equal(_rest(server, new), _rest(server, pid))
+    assert server.api("GET", f"/api/projects/{new}/landmarks") == server.api("GET", f"/api/projects/{pid}/landmarks")
+    np.testing.assert_allclose(_server_rig(server, new).dense(), _server_rig(server, pid).dense(), atol=1e-6)
+
+    # refusals: the server's reason in the panel and the banner, no project made
+    page.set_input_files("#import-file", files=[{"name": "bad.glb", "mimeType": "model/gltf-binary",
+                                                 "buffer": b"solid not a glb"}])
+    reason = "'bad.glb' cannot be imported (only a .glb exported by this app can): the file is not a GLB file"
+    page.wait_for_function("(r) => document.getElementById('export-note').textContent.includes(r)", arg=reason)
+    assert reason in page.inner_text("#error")
+    page.evaluate("() => window.app.errors.clear()")
+    empty = server.api("POST", "/api/projects", {"name": "empty"})["id"]
+    assert {p["id"] for p in server.api("GET", "/api/projects")} == before | {new, empty}
+    open_project(page, server, empty)
+    page.click("#export-gltf")
+    page.wait_for_function("() => document.getElementById('export-note').textContent.includes('has no mesh yet')")
+    assert "has no mesh yet" in page.inner_text("#error")

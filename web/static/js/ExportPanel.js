@@ -1,0 +1,192 @@
+import { api } from './api.js';
+
+const $ = ( id ) => document.getElementById( id );
+
+/**
+ * The Export panel (index.html #export-panel): download the project as a glTF binary
+ * (GET /api/projects/{id}/export.glb: mesh, landmarks and the rig in use, with the chosen
+ * takes as animations, retargeted with the Performance panel's conditioning and the Live
+ * panel's regions), and import such a file as a new project, which is then opened.
+ *
+ * The panel holds no maths: the server retargets and writes the file. Refusals show the
+ * server's reason in the panel's note and the page's error banner.
+ */
+export class ExportPanel {
+
+	/**
+	 * @param {object} app - the page's App: {projectId, errors, sources (settings()),
+	 *   _refreshProjects(), openProject(id)}.
+	 */
+	constructor( app ) {
+
+		this.app = app;
+		this.takes = [];
+		this._chosen = new Set(); // take ids ticked, kept across refreshes of the list
+		this._bind();
+
+	}
+
+	/** The project changed: list its takes (none ticked). */
+	async setProject( project ) {
+
+		this.takes = [];
+		this._chosen.clear();
+		this._note( '' );
+		this._render();
+		if ( project ) await this.refresh();
+
+	}
+
+	/** Fetch the project's takes again (they change in the Performance panel). */
+	async refresh() {
+
+		const id = this.app.projectId;
+		if ( ! id ) return;
+		const takes = await api.takes( id );
+		if ( id !== this.app.projectId ) return;
+		this.takes = takes;
+		this._render();
+
+	}
+
+	/**
+	 * Download the current project as .glb with the ticked takes (or all of them).
+	 * @returns {Promise<{filename: string, size: number}|null>} what was saved; null on a
+	 *   refusal, which is shown.
+	 */
+	async exportGltf() {
+
+		const id = this.app.projectId;
+		if ( ! id ) return null;
+		const all = $( 'export-all' ).checked;
+		const takes = all ? 'all' : this.takes.filter( ( t ) => this._chosen.has( t.id ) ).map( ( t ) => t.id ).join( ',' );
+		const count = all ? this.takes.length : takes.split( ',' ).filter( Boolean ).length;
+		const button = $( 'export-gltf' );
+		button.disabled = true;
+		this._note( count ? `Retargeting ${ count } take${ count > 1 ? 's' : '' } and writing the glTF…` : 'Writing the glTF…' );
+		try {
+
+			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.sources.settings(), regions: movingRegions() } );
+			const link = document.createElement( 'a' );
+			link.href = URL.createObjectURL( blob );
+			link.download = filename;
+			document.body.append( link );
+			link.click();
+			link.remove();
+			setTimeout( () => URL.revokeObjectURL( link.href ), 0 );
+			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB${ count ? `, ${ count } animation${ count > 1 ? 's' : '' }` : '' }).` );
+			return { filename, size: blob.size };
+
+		} catch ( error ) {
+
+			this._refused( error );
+			return null;
+
+		} finally {
+
+			button.disabled = false;
+
+		}
+
+	}
+
+	/**
+	 * Import a .glb exported by this app as a new project and open it.
+	 * @param {File} file
+	 * @returns {Promise<object|null>} the server's answer {project, deformation, animations};
+	 *   null on a refusal, which is shown.
+	 */
+	async importGltf( file ) {
+
+		this._note( `Importing ${ file.name }…` );
+		try {
+
+			const answer = await api.importProject( file, ( fraction ) => this._note( `Uploading ${ file.name }… ${ Math.round( 100 * fraction ) } %` ) );
+			await this.app._refreshProjects();
+			await this.app.openProject( answer.project.id );
+			const animations = answer.animations.length;
+			this._note( `Imported "${ answer.project.name }": mesh, landmarks and rig (${ answer.deformation === 'skin' ? 'glTF skin' : 'morph targets' }).` +
+				( animations ? ` Its ${ animations } animation${ animations > 1 ? 's were' : ' was' } not imported: an animation holds the face's own motion, not a performer's points, so it cannot be a take.` : '' ) );
+			return answer;
+
+		} catch ( error ) {
+
+			this._refused( error );
+			return null;
+
+		}
+
+	}
+
+	_bind() {
+
+		$( 'export-gltf' ).addEventListener( 'click', () => this.exportGltf() );
+		$( 'export-all' ).addEventListener( 'change', () => this._render() );
+		$( 'export-takes' ).addEventListener( 'change', ( event ) => {
+
+			const id = event.target.dataset.take;
+			if ( ! id ) return;
+			if ( event.target.checked ) this._chosen.add( id );
+			else this._chosen.delete( id );
+
+		} );
+		// takes are added and removed in the Performance panel: list them afresh on the way in
+		$( 'export-panel' ).addEventListener( 'pointerenter', () => this.refresh().catch( ( error ) => this._refused( error ) ) );
+		$( 'import-file' ).addEventListener( 'change', async ( event ) => {
+
+			const file = event.target.files[ 0 ];
+			event.target.value = '';
+			if ( file ) await this.importGltf( file );
+
+		} );
+
+	}
+
+	_render() {
+
+		const all = $( 'export-all' ).checked;
+		const known = new Set( this.takes.map( ( t ) => t.id ) );
+		for ( const id of this._chosen ) if ( ! known.has( id ) ) this._chosen.delete( id );
+		$( 'export-takes' ).replaceChildren( ...this.takes.map( ( take ) => {
+
+			const label = document.createElement( 'label' );
+			label.className = 'toggle';
+			label.title = `${ take.n_frames } frames, ${ take.duration.toFixed( 2 ) } s`;
+			const box = document.createElement( 'input' );
+			box.type = 'checkbox';
+			box.dataset.take = take.id;
+			box.checked = all || this._chosen.has( take.id );
+			box.disabled = all;
+			label.append( box, take.name );
+			return label;
+
+		} ) );
+		$( 'export-none' ).hidden = this.takes.length > 0;
+
+	}
+
+	_note( text, warn = false ) {
+
+		const note = $( 'export-note' );
+		note.textContent = text;
+		note.className = 'note' + ( warn ? ' warn' : '' );
+
+	}
+
+	_refused( error ) {
+
+		this._note( error.detail ?? error.message, true );
+		this.app.errors.show( error );
+
+	}
+
+}
+
+/** The Live panel's ticked regions, or null when all (or none) are: the whole face moves. */
+function movingRegions() {
+
+	const boxes = [ ...document.querySelectorAll( '#regions input[data-region]' ) ];
+	const ticked = boxes.filter( ( b ) => b.checked ).map( ( b ) => b.dataset.region );
+	return ticked.length && ticked.length < boxes.length ? ticked : null;
+
+}
