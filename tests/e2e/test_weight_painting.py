@@ -210,22 +210,28 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
     assert np.abs(page_weights(page) - automatic).max() > 0.2  # the local stroke is kept
     np.testing.assert_array_equal(server_weights(server, pid), automatic)
 
-    # the vertex-attribute path of rigs with k <= 8: painted rows reach the GPU too
-    moved = page.evaluate("""() => {
-        const face = window.app.face, v = face.nVertices, k = 4;
-        const indices = new Uint16Array(v * k), weights = new Float32Array(v * k);
-        for (let i = 0; i < v; i ++) {
-            indices[i * k] = i % 68; weights[i * k] = 0.5;
-            indices[i * k + 1] = (i + 1) % 68; weights[i * k + 1] = 0.25;
-        }
-        face.setRig({nJoints: 68, nInfluences: k, indices, weights});
-        window.app.viewer.render();  // uploaded whole; the update below goes as a range
-        const rows = [5000, 5001, 5002, 8429];
-        for (const r of rows) { indices.fill(0, r * k, r * k + k); weights.fill(0, r * k, r * k + k); indices[r * k + 2] = 7; weights[r * k + 2] = 1; }
-        face.updateWeights(rows, indices, weights);
-        const d = new Float32Array(3 * 68); d[3 * 7 + 2] = 1; face.setDisplacements(d);
-        return Array.from(face.deformedPositions().filter((_, i) => i % 3 === 2)); }""")
-    vertex = np.arange(n_vertices)
-    expected = 0.5 * (vertex % 68 == 7) + 0.25 * ((vertex + 1) % 68 == 7)
-    expected[[5000, 5001, 5002, 8429]] = 1.0
-    np.testing.assert_allclose(np.array(moved) - rest[:, 2], expected, atol=1e-5)
+    # partial uploads on both paths: vertex attributes (k <= 8) and the weight texture
+    # (k = 12), where vertex 240's 17 texels straddle the texture's first row end (4096):
+    # joint 66 is in its last texel, on the second row
+    for k in (4, 12):
+        moved = page.evaluate("""k => {
+            const face = window.app.face, v = face.nVertices;
+            const indices = new Uint16Array(v * k), weights = new Float32Array(v * k);
+            for (let i = 0; i < v; i ++) {
+                indices[i * k] = i % 68; weights[i * k] = 0.5;
+                indices[i * k + 1] = (i + 1) % 68; weights[i * k + 1] = 0.25;
+            }
+            face.setRig({nJoints: 68, nInfluences: k, indices, weights});
+            window.app.viewer.render();  // uploaded whole; the update below goes as ranges
+            const rows = [240, 5000, 5001, 8429];
+            for (const r of rows) {
+                indices.fill(0, r * k, r * k + k); weights.fill(0, r * k, r * k + k);
+                indices[r * k + 2] = 66; weights[r * k + 2] = 1;
+            }
+            face.updateWeights(rows, indices, weights);
+            const d = new Float32Array(3 * 68); d[3 * 66 + 2] = 1; face.setDisplacements(d);
+            return Array.from(face.deformedPositions().filter((_, i) => i % 3 === 2)); }""", k)
+        vertex = np.arange(n_vertices)
+        expected = 0.5 * (vertex % 68 == 66) + 0.25 * ((vertex + 1) % 68 == 66)
+        expected[[240, 5000, 5001, 8429]] = 1.0
+        np.testing.assert_allclose(np.array(moved) - rest[:, 2], expected, atol=1e-5, err_msg=f"k = {k}")

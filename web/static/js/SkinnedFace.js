@@ -263,8 +263,8 @@ export class SkinnedFace {
 	/**
 	 * Change the weights of some vertices of the current rig, as painting does: their rows
 	 * are read from `indices` and `weights` (the (V*k) arrays of `setRig`'s form, k the
-	 * rig's nInfluences) and only the span of attribute or texture rows they fall in is
-	 * uploaded again. The pose and the heat map follow at the next draw.
+	 * rig's nInfluences) and only their attribute or texture ranges are uploaded again
+	 * (three.js merges adjacent ones). The pose and the heat map follow at the next draw.
 	 * @param {ArrayLike<number>} vertices - vertex indices whose rows changed.
 	 * @param {Uint16Array} indices - (V*k) joint indices, each below nJoints.
 	 * @param {Float32Array} weights - (V*k) weights.
@@ -280,7 +280,6 @@ export class SkinnedFace {
 		}
 
 		if ( vertices.length === 0 ) return;
-		let first = Infinity, last = - Infinity;
 		for ( let n = 0; n < vertices.length; n ++ ) {
 
 			const i = vertices[ n ];
@@ -290,9 +289,6 @@ export class SkinnedFace {
 				if ( indices[ s ] >= this.nJoints ) throw new RangeError( `SkinnedFace.updateWeights: joint index ${ indices[ s ] } at slot ${ s } is not below nJoints = ${ this.nJoints }.` );
 
 			}
-
-			first = Math.min( first, i );
-			last = Math.max( last, i );
 
 		}
 
@@ -314,35 +310,29 @@ export class SkinnedFace {
 
 				}
 
-			}
-
-			for ( const attribute of [ ...slots, ...values ] ) {
-
-				if ( partial ) attribute.addUpdateRange( 4 * first, 4 * ( last - first + 1 ) );
-				attribute.needsUpdate = true;
+				if ( partial ) for ( const attribute of [ ...slots, ...values ] ) attribute.addUpdateRange( 4 * i, 4 );
 
 			}
+
+			for ( const attribute of [ ...slots, ...values ] ) attribute.needsUpdate = true;
 
 		} else {
 
 			const texture = this._skinUniforms.skinWeightTexture.value;
 			const dense = texture.image.data;
 			const stride = 4 * this._skinUniforms.skinQuads.value;
+			const rowFloats = 4 * SKIN_TEXTURE_WIDTH;
 			for ( let n = 0; n < vertices.length; n ++ ) {
 
 				const i = vertices[ n ], row = i * stride, slot = i * k;
 				dense.fill( 0, row, row + stride );
 				for ( let s = 0; s < k; s ++ ) dense[ row + indices[ slot + s ] ] += weights[ slot + s ];
+				// a texture update range may not cross a texture row: split the vertex's texels at one
+				for ( let start = row; partial && start < row + stride; ) {
 
-			}
-
-			if ( partial ) {
-
-				// update ranges may not cross a texture row: whole rows from the first vertex's to the last's
-				const texelsPerRow = 4 * SKIN_TEXTURE_WIDTH;
-				for ( let r = Math.floor( first * stride / texelsPerRow ); r <= Math.floor( ( ( last + 1 ) * stride - 1 ) / texelsPerRow ); r ++ ) {
-
-					texture.addUpdateRange( r * texelsPerRow, texelsPerRow );
+					const count = Math.min( row + stride, ( Math.floor( start / rowFloats ) + 1 ) * rowFloats ) - start;
+					texture.addUpdateRange( start, count );
+					start += count;
 
 				}
 
