@@ -86,8 +86,9 @@ def take_clip(name: str, take: Take, target_points, layout: str, settings=None, 
     settings : `ConditionSettings`, its dict form, or None for the defaults.
     regions : region, group or point names that move (partial retargeting), None for all.
 
-    The clip's times are the kept frames' own, from 0 s (the first kept frame). The head's rotation is not part
-    of the clip (feature displacements carry no rigid head motion).
+    The clip's times are the kept frames' own, from 0 s at the first kept frame. The
+    head's rotation is not part of the clip (feature displacements carry no rigid head
+    motion).
     """
     target = get_layout(layout or "ibug68")
     if not isinstance(settings, ConditionSettings):

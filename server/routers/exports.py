@@ -47,7 +47,8 @@ GLB_MEDIA_TYPE = "model/gltf-binary"
 def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                    takes: str = Query(default="", description="take ids, comma-separated, or 'all'"),
                    settings: str = Query(default="", description="ConditionSettings JSON"),
-                   regions: str = Query(default="", description="regions that move, comma-separated")) -> Response:
+                   regions: str = Query(default="", description="regions that move, comma-separated"),
+                   ) -> Response:
     """The project rigged and animated as a .glb download (see the module docstring)."""
     landmarks = store.landmarks(project["id"])
     weights = store.rig(project["id"])
