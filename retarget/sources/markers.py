@@ -439,13 +439,13 @@ def _auto_assignment(blobs: RingBlobs, lay, path: Path) -> np.ndarray:
     if found < lay.n_points:
         raise RetargetError(
             f"{path}: found {found} ring markers in the first frame, layout {lay.name!r} needs "
-            f"{lay.n_points}; give their positions as `assignment`")
+            f"{lay.n_points} (white dots with a black ring, all in view in the first frame)")
     match = assign_markers(blobs.centres, reference_points(lay.name))
     if (match < 0).any():
         missing = [lay.point_names[i] for i in np.flatnonzero(match < 0)]
         raise RetargetError(
             f"{path}: no marker in the first frame matches point(s) {', '.join(missing)} of layout "
-            f"{lay.name!r}; give the positions as `assignment`")
+            f"{lay.name!r} (are the markers placed as the layout's reference face shows?)")
     return blobs.centres[match]
 
 

@@ -231,9 +231,14 @@ class Take:
                 close = difflib.get_close_matches(name, list(lowered), n=2)
                 if close:
                     hints.append(f"{name} ~ {' / '.join(lowered[c] for c in close)}")
+            if len(missing) == target.n_points:
+                labels = ", ".join(self.names[:6]) + (", ..." if self.n_points > 6 else "")
+                raise RetargetError(
+                    f"none of the take's {self.n_points} labels ({labels}) is a point of layout "
+                    f"{target.name!r}" + (f" (close: {'; '.join(hints)})" if hints else ""))
             raise RetargetError(
                 f"the take lacks {len(missing)} of the {target.n_points} points of layout "
-                f"{target.name!r}: {', '.join(missing)}"
+                f"{target.name!r}: {', '.join(missing[:20])}{' ...' if len(missing) > 20 else ''}"
                 + (f" (close labels: {'; '.join(hints)}; map them with `mapping`)" if hints else ""))
         rows = [lookup[name] for name in target.point_names]
         return replace(self, points=self.points[:, rows], names=target.point_names,

@@ -409,7 +409,7 @@ BAD = {
     "not a video": (_text_video, "#video-file", "markers", r"notes\.mp4.* is not a video"),
     "no markers": (_plain_video, "#video-file", "markers", r"plain\.avi.*found 0 ring markers"),
     "unknown labels": (_unlabelled_c3d, "#take-file", None,
-                       r"vicon\.c3d.* lacks 68 of the 68 points of layout 'ibug68'"),
+                       r"vicon\.c3d.* none of the take's 68 labels \(M01, M02, .*\) is a point of layout 'ibug68'"),
     "empty take": (_empty_take, "#take-file", None, r"empty\.csv.* is empty"),
     "garbage take": (_garbage_take, "#take-file", None,
                      r"garbage\.c3d' refused: 'garbage\.c3d' is not a C3D file"),
