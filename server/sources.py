@@ -34,7 +34,7 @@ from retarget.sample_face import demo_weights, sample_face
 from retarget.sources.conditioning import ConditionSettings, SourceConditioner, condition_take
 from retarget.sources.take import Take
 from server.hub import StreamHub
-from server.stream_codec import FLAG_LOST_POINTS, encode_frame
+from server.stream_codec import FLAG_LAST, FLAG_LOST_POINTS, encode_frame
 
 # The performer differs from the built-in target face so the demo really retargets.
 _PERFORMER_IDENTITY = np.array([1.2, -0.8, 0.9, 0.6, -0.7])
@@ -76,13 +76,15 @@ class _Retargeted:
         self.driven = np.isfinite(neutral).all(axis=1)
         self.set_regions(self.regions)
 
-    def encode(self, points: np.ndarray, index: int, t: float, rotation=None) -> bytes:
-        """The stream frame for (N, D) conditioned source points; rotation (3, 3) or None."""
+    def encode(self, points: np.ndarray, index: int, t: float, rotation=None, *, last=False) -> bytes:
+        """The stream frame for (N, D) conditioned source points; rotation (3, 3) or None;
+        `last` marks the source's final frame."""
         d = self.retargeter.displacements(points)
         lost = bool((~np.isfinite(points[self.driven]).all(axis=1)).any())
         quaternion = None if rotation is None else Rotation.from_matrix(rotation).as_quat()
-        return encode_frame(d, frame_index=index % 2**32, source_time=t,
-                            flags=FLAG_LOST_POINTS if lost else 0, head_rotation=quaternion)
+        flags = (FLAG_LOST_POINTS if lost else 0) | (FLAG_LAST if last else 0)
+        return encode_frame(d, frame_index=index % 2**32, source_time=t, flags=flags,
+                            head_rotation=quaternion)
 
     def start_recording(self) -> None:
         self.recording = []
@@ -170,7 +172,8 @@ class TakeSource(_Retargeted):
         t = float(self.times[i]) + index // len(self.points) * self.duration
         rotation = None if self.rotations is None else self.rotations[i]
         self.record(self.take.points[i], t)
-        return self.encode(self.points[i], index, t, rotation)
+        last = not self.loop and index == len(self.points) - 1
+        return self.encode(self.points[i], index, t, rotation, last=last)
 
     @property
     def duration(self) -> float:

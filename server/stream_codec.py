@@ -8,7 +8,8 @@ against each other. Layout (byte offsets):
     4   uint16   version (1)
     6   uint16   flags: bit 0 = neutral (all displacements zero, a reset),
                         bit 1 = some source points were lost this frame,
-                        bit 2 = a head rotation follows the displacements
+                        bit 2 = a head rotation follows the displacements,
+                        bit 3 = the source's last frame (a take played once ends)
     8   uint32   frame index
     12  uint32   point count N
     16  float64  source timestamp, seconds (when the source produced the frame)
@@ -36,6 +37,7 @@ VERSION = 1
 FLAG_NEUTRAL = 1
 FLAG_LOST_POINTS = 2
 FLAG_HEAD_ROTATION = 4
+FLAG_LAST = 8
 _HEADER = struct.Struct("<4sHHIIdd")
 HEADER_BYTES = _HEADER.size
 

@@ -276,3 +276,25 @@ def assert_frames_in_order(recorded: np.ndarray, played: np.ndarray) -> None:
     assert distance[np.arange(len(recorded)), index].max() < 1e-5
     steps = np.diff(index)
     assert (steps > 0).sum() >= len(steps) - 1, index
+
+
+def test_a_take_played_once_marks_its_last_frame(app, sample_id):
+    from server.sources import _performance68
+    from server.stream_codec import FLAG_LAST
+
+    _, frames68 = _performance68(30.0)
+    buffer = io.BytesIO()
+    np.save(buffer, frames68[:45].astype(np.float32))
+    with TestClient(app) as client:
+        take = client.post(f"/api/projects/{sample_id}/takes", files={"file": ("once.npy", buffer.getvalue())},
+                           data={"layout": "ibug68"}).json()
+        with client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+            ws.receive_json()
+            ws.send_json({"type": "start", "source": "take", "take": take["id"], "loop": False,
+                          "settings": {"neutral": {"mode": "frame", "frame": 0}}})
+            started = replies(ws, 1)[0]
+            got = []
+            while not got or not got[-1].flags & FLAG_LAST:
+                got += binary_frames(ws, 1)
+    assert started["frames"] == 45 and got[-1].frame_index == 44
+    assert not any(f.flags & FLAG_LAST for f in got[:-1])

@@ -14,6 +14,7 @@ export class StreamDecoder {
 	static FLAG_NEUTRAL = 1;
 	static FLAG_LOST_POINTS = 2;
 	static FLAG_HEAD_ROTATION = 4;
+	static FLAG_LAST = 8;
 
 	/**
 	 * Decode one frame.

@@ -7,6 +7,7 @@ import { PaintPanel } from './PaintPanel.js';
 import { regionColor } from './palette.js';
 import { SkinnedFace } from './SkinnedFace.js';
 import { StreamClient } from './StreamClient.js';
+import { StreamDecoder } from './StreamDecoder.js';
 import { SourcePanel } from './SourcePanel.js';
 import { Viewer } from './Viewer.js';
 
@@ -717,6 +718,7 @@ class App {
 			this._turnHead( frame.headRotation );
 			this.picker.setDisplacements( frame.displacements );
 			stream.markApplied( frame );
+			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
 
 		} );
 		stream.addEventListener( 'message', ( event ) => {
