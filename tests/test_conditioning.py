@@ -230,3 +230,26 @@ def test_settings_round_trip_through_json_and_defaults():
 def test_bad_settings_are_refused_by_name(data, message):
     with pytest.raises(RetargetError, match=message):
         ConditionSettings.from_dict(data)
+
+
+def test_live_capture_waits_for_a_face_and_starts_again_after_a_failed_capture():
+    """A camera that shows no face at first (all points lost) delays the capture rather
+    than failing it; a capture spoiled by a lost point fails once, then the next frames
+    capture the neutral afresh."""
+    face, _ = _performance(frames=30)
+    conditioner = SourceConditioner("ibug68", 3, {"neutral": {"mode": "first_seconds", "seconds": 0.1},
+                                                  "head_pose": "keep", "filter": "none"})
+    lost = np.full((68, 3), np.nan)
+    assert all(conditioner.push(lost, i / 30) is None for i in range(10))   # no face yet
+    spoiled = NEUTRAL.copy()
+    spoiled[IBUG.index("chin")] = np.nan
+    outputs = [conditioner.push(spoiled, (10 + i) / 30) for i in range(4)]  # 0.1 s of frames
+    with pytest.raises(RetargetError, match="chin"):
+        conditioner.push(spoiled, 14 / 30)                                  # the capture ends: chin never seen
+    assert all(o is None for o in outputs)
+    for i in range(4):                                                      # a new capture of the neutral
+        assert conditioner.push(NEUTRAL, (15 + i) / 30) is None
+    out = [conditioner.push(face[i], (19 + i) / 30) for i in range(10)]
+    np.testing.assert_allclose(conditioner.neutral_, NEUTRAL, atol=1e-5)
+    assert all(o is not None for o in out)
+    np.testing.assert_allclose(out[-1], face[9], atol=1e-4)
