@@ -18,6 +18,10 @@ Subcommands (``retarget <command> --help`` for the details):
     A performance video -> (F, N, 3) source points per frame: ring markers (Dutreve §5,
     one camera, z = 0), a colour-marker stereo pair (Woodward §5) or markerless face-mesh
     tracking (the web app's browser tracker, run in a headless Chromium).
+``condition``
+    A performance file (landmark table, TRC/C3D motion capture, animated glTF face, OBJ
+    sequence, a tracked take) read in a layout's order and conditioned as the app plays a
+    take (neutral, head pose, filter, gain) into S0 and S for ``transfer``/``export-gltf``.
 ``calibrate``
     A stereo camera pair's calibration from checkerboard or circle-grid views, for
     ``track --method stereo``.
@@ -704,6 +708,40 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+def _cmd_condition(args) -> int:
+    from retarget.sources.conditioning import ConditionSettings, condition_take
+    from retarget.sources.files import read_take
+
+    out, neutral_out = Path(args.out), Path(args.neutral_out)
+    for path in (out, neutral_out):
+        _require_parent(path)
+    _require_file(args.take, "take file")
+    options = {name: _read_json_file(getattr(args, name), name.replace("_", " "))
+               for name in ("mapping", "labelled_vertices", "settings")}
+    take = read_take(args.take, layout=args.layout, mapping=options["mapping"], fps=args.fps,
+                     labelled_vertices=options["labelled_vertices"])
+    settings = ConditionSettings.from_dict(options["settings"])
+    conditioned, neutral = condition_take(take, settings)
+    _write_npy(out, np.ascontiguousarray(conditioned.points, dtype=np.float32))
+    _write_npy(neutral_out, np.ascontiguousarray(neutral, dtype=np.float32))
+    print(f"{take.source or 'take'} {take.n_frames} frames of {take.n_points} {take.dims}D points "
+          f"({take.layout}) at {take.fps:g} fps: neutral from {settings.neutral['mode']}, head "
+          f"{settings.head_pose}, filter {settings.filter}; {conditioned.n_frames} frames "
+          f"-> {out}, neutral -> {neutral_out}")
+    return 0
+
+
+def _read_json_file(path, what: str):
+    """The JSON in the file `path` (None when not given)."""
+    if path is None:
+        return None
+    _require_file(path, what)
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RetargetError(f"{what} {str(path)!r} is not readable JSON: {exc}") from None
+
+
 def _cmd_layouts(args) -> int:
     for name, layout in LAYOUTS.items():
         counts = {r: layout.regions.count(r) for r in REGIONS if r in layout.regions}
@@ -870,6 +908,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--take", metavar="TAKE.npz",
                    help="also write the take (points, times, names) for upload to the web app")
     p.set_defaults(run=_cmd_track)
+
+    p = commands.add_parser(
+        "condition", parents=[quiet], help="read a take file and condition it into source points",
+        description="Read a performance file (landmark CSV/JSON/NPY, TRC or C3D motion capture, an "
+        "animated glTF/GLB face or a zip of OBJ frames with --labelled-vertices, or a take .npz "
+        "from 'track --take') in a layout's point order, condition it as the web app plays a "
+        "take (neutral capture, head-motion removal, jitter filter, gain per region) and write "
+        "the neutral and the frames for 'transfer' and 'export-gltf'.")
+    p.add_argument("take", metavar="TAKE", help="the performance file")
+    p.add_argument("--layout", choices=list(LAYOUTS), required=True, metavar="NAME",
+                   help="the layout whose points to produce, in its order (every point needed)")
+    p.add_argument("--mapping", metavar="MAP.json", help='{"file label": "layout point name"} for '
+                   "labels that are not point names (motion-capture marker names)")
+    p.add_argument("--labelled-vertices", metavar="LV.json", help="animated meshes: "
+                   '{"point name": vertex index}, or a landmarks JSON of the animated mesh')
+    p.add_argument("--fps", type=float, metavar="F", help="frame rate (default: the file's)")
+    p.add_argument("--settings", metavar="SETTINGS.json", help="conditioning settings, as the web "
+                   'app\'s (e.g. {"neutral": {"mode": "frame", "frame": 0}, "head_pose": "remove", '
+                   '"filter": "one_euro"}); default: the first 0.5 s, head motion removed, no filter')
+    p.add_argument("--neutral-out", required=True, metavar="S0.npy", help="(N, D) float32 neutral")
+    p.add_argument("--out", required=True, metavar="FRAMES.npy",
+                   help="(F, N, D) float32 conditioned frames (the neutral capture left out)")
+    p.set_defaults(run=_cmd_condition)
 
     p = commands.add_parser(
         "calibrate", parents=[quiet], help="calibrate a stereo camera pair",

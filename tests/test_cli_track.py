@@ -70,3 +70,59 @@ def test_track_and_calibrate_refusals(tmp_path, capsys):
         err = capsys.readouterr().err
         assert message in err and err.startswith("retarget: error:"), (argv, err)
     assert not (tmp_path / "o.npy").exists()
+
+
+def test_condition_a_motion_capture_file_then_transfer_it(tmp_path, capsys):
+    """A C3D of a performer's 68 landmarks under head motion, conditioned from the CLI,
+    then transferred: the target moves with the performer's expression, without the head."""
+    import ezc3d
+    from scipy.spatial.transform import Rotation
+
+    from retarget.layouts import get_layout
+    from retarget.mesh import mesh_from_arrays, save_mesh
+    from retarget.sample_face import demo_weights, posed_vertices, sample_face
+
+    performer = sample_face(1, identity=np.array([0.9, -0.4, 0.5, 0.2, -0.3]))
+    expression = posed_vertices(performer, demo_weights(60, 30.0))[:, performer.landmarks68]
+    expression[:15] = performer.vertices[performer.landmarks68]              # 0.5 s of neutral
+    turn = Rotation.from_rotvec(np.c_[np.zeros(60), np.linspace(0, 0.3, 60), np.zeros(60)]).as_matrix()
+    moved = np.einsum("fij,fnj->fni", turn, expression) + np.c_[np.linspace(0, 2, 60), np.zeros((60, 2))][:, None]
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [30.0]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = [f"M{i:02d}" for i in range(68)]
+    data = np.ones((4, 68, 60))
+    data[:3] = (10 * moved).transpose(2, 1, 0)                                # mm
+    c3d["data"]["points"] = data
+    c3d.write(str(tmp_path / "perf.c3d"))
+    mapping = dict(zip([f"M{i:02d}" for i in range(68)], get_layout("ibug68").point_names))
+    (tmp_path / "map.json").write_text(__import__("json").dumps(mapping))
+
+    assert main(["condition", str(tmp_path / "perf.c3d"), "--layout", "ibug68", "--mapping",
+                 str(tmp_path / "map.json"), "--neutral-out", str(tmp_path / "s0.npy"),
+                 "--out", str(tmp_path / "s.npy"), "-q"]) == 0
+    assert "60 frames of 68 3D points" in capsys.readouterr().out
+    s0, s = np.load(tmp_path / "s0.npy"), np.load(tmp_path / "s.npy")
+    assert s0.shape == (68, 3) and s.shape[1:] == (68, 3) and 40 <= len(s) < 60
+    # head motion removed: the conditioned frames equal the expression in the neutral's head frame
+    kept = expression[60 - len(s):] * 10
+    shape = lambda a: a - a.mean(axis=-2, keepdims=True)  # noqa: E731
+    assert np.abs(shape(s) - shape(np.einsum("ij,fnj->fni", turn[0], kept))).max() < 0.05  # mm
+
+    target = sample_face(1)
+    save_mesh(mesh_from_arrays(target.vertices, target.faces), tmp_path / "target.obj")
+    (tmp_path / "t0.json").write_text(__import__("json").dumps(
+        {"vertex_indices": [int(i) for i in target.landmarks68], "layout": "ibug68"}))
+    assert main(["transfer", "--target-mesh", str(tmp_path / "target.obj"), "--target-landmarks",
+                 str(tmp_path / "t0.json"), "--source-neutral", str(tmp_path / "s0.npy"),
+                 "--source-frames", str(tmp_path / "s.npy"), "--deformer", "ellipsoid",
+                 "--out", str(tmp_path / "out.npy"), "-q"]) == 0
+    out = np.load(tmp_path / "out.npy")
+    assert out.shape == (len(s), len(target.vertices), 3)
+    # the jaw follows the performer's: the chin moves with the source chin, frame by frame
+    chin = get_layout("ibug68").index("chin")
+    target_chin = out[:, target.landmarks68[chin]] - target.vertices[target.landmarks68[chin]]
+    source_chin = np.linalg.norm(s[:, chin] - s0[chin], axis=1)
+    assert np.abs(target_chin).max() > 0.1 and np.corrcoef(np.linalg.norm(target_chin, axis=1), source_chin)[0, 1] > 0.9
+    assert main(["condition", str(tmp_path / "perf.c3d"), "--layout", "ibug68", "--neutral-out",
+                 str(tmp_path / "x.npy"), "--out", str(tmp_path / "y.npy"), "-q"]) == 2
+    assert "none of the take's 68 labels (M00, M01" in capsys.readouterr().err
