@@ -7,9 +7,10 @@ import { trackVideo } from './tracking/videoTake.js';
 /**
  * The performance panel: which source drives the face (the built-in demo, the webcam
  * tracked in this page, or a recorded take), the project's takes (import, track a video,
- * rename, trim, download, delete), recording, and the conditioning settings sent with
- * every start (`retarget.sources.conditioning.ConditionSettings`: neutral, head pose,
- * jitter filter and gain per region).
+ * rename, trim, download, delete), recording whatever source plays into a new take, and
+ * the conditioning settings sent with every start
+ * (`retarget.sources.conditioning.ConditionSettings`: neutral, head pose, jitter filter and
+ * gain per region).
  *
  * Markerless tracking runs here, in the page (tracking/); marker videos are tracked by
  * the server in a job whose progress feeds the bar. The panel holds no maths: the server
@@ -19,6 +20,7 @@ import { trackVideo } from './tracking/videoTake.js';
 const $ = ( id ) => document.getElementById( id );
 const TAKE_EXTENSIONS = [ 'csv', 'json', 'npy', 'trc', 'c3d', 'glb', 'gltf', 'zip' ];
 const JOB_POLL_MS = 100;
+const RECORD_TICK_MS = 100;
 
 export class SourcePanel {
 
@@ -33,6 +35,12 @@ export class SourcePanel {
 		this.selectedTake = null;
 		this.webcam = null; // a Promise of {stop()} from the moment the webcam starts
 		this.recording = false;
+		this._playing = ''; // what the last start plays, for a recording's default name
+		this._watched = null; // the stream whose 'started' replies enable recording
+		this._recordClock = { since: 0, timer: 0 }; // performance.now() the recording began, ms
+		this._pointIndex = 0; // the index of the webcam's next points message
+		this._neutralFrom = 0; // _pointIndex when the last neutral capture was asked for
+		this._neutralWait = null; // {stream, listener} until a neutral capture is in
 		this.stereo = new StereoTrack( {
 			projectId: () => this.app.projectId,
 			run: ( work ) => this._task( work ),
@@ -45,6 +53,7 @@ export class SourcePanel {
 			},
 		} );
 		this._bind();
+		this._setRecording( false ); // disabled until a source plays, and why
 
 	}
 
@@ -78,6 +87,7 @@ export class SourcePanel {
 	async setProject( project ) {
 
 		this.stopWebcam();
+		this._setRecording( false ); // its source went with the old project's stream
 		this._abort?.abort( new Error( 'Video tracking stopped: another project was opened.' ) );
 		this.takes = [];
 		this.selectedTake = null;
@@ -103,6 +113,8 @@ export class SourcePanel {
 	async startMessage() {
 
 		const kind = $( 'source-select' ).value;
+		this._watch( this.app.stream );
+		this._playing = kind;
 		if ( kind === 'demo' ) return { type: 'start', source: 'demo', fps: 60 };
 		if ( kind === 'take' ) {
 
@@ -118,6 +130,7 @@ export class SourcePanel {
 
 			}
 
+			this._playing = take?.name ?? kind;
 			return { type: 'start', source: 'take', take: this.selectedTake, loop: $( 'take-loop' ).checked, settings };
 
 		}
@@ -136,20 +149,35 @@ export class SourcePanel {
 
 			this._note( `Recorded "${ message.take.name }": ${ message.take.n_frames } frames, ${ message.take.duration.toFixed( 1 ) } s.` );
 			this.selectedTake = message.take.id;
-			this.refreshTakes();
+			$( 'record-name' ).value = ''; // the next recording is another take
+			this._guard( async () => {
+
+				await this.refreshTakes();
+				$( 'take-list' ).querySelector( 'li.selected' )?.scrollIntoView( { block: 'nearest' } );
+
+			} );
 
 		} else if ( message.type === 'recording' ) {
 
 			this._setRecording( true );
 
+		} else if ( message.type === 'neutral' ) {
+
+			this._awaitNeutral();
+
 		}
 
 	}
 
-	/** The stream stopped (Stop, a reconnect, another project). */
+	/**
+	 * The stream stopped (Stop, the end of a take played once, a reconnect): a recording
+	 * not stopped first went with its source.
+	 */
 	onStopped() {
 
+		if ( this.recording ) this._note( 'The source stopped while recording: nothing was kept. Stop the recording (■ Stop & save) before the source.', true );
 		this._setRecording( false );
+		this._endNeutralWait();
 
 	}
 
@@ -177,12 +205,12 @@ export class SourcePanel {
 		const encoder = new PointsEncoder();
 		const video = $( 'webcam-video' );
 		$( 'webcam-box' ).hidden = false;
-		let index = 0;
+		this._pointIndex = 0;
 		const lost = new Float32Array( 3 * layout.points.length ).fill( NaN );
 		return startWebcam( video, ( { points, time } ) => {
 
 			// a frame without a face goes as lost points, so the stream knows the time
-			this.app.stream?.sendPoints( encoder.encode( points ?? lost, 3, index ++, time ) );
+			this.app.stream?.sendPoints( encoder.encode( points ?? lost, 3, this._pointIndex ++, time ) );
 
 		}, {
 			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
@@ -198,7 +226,7 @@ export class SourcePanel {
 		this.webcam = null;
 		if ( $( 'source-note' ).textContent.startsWith( 'Webcam:' ) ) this._note( '' ); // not tracking any more
 		$( 'webcam-box' ).hidden = true;
-		this._setRecording( false );
+		this._endNeutralWait();
 
 	}
 
@@ -448,20 +476,65 @@ export class SourcePanel {
 
 	}
 
+	// recording
+
+	/**
+	 * Follow `stream`'s 'started' replies, which the page keeps to itself: recording can
+	 * begin once a source plays, and a restarted source records nothing any more.
+	 */
+	_watch( stream ) {
+
+		if ( ! stream || stream === this._watched ) return;
+		this._watched = stream;
+		stream.addEventListener( 'message', ( event ) => {
+
+			if ( stream !== this.app.stream || event.detail.type !== 'started' ) return;
+			if ( this.recording && ! event.detail.recording ) this._note( 'The source started again: the recording so far was not kept.', true );
+			this._setRecording( Boolean( event.detail.recording ) );
+
+		} );
+
+	}
+
+	/** Show `on` in the record button, its tooltip and the elapsed-time badge. */
 	_setRecording( on ) {
 
+		const clock = this._recordClock;
+		if ( on && ! this.recording ) {
+
+			clock.since = performance.now();
+			clock.timer = setInterval( () => this._showElapsed(), RECORD_TICK_MS );
+
+		} else if ( ! on ) {
+
+			clearInterval( clock.timer );
+
+		}
+
 		this.recording = on;
-		$( 'record' ).textContent = on ? '■ Stop & save' : '● Record';
-		$( 'record' ).classList.toggle( 'recording', on );
+		const button = $( 'record' );
+		button.textContent = on ? '■ Stop & save' : '● Record';
+		button.classList.toggle( 'recording', on );
+		button.disabled = ! this.app.streaming;
+		button.title = ! this.app.streaming ? 'Press ▶ Play first: a recording keeps what the playing source (demo, webcam or take) performs.'
+			: on ? 'Stop recording and keep it as a take under the name in the box' : 'Record what the source plays as a new take';
+		this._showElapsed();
+
+	}
+
+	_showElapsed() {
+
+		const seconds = ( performance.now() - this._recordClock.since ) / 1000;
+		$( 'record-time' ).textContent = this.recording ? `REC ${ seconds.toFixed( 1 ) } s` : '';
 
 	}
 
 	_toggleRecording() {
 
-		if ( ! this.webcam ) throw new Error( 'Recording keeps what the webcam tracks: start the webcam source first.' );
+		if ( ! this.app.streaming ) throw new Error( 'Nothing is playing to record: press ▶ Play first.' );
 		if ( this.recording ) {
 
-			const name = $( 'record-name' ).value.trim() || `webcam ${ new Date().toLocaleTimeString() }`;
+			const name = $( 'record-name' ).value.trim() || `${ this._playing } ${ new Date().toLocaleTimeString() }`;
 			this.app.stream.send( { type: 'record_stop', name } );
 			this._setRecording( false );
 
@@ -470,6 +543,36 @@ export class SourcePanel {
 			this.app.stream.send( { type: 'record' } );
 
 		}
+
+	}
+
+	/** The server captures the webcam's neutral again: say so until a frame retargeted with it comes. */
+	_awaitNeutral() {
+
+		this._endNeutralWait();
+		const stream = this.app.stream;
+		if ( ! stream || ! this.webcam ) return;
+		// points sent after the request reach the server after it: the first frame echoing
+		// one of them is retargeted from the new neutral
+		const first = this._neutralFrom;
+		const listener = ( event ) => {
+
+			if ( event.detail.frameIndex < first ) return;
+			this._endNeutralWait();
+			this._note( 'Webcam: neutral captured.' );
+
+		};
+		stream.addEventListener( 'frame', listener );
+		this._neutralWait = { stream, listener };
+		this._note( 'Webcam: hold a neutral face…' );
+
+	}
+
+	_endNeutralWait() {
+
+		const wait = this._neutralWait;
+		wait?.stream.removeEventListener( 'frame', wait.listener );
+		this._neutralWait = null;
 
 	}
 
@@ -580,7 +683,12 @@ export class SourcePanel {
 			if ( $( 'source-select' ).value !== 'webcam' ) this.stopWebcam();
 
 		} );
-		$( 'recapture-neutral' ).addEventListener( 'click', () => this.app.stream?.send( { type: 'neutral' } ) );
+		$( 'recapture-neutral' ).addEventListener( 'click', () => {
+
+			this._neutralFrom = this._pointIndex;
+			this.app.stream?.send( { type: 'neutral' } );
+
+		} );
 		$( 'record' ).addEventListener( 'click', () => this._guard( () => this._toggleRecording() ) );
 		$( 'conditioning' ).addEventListener( 'change', () => this._sendSettings() );
 
