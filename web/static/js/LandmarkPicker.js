@@ -255,6 +255,39 @@ export class LandmarkPicker extends EventTarget {
 
 	}
 
+	/**
+	 * The point of the face's rest pose under the pointer (what a click there places, or
+	 * where a brush paints). A pointer just off the surface (on an eyelid's or the mouth's
+	 * edge, at the silhouette) snaps to the front-most hit on the nearest ring of rays
+	 * within SNAP_PX, so points on a hole's rim are as easy to reach as any other.
+	 * @param {{clientX: number, clientY: number}} event - a pointer position, CSS px.
+	 * @returns {{faceIndex: number, local: THREE.Vector3, distance: number}|null} the
+	 *   triangle hit, the point in the mesh's local frame and its distance from the camera
+	 *   (world units); null off the face or without a mesh.
+	 */
+	hitFace( event ) {
+
+		if ( ! this.mesh ) return null;
+		for ( let r = 0; r <= SNAP_PX; r ++ ) {
+
+			const rays = r === 0 ? 1 : 8 * r;
+			let best = null;
+			for ( let k = 0; k < rays; k ++ ) {
+
+				const angle = ( 2 * Math.PI * k ) / rays;
+				const hit = this._ray( event.clientX + r * Math.cos( angle ), event.clientY + r * Math.sin( angle ) ).intersectObject( this.mesh, false )[ 0 ];
+				if ( hit && ( ! best || hit.distance < best.distance ) ) best = hit;
+
+			}
+
+			if ( best ) return { faceIndex: best.faceIndex, local: this.mesh.worldToLocal( best.point.clone() ), distance: best.distance };
+
+		}
+
+		return null;
+
+	}
+
 	// edits (each one undoable)
 
 	/**
@@ -616,35 +649,6 @@ export class LandmarkPicker extends EventTarget {
 	}
 
 	/**
-	 * The face hit under the pointer: {faceIndex, local point, distance} or null. A pointer
-	 * just off the surface (on an eyelid's or the mouth's edge, at the silhouette) snaps to
-	 * the front-most hit on the nearest ring of rays within SNAP_PX, so points on a hole's
-	 * rim are as easy to place as any other.
-	 */
-	_hitFace( event ) {
-
-		if ( ! this.mesh ) return null;
-		for ( let r = 0; r <= SNAP_PX; r ++ ) {
-
-			const rays = r === 0 ? 1 : 8 * r;
-			let best = null;
-			for ( let k = 0; k < rays; k ++ ) {
-
-				const angle = ( 2 * Math.PI * k ) / rays;
-				const hit = this._ray( event.clientX + r * Math.cos( angle ), event.clientY + r * Math.sin( angle ) ).intersectObject( this.mesh, false )[ 0 ];
-				if ( hit && ( ! best || hit.distance < best.distance ) ) best = hit;
-
-			}
-
-			if ( best ) return { faceIndex: best.faceIndex, local: this.mesh.worldToLocal( best.point.clone() ), distance: best.distance };
-
-		}
-
-		return null;
-
-	}
-
-	/**
 	 * The visible marker nearest the pointer within its drawn radius (plus GRAB_SLOP px),
 	 * -1 for none. A marker behind the surface under the pointer does not count.
 	 */
@@ -676,7 +680,7 @@ export class LandmarkPicker extends EventTarget {
 		} );
 		if ( best < 0 ) return - 1;
 
-		const hit = this._hitFace( event );
+		const hit = this.hitFace( event );
 		if ( hit ) {
 
 			const marker = this.markers.children[ best ];
@@ -721,7 +725,7 @@ export class LandmarkPicker extends EventTarget {
 		}
 
 		if ( gesture.marker < 0 || ! gesture.moved ) return;
-		const hit = this._hitFace( event );
+		const hit = this.hitFace( event );
 		if ( ! hit ) return;
 		// slide without a history entry per move: the whole drag is one undo step (on release)
 		const points = this.state.points.slice();
@@ -763,7 +767,7 @@ export class LandmarkPicker extends EventTarget {
 
 		}
 
-		const hit = this._hitFace( event );
+		const hit = this.hitFace( event );
 		if ( next >= 0 && hit ) this.place( next, this._surfacePoint( hit.faceIndex, hit.local ) );
 		else if ( this.selected >= 0 ) this.select( - 1 );
 
@@ -803,7 +807,7 @@ export class LandmarkPicker extends EventTarget {
 			const e = this._hoverEvent;
 			const marker = this._markerAt( e );
 			const element = this.viewer.renderer.domElement;
-			element.style.cursor = marker >= 0 ? 'grab' : ( this.layout && this.next >= 0 && this._hitFace( e ) ? 'crosshair' : '' );
+			element.style.cursor = marker >= 0 ? 'grab' : ( this.layout && this.next >= 0 && this.hitFace( e ) ? 'crosshair' : '' );
 			if ( marker !== this.hovered ) {
 
 				this.hovered = marker;

@@ -358,7 +358,7 @@ export class WeightPainter extends EventTarget {
 	_pointerDown( event ) {
 
 		if ( ! this.active || ! this.face || event.button !== 0 || event.altKey || event.target !== this.viewer.renderer.domElement ) return;
-		const hit = this.picker._hitFace( event );
+		const hit = this.picker.hitFace( event );
 		if ( ! hit ) return; // off the face: the camera orbits
 		event.stopPropagation();
 		event.preventDefault();
@@ -382,7 +382,7 @@ export class WeightPainter extends EventTarget {
 
 		const stroke = this._stroke;
 		if ( ! stroke || event.pointerId !== stroke.pointerId ) return;
-		const hit = this.picker._hitFace( event );
+		const hit = this.picker.hitFace( event );
 		this._showRings( hit );
 		if ( ! hit ) return;
 		// dabs every SPACING radii from the last one, on the surface between it and the pointer
@@ -764,7 +764,7 @@ export class WeightPainter extends EventTarget {
 		this._hoverFrame = requestAnimationFrame( () => {
 
 			this._hoverFrame = 0;
-			if ( this.active && ! this._stroke ) this._showRings( this.picker._hitFace( this._hoverEvent ) );
+			if ( this.active && ! this._stroke ) this._showRings( this.picker.hitFace( this._hoverEvent ) );
 
 		} );
 
