@@ -200,7 +200,7 @@ export class SourcePanel {
 	async _openWebcam() {
 
 		this._note( 'Webcam: starting the camera and the face tracker…' );
-		const { startWebcam } = await import( './tracking/webcam.js' );
+		const { startWebcam, frameEcho } = await import( './tracking/webcam.js' );
 		const layout = this._layout();
 		const encoder = new PointsEncoder();
 		const video = $( 'webcam-video' );
@@ -210,7 +210,11 @@ export class SourcePanel {
 		return startWebcam( video, ( { points, time } ) => {
 
 			// a frame without a face goes as lost points, so the stream knows the time
-			this.app.stream?.sendPoints( encoder.encode( points ?? lost, 3, this._pointIndex ++, time ) );
+			const stream = this.app.stream;
+			const index = this._pointIndex ++;
+			const sent = stream?.sendPoints( encoder.encode( points ?? lost, 3, index, time ) );
+			// the next frame is tracked once this one's motion is drawn; lost points move nothing
+			return sent && points !== null ? frameEcho( stream, index ) : null;
 
 		}, {
 			layoutIndices: layout.points.map( ( p ) => p.mediapipe468 ),
