@@ -1,10 +1,12 @@
 import * as THREE from 'three';
 
 import { ApiError, api } from './api.js';
+import { MeshNeighbours } from './MeshNeighbours.js';
+import { SaveQueue } from './SaveQueue.js';
+import { reflect, symmetryPlane } from './symmetryPlane.js';
 import { jointWeight, setJointWeight } from './weightRows.js';
 
 export const BRUSHES = [ 'add', 'subtract', 'smooth', 'set' ];
-const SAVE_DELAY_MS = 300; // a stroke's rows reach the server this long after the last stroke ends
 const SPACING = 0.25; // brush radii between dabs along a stroke
 const RING_INNER = 0.94; // the cursor ring's inner radius, in brush radii
 
@@ -23,10 +25,12 @@ const RING_INNER = 0.94; // the cursor ring's inner radius, in brush radii
  * The brush works on the rows of the loaded rig (weightRows.js: w_j set, the other
  * influences and the static root rescaled, at most k kept) and uploads only the changed
  * rows to the face, so its heat map and the live pose follow each dab. A brush covers the
- * vertices within its radius that the surface connects to the point under the pointer, so
- * painting the upper lip leaves the lower lip alone. Strokes do not accumulate (Blender's
- * default): within one stroke a vertex moves toward the brush's target by at most the
- * strength; the smooth brush does accumulate, pulling w_j toward its 1-ring mean.
+ * vertices within its radius that the surface connects to the point under the pointer
+ * (MeshNeighbours), so painting the upper lip leaves the lower lip alone. Strokes do not
+ * accumulate (Blender's default): within one stroke a vertex moves toward the brush's
+ * target by at most the strength; the smooth brush does accumulate, pulling w_j toward
+ * its 1-ring mean. Mirroring reflects the brush across the landmarks' symmetry plane
+ * (symmetryPlane.js); strokes reach the server through a SaveQueue.
  *
  * While active, a left-drag that starts on the face paints; Alt+drag or a drag off the face
  * orbits; Ctrl+click picks the feature point nearest the click. Picking is the landmark
@@ -59,24 +63,18 @@ export class WeightPainter extends EventTarget {
 		this.value = 1;
 		/** Also paint the mirror joint at the mirrored point. */
 		this.mirror = false;
-		/** The server's reason the last save failed ('' when it did not). */
-		this.saveError = '';
 
 		this.face = null;
 		this.projectId = null;
 		/** @type {{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array, version: number, painted: number}|null} */
 		this.rig = null;
 		this._mirrorOf = null; // joint -> its mirror joint, from the layout
-		this._plane = null; // {normal, point}: the face's symmetry plane, mesh frame
+		this._plane = null; // the face's symmetry plane (symmetryPlane.js), mesh frame
 		this._undo = [];
 		this._redo = [];
-		this._dirty = new Set(); // vertices whose rows the server does not have yet
-		this._saving = null; // the save in flight
-		this._saveTimer = 0;
+		this._saves = new SaveQueue( ( vertices, options ) => this._send( vertices, options ), () => this._changed() );
 		this._stroke = null;
-		this._adjacency = null;
-		this._stamp = null; // per-vertex visit marks of the brush's flood fill
-		this._stampId = 0;
+		this._neighbours = null; // the face's MeshNeighbours, built on the first dab
 		this._hoverFrame = 0;
 		this._hoverEvent = null;
 
@@ -117,15 +115,13 @@ export class WeightPainter extends EventTarget {
 	 */
 	setRig( face, projectId, info, weights, layout ) {
 
-		clearTimeout( this._saveTimer );
+		this._saves.clear();
 		this._endStroke();
 		this._undo = [];
 		this._redo = [];
-		this._dirty.clear();
-		this.saveError = '';
 		this.face = face;
 		this.projectId = projectId;
-		this._adjacency = null;
+		this._neighbours = null;
 		if ( ! face || ! weights ) {
 
 			this.rig = null;
@@ -143,7 +139,7 @@ export class WeightPainter extends EventTarget {
 		};
 		const mirror = layout && layout.points.length === weights.nJoints ? layout.points.map( ( p ) => p.mirror ) : null;
 		this._mirrorOf = mirror;
-		this._plane = mirror ? this._symmetryPlane( mirror ) : null;
+		this._plane = mirror ? symmetryPlane( this.picker, mirror ) : null;
 		if ( this.joint >= weights.nJoints ) this.joint = 0;
 		const radius = face.mesh.geometry.boundingSphere.radius;
 		if ( ! ( this.radius > radius * 1e-3 && this.radius < radius ) ) this.radius = 0.08 * radius;
@@ -205,9 +201,14 @@ export class WeightPainter extends EventTarget {
 	/** 'saved', 'unsaved', 'saving' or 'failed' (the reason in `saveError`). */
 	get saveState() {
 
-		if ( this._saving ) return 'saving';
-		if ( this._dirty.size && this.saveError ) return 'failed';
-		return this._dirty.size ? 'unsaved' : 'saved';
+		return this._saves.state;
+
+	}
+
+	/** The server's reason the last save failed ('' when it did not). */
+	get saveError() {
+
+		return this._saves.error;
 
 	}
 
@@ -255,8 +256,8 @@ export class WeightPainter extends EventTarget {
 		const rig = this.rig, id = this.projectId;
 		if ( ! rig ) return;
 		await this.flush();
-		if ( this._dirty.size ) throw new ApiError( 0, `Cannot reset before the painted weights are saved: ${ this.saveError }` );
-		const info = await send( 'POST', `/api/projects/${ id }/rig/reset`, JSON.stringify( { joints, version: rig.version } ), 'application/json' );
+		if ( this._saves.pending ) throw new ApiError( 0, `Cannot reset before the painted weights are saved: ${ this.saveError }` );
+		const info = await api.resetRigWeights( id, joints, rig.version );
 		const fresh = await api.rigWeights( id );
 		if ( rig !== this.rig ) return;
 		const k = rig.nInfluences, changed = [];
@@ -296,20 +297,16 @@ export class WeightPainter extends EventTarget {
 	 * Save unsaved strokes now and wait for the answer.
 	 * @param {{keepalive?: boolean}} [options] - keepalive: the page is being unloaded.
 	 */
-	async flush( { keepalive = false } = {} ) {
+	flush( options ) {
 
-		clearTimeout( this._saveTimer );
-		this._saveTimer = 0;
-		while ( this._saving ) await this._saving;
-		if ( this._dirty.size ) await this._save( { keepalive } );
+		return this._saves.flush( options );
 
 	}
 
 	/** Retry a failed save. */
 	retry() {
 
-		this.saveError = '';
-		return this.flush();
+		return this._saves.retry();
 
 	}
 
@@ -423,7 +420,7 @@ export class WeightPainter extends EventTarget {
 		} );
 		this._undo.push( { vertices, before, after: this._rows( vertices ) } );
 		this._redo.length = 0;
-		this._markDirty( vertices );
+		this._saves.add( vertices );
 
 	}
 
@@ -444,7 +441,7 @@ export class WeightPainter extends EventTarget {
 		const mirrorJoint = this.mirror && this._mirrorOf ? this._mirrorOf[ this.joint ] : - 1;
 		if ( mirrorJoint >= 0 ) {
 
-			const image = this._reflect( center );
+			const image = reflect( this._plane, center );
 			const near = this.face.mesh.geometry.boundsTree.closestPointToPoint( image );
 			if ( near ) this._dab( near.point, near.faceIndex, mirrorJoint, changed );
 
@@ -456,15 +453,16 @@ export class WeightPainter extends EventTarget {
 
 	_dab( center, faceIndex, joint, changed ) {
 
-		const stroke = this._stroke, rig = this.rig, k = rig.nInfluences;
-		const { vertices, distances } = this._reach( center, faceIndex );
+		const stroke = this._stroke, rig = this.rig, k = rig.nInfluences, surface = this._surface();
+		const { vertices, distances } = surface.within( this.face.mesh.geometry.attributes.position.array, center, faceIndex, this.radius );
 		const r = this.radius;
 		if ( this.brush === 'smooth' ) {
 
 			const targets = vertices.map( ( v, n ) => {
 
 				const a = jointWeight( rig.indices, rig.weights, v, k, joint );
-				return a + this.strength * falloff( distances[ n ] / r ) * ( this._neighbourMean( v, joint ) - a );
+				const mean = surface.mean( v, ( u ) => jointWeight( rig.indices, rig.weights, u, k, joint ) );
+				return a + this.strength * falloff( distances[ n ] / r ) * ( mean - a );
 
 			} );
 			vertices.forEach( ( v, n ) => {
@@ -520,88 +518,11 @@ export class WeightPainter extends EventTarget {
 
 	}
 
-	/**
-	 * The vertices within the brush radius of `center` that the surface connects to the
-	 * triangle under it, and their distances from the centre (mesh units).
-	 */
-	_reach( center, faceIndex ) {
+	/** The face's MeshNeighbours, built on first use. */
+	_surface() {
 
-		const geometry = this.face.mesh.geometry;
-		const position = geometry.attributes.position.array, index = geometry.index.array;
-		const { offsets, neighbours } = this._neighbours();
-		if ( ++ this._stampId > 0xfffffff0 ) {
-
-			this._stamp.fill( 0 );
-			this._stampId = 1;
-
-		}
-
-		const stamp = this._stamp, id = this._stampId, r2 = this.radius * this.radius;
-		const queue = [ index[ 3 * faceIndex ], index[ 3 * faceIndex + 1 ], index[ 3 * faceIndex + 2 ] ];
-		for ( const v of queue ) stamp[ v ] = id;
-		const vertices = [], distances = [];
-		for ( let q = 0; q < queue.length; q ++ ) {
-
-			const v = queue[ q ];
-			const dx = position[ 3 * v ] - center.x, dy = position[ 3 * v + 1 ] - center.y, dz = position[ 3 * v + 2 ] - center.z;
-			const d2 = dx * dx + dy * dy + dz * dz;
-			if ( d2 >= r2 ) continue;
-			vertices.push( v );
-			distances.push( Math.sqrt( d2 ) );
-			for ( let e = offsets[ v ]; e < offsets[ v + 1 ]; e ++ ) {
-
-				const u = neighbours[ e ];
-				if ( stamp[ u ] !== id ) {
-
-					stamp[ u ] = id;
-					queue.push( u );
-
-				}
-
-			}
-
-		}
-
-		return { vertices, distances };
-
-	}
-
-	/** The mesh's vertex adjacency (CSR), built on first use. */
-	_neighbours() {
-
-		if ( this._adjacency ) return this._adjacency;
-		const faces = this.face.mesh.geometry.index.array, nv = this.face.nVertices;
-		const counts = new Uint32Array( nv + 1 );
-		for ( let f = 0; f < faces.length; f += 3 ) for ( let c = 0; c < 3; c ++ ) counts[ faces[ f + c ] + 1 ] += 2;
-		for ( let v = 0; v < nv; v ++ ) counts[ v + 1 ] += counts[ v ];
-		const neighbours = new Uint32Array( counts[ nv ] ), fill = counts.slice( 0, nv );
-		for ( let f = 0; f < faces.length; f += 3 ) {
-
-			for ( let c = 0; c < 3; c ++ ) {
-
-				const v = faces[ f + c ];
-				neighbours[ fill[ v ] ++ ] = faces[ f + ( c + 1 ) % 3 ];
-				neighbours[ fill[ v ] ++ ] = faces[ f + ( c + 2 ) % 3 ];
-
-			}
-
-		}
-
-		this._stamp = new Uint32Array( nv );
-		this._stampId = 0;
-		this._adjacency = { offsets: counts, neighbours };
-		return this._adjacency;
-
-	}
-
-	_neighbourMean( v, joint ) {
-
-		const { offsets, neighbours } = this._neighbours();
-		const rig = this.rig;
-		let sum = 0;
-		for ( let e = offsets[ v ]; e < offsets[ v + 1 ]; e ++ ) sum += jointWeight( rig.indices, rig.weights, neighbours[ e ], rig.nInfluences, joint );
-		const n = offsets[ v + 1 ] - offsets[ v ];
-		return n ? sum / n : jointWeight( rig.indices, rig.weights, v, rig.nInfluences, joint );
+		this._neighbours ??= new MeshNeighbours( this.face.mesh.geometry.index.array, this.face.nVertices );
+		return this._neighbours;
 
 	}
 
@@ -623,46 +544,6 @@ export class WeightPainter extends EventTarget {
 		}
 
 		return best;
-
-	}
-
-	// mirroring
-
-	/**
-	 * The face's left/right symmetry plane from the placed feature points: its normal the
-	 * mean direction between mirror partners, through the mean of their midpoints and of
-	 * the midline points; the picker's x = const plane when no pair is placed.
-	 */
-	_symmetryPlane( mirror ) {
-
-		const normal = new THREE.Vector3(), point = new THREE.Vector3();
-		const a = new THREE.Vector3(), b = new THREE.Vector3(), d = new THREE.Vector3();
-		let midpoints = 0;
-		mirror.forEach( ( m, i ) => {
-
-			if ( m < i || ! this.picker.position( i, a ) || ! this.picker.position( m, b ) ) return;
-			if ( m !== i ) {
-
-				d.subVectors( a, b );
-				normal.addScaledVector( d, normal.dot( d ) < 0 ? - 1 : 1 );
-
-			}
-
-			point.add( a ).add( b );
-			midpoints += 2;
-
-		} );
-		if ( normal.lengthSq() === 0 ) return { normal: new THREE.Vector3( 1, 0, 0 ), point: new THREE.Vector3( this.picker.symmetryX(), 0, 0 ) };
-		return { normal: normal.normalize(), point: point.divideScalar( midpoints ) };
-
-	}
-
-	/** The mirror image of a point (mesh frame) across the symmetry plane. */
-	_reflect( p ) {
-
-		const { normal, point } = this._plane;
-		const offset = new THREE.Vector3().subVectors( p, point ).dot( normal );
-		return p.clone().addScaledVector( normal, - 2 * offset );
 
 	}
 
@@ -700,54 +581,19 @@ export class WeightPainter extends EventTarget {
 	_apply( vertices, rows ) {
 
 		this._write( vertices, rows );
-		this._markDirty( vertices );
+		this._saves.add( vertices );
 
 	}
 
-	_markDirty( vertices ) {
+	/** Save the rows of `vertices` (the save queue's `send`); the rig takes the new version. */
+	async _send( vertices, { keepalive } ) {
 
-		for ( const v of vertices ) this._dirty.add( v );
-		clearTimeout( this._saveTimer );
-		this._saveTimer = setTimeout( () => this.flush().catch( () => {} ), SAVE_DELAY_MS );
-		this._changed();
+		const rig = this.rig;
+		const info = await api.patchRigWeights( this.projectId, rig, vertices, this._rows( vertices ), { keepalive } );
+		if ( rig === this.rig ) {
 
-	}
-
-	/** Send the unsaved rows (PATCH .../rig/weights); a refusal keeps them unsaved. */
-	async _save( { keepalive = false } = {} ) {
-
-		const rig = this.rig, id = this.projectId;
-		const vertices = Int32Array.from( this._dirty ).sort();
-		this._dirty.clear();
-		let done;
-		this._saving = new Promise( ( resolve ) => ( done = resolve ) );
-		this._changed();
-		try {
-
-			const body = editBody( rig.version, rig.nJoints, rig.nInfluences, vertices, this._rows( vertices ) );
-			const info = await send( 'PATCH', `/api/projects/${ id }/rig/weights`, body, 'application/octet-stream', keepalive );
-			if ( rig === this.rig ) {
-
-				rig.version = info.version;
-				rig.painted = info.painted_vertices;
-				this.saveError = '';
-
-			}
-
-		} catch ( error ) {
-
-			if ( rig === this.rig ) {
-
-				for ( const v of vertices ) this._dirty.add( v );
-				this.saveError = error.detail || error.message;
-
-			}
-
-		} finally {
-
-			this._saving = null;
-			done();
-			this._changed();
+			rig.version = info.version;
+			rig.painted = info.painted_vertices;
 
 		}
 
@@ -779,7 +625,7 @@ export class WeightPainter extends EventTarget {
 		this._placeRing( ring, hit.local, hit.faceIndex );
 		if ( this.mirror && this._mirrorOf ) {
 
-			const near = this.face.mesh.geometry.boundsTree.closestPointToPoint( this._reflect( hit.local ) );
+			const near = this.face.mesh.geometry.boundsTree.closestPointToPoint( reflect( this._plane, hit.local ) );
 			if ( near ) this._placeRing( image, near.point, near.faceIndex );
 
 		}
@@ -813,67 +659,6 @@ function falloff( x ) {
 
 	const t = 1 - x * x;
 	return x >= 1 ? 0 : t * t;
-
-}
-
-/**
- * The binary weight edit (server/routers/rigs.py "RTSE").
- * @param {number} version - the rig version the rows were painted on.
- * @param {number} nJoints
- * @param {number} k - influences per row.
- * @param {Int32Array} vertices - (R)
- * @param {{indices: Uint16Array, weights: Float32Array}} rows - (R*k) each.
- * @returns {ArrayBuffer}
- */
-function editBody( version, nJoints, k, vertices, rows ) {
-
-	const r = vertices.length, indexBytes = 2 * r * k;
-	const start = 24 + 4 * r + indexBytes + ( indexBytes % 4 );
-	const buffer = new ArrayBuffer( start + 4 * r * k );
-	const view = new DataView( buffer );
-	new Uint8Array( buffer, 0, 4 ).set( [ 82, 84, 83, 69 ] ); // "RTSE"
-	[ 1, r, k, nJoints, version ].forEach( ( value, i ) => view.setUint32( 4 + 4 * i, value, true ) );
-	new Uint32Array( buffer, 24, r ).set( vertices );
-	new Uint16Array( buffer, 24 + 4 * r, r * k ).set( rows.indices );
-	new Float32Array( buffer, start, r * k ).set( rows.weights );
-	return buffer;
-
-}
-
-/** A request with a body; its JSON answer, or an ApiError with the server's reason. */
-async function send( method, url, body, contentType, keepalive = false ) {
-
-	let response;
-	try {
-
-		response = await fetch( url, { method, body, keepalive, headers: { 'Content-Type': contentType } } );
-
-	} catch ( error ) {
-
-		throw new ApiError( 0, `${ method } ${ url } failed: the server did not answer (${ error.message })` );
-
-	}
-
-	const text = await response.text();
-	let answer = null;
-	try {
-
-		answer = JSON.parse( text );
-
-	} catch {
-
-		// not JSON: a proxy's or crash page's text
-
-	}
-
-	if ( ! response.ok ) {
-
-		const detail = answer?.detail;
-		throw new ApiError( response.status, typeof detail === 'string' ? detail : Array.isArray( detail ) ? detail.map( ( d ) => d.msg ).join( '; ' ) : `${ method } ${ url }: ${ response.statusText || 'request failed' }` );
-
-	}
-
-	return answer;
 
 }
 

@@ -43,15 +43,28 @@ function detailOf( body, fallback ) {
 
 }
 
-async function request( method, url, { json, binary = false, keepalive = false, raw = false } = {} ) {
+/**
+ * One request; its JSON answer (binary: its bytes; raw: the Response; 204: null).
+ * @param {{json?: *, body?: ArrayBuffer, contentType?: string, binary?: boolean,
+ *   keepalive?: boolean, raw?: boolean}} [options] - json: a JSON body; body: bytes of
+ *   `contentType` (json wins); keepalive: the request outlives the page (unload).
+ */
+async function request( method, url, { json, body, contentType, binary = false, keepalive = false, raw = false } = {} ) {
+
+	if ( json !== undefined ) {
+
+		body = JSON.stringify( json );
+		contentType = 'application/json';
+
+	}
 
 	let response;
 	try {
 
 		response = await fetch( url, {
 			method,
-			headers: json === undefined ? {} : { 'Content-Type': 'application/json' },
-			body: json === undefined ? undefined : JSON.stringify( json ),
+			headers: contentType === undefined ? {} : { 'Content-Type': contentType },
+			body,
 			keepalive,
 		} );
 
@@ -176,6 +189,28 @@ export const api = {
 	},
 
 	/**
+	 * Paint rows of the rig's skin weights (PATCH .../rig/weights, the binary "RTSE" edit
+	 * of server/routers/rigs.py); the server refuses rows painted on an older version.
+	 * @param {string} id
+	 * @param {{version: number, nJoints: number, nInfluences: number}} rig - the rig the rows were painted on.
+	 * @param {Int32Array} vertices - (R) the vertices whose rows change.
+	 * @param {{indices: Uint16Array, weights: Float32Array}} rows - (R, k) row-major each.
+	 * @param {{keepalive?: boolean}} [options] - keepalive: the page is being unloaded.
+	 * @returns {Promise<object>} the rig's info (GET .../rig), with its new version
+	 */
+	patchRigWeights: ( id, rig, vertices, rows, { keepalive = false } = {} ) => request( 'PATCH', `/api/projects/${ id }/rig/weights`, {
+		body: weightEdit( rig.version, rig.nJoints, rig.nInfluences, vertices, rows ), contentType: 'application/octet-stream', keepalive,
+	} ),
+
+	/**
+	 * Paint joints back to the automatic rig's weights.
+	 * @param {number[]|null} joints - null: every joint (the automatic rig again).
+	 * @param {number} version - the rig version the page shows.
+	 * @returns {Promise<object>} the rig's info (GET .../rig), with its new version
+	 */
+	resetRigWeights: ( id, joints, version ) => request( 'POST', `/api/projects/${ id }/rig/reset`, { json: { joints, version } } ),
+
+	/**
 	 * Upload a mesh file with progress.
 	 * @param {string} id
 	 * @param {File} file
@@ -247,6 +282,30 @@ export const api = {
 	importProject: ( file, onProgress ) => upload( 'POST', '/api/projects/import', file, {}, onProgress ),
 
 };
+
+/**
+ * The binary weight edit (server/routers/rigs.py "RTSE").
+ * @param {number} version - the rig version the rows were painted on.
+ * @param {number} nJoints
+ * @param {number} k - influences per row.
+ * @param {Int32Array} vertices - (R)
+ * @param {{indices: Uint16Array, weights: Float32Array}} rows - (R*k) each.
+ * @returns {ArrayBuffer}
+ */
+function weightEdit( version, nJoints, k, vertices, rows ) {
+
+	const r = vertices.length, indexBytes = 2 * r * k;
+	const start = 24 + 4 * r + indexBytes + ( indexBytes % 4 );
+	const buffer = new ArrayBuffer( start + 4 * r * k );
+	const view = new DataView( buffer );
+	new Uint8Array( buffer, 0, 4 ).set( [ 82, 84, 83, 69 ] ); // "RTSE"
+	[ 1, r, k, nJoints, version ].forEach( ( value, i ) => view.setUint32( 4 + 4 * i, value, true ) );
+	new Uint32Array( buffer, 24, r ).set( vertices );
+	new Uint16Array( buffer, 24 + 4 * r, r * k ).set( rows.indices );
+	new Float32Array( buffer, start, r * k ).set( rows.weights );
+	return buffer;
+
+}
 
 /**
  * A multipart upload (field "file" plus `fields`, whose Files go as files) with progress;
