@@ -64,6 +64,7 @@ class StreamHub:
         self._sources: dict[str, object] = {}
         self._tasks: dict[str, asyncio.Task] = {}
         self._regions: dict[str, list[str] | None] = {}
+        self._unsaved: dict[str, object] = {}  # a source that ended while recording
 
     # -- viewers ------------------------------------------------------------------------
 
@@ -104,7 +105,7 @@ class StreamHub:
     def stop_source(self, project_id: str) -> bool:
         """Stop the project's source; False when none was running."""
         task = self._tasks.pop(project_id, None)
-        self._sources.pop(project_id, None)
+        self._keep_recording(project_id, self._sources.pop(project_id, None))
         if task is None:
             return False
         task.cancel()
@@ -120,9 +121,18 @@ class StreamHub:
             source.set_regions(regions)  # refuses unknown names before anything changes
         self._regions[project_id] = regions
 
+    def unsaved_recording(self, project_id: str):
+        """The source that stopped or ended while it was recording (once), or None: its
+        recording can still be saved."""
+        return self._unsaved.pop(project_id, None)
+
+    def _keep_recording(self, project_id: str, source) -> None:
+        if getattr(source, "recording", None):
+            self._unsaved[project_id] = source
+
     def _finished(self, project_id: str, task: asyncio.Task) -> None:
         if self._tasks.get(project_id) is task:  # ended by itself, not replaced
             self._tasks.pop(project_id)
-            self._sources.pop(project_id, None)
+            self._keep_recording(project_id, self._sources.pop(project_id, None))
         if not task.cancelled() and task.exception() is not None:
             log.error("stream source of project %s failed", project_id, exc_info=task.exception())

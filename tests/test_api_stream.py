@@ -256,11 +256,12 @@ def test_any_source_records_its_raw_points_into_a_take(app, sample_id):
         assert recorded.shape[1:] == (68, 3) and len(recorded) >= 30
         assert_frames_in_order(recorded, frames68)
 
-        ws.send_json({"type": "start", "source": "take", "take": demo_take["id"], "loop": False})
+        ws.send_json({"type": "start", "source": "take", "take": demo_take["id"], "loop": False,
+                      "settings": {"neutral": {"mode": "frame", "frame": 0}}})
         assert replies(ws, 1)[0]["type"] == "started"
         ws.send_json({"type": "record"})
         assert replies(ws, 1)[0]["type"] == "recording"
-        binary_frames(ws, 10)
+        binary_frames(ws, 5)
         ws.send_json({"type": "record_stop", "name": "replay"})
         replay = replies(ws, 1)[0]["take"]
     again = np.load(io.BytesIO(client.get(f"/api/projects/{sample_id}/takes/{replay['id']}/points").content))
@@ -298,3 +299,32 @@ def test_a_take_played_once_marks_its_last_frame(app, sample_id):
                 got += binary_frames(ws, 1)
     assert started["frames"] == 45 and got[-1].frame_index == 44
     assert not any(f.flags & FLAG_LAST for f in got[:-1])
+
+
+def test_a_recording_outlives_its_source(app, sample_id):
+    """Stopping the source (or a take played once ending) while recording keeps the
+    recording for the next record_stop; a second record_stop has nothing left."""
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "start", "source": "demo", "fps": 60})
+        ws.send_json({"type": "record"})
+        assert [r["type"] for r in replies(ws, 2)] == ["started", "recording"]
+        binary_frames(ws, 20)
+        ws.send_json({"type": "stop"})
+        assert replies(ws, 1)[0]["type"] == "stopped"
+        ws.send_json({"type": "record_stop", "name": "after stop"})
+        saved = replies(ws, 1)[0]
+        assert saved["type"] == "recorded" and saved["take"]["n_frames"] >= 15
+        ws.send_json({"type": "record_stop"})
+        assert "none is running" in replies(ws, 1)[0]["detail"]
+
+        ws.send_json({"type": "start", "source": "take", "take": saved["take"]["id"], "loop": False,
+                      "settings": {"neutral": {"mode": "frame", "frame": 0}}})
+        ws.send_json({"type": "record"})
+        assert [r["type"] for r in replies(ws, 2)] == ["started", "recording"]
+        while not binary_frames(ws, 1)[0].flags & 8:  # FLAG_LAST: the take has ended
+            pass
+        ws.send_json({"type": "record_stop", "name": "to the end"})
+        replay = replies(ws, 1)[0]
+    assert replay["type"] == "recorded" and replay["take"]["source"] == "take"
+    assert replay["take"]["n_frames"] >= saved["take"]["n_frames"] - 2

@@ -18,7 +18,8 @@ are JSON text:
 - ``{"type": "neutral"}``: a live source captures its neutral again from the next frames;
 - ``{"type": "record"}`` / ``{"type": "record_stop", "name": "..."}``: record the running
   source's raw points (demo, take or live); stopping stores them as a take and answers
-  ``{"type": "recorded", "take": {...}}``;
+  ``{"type": "recorded", "take": {...}}``. A source that stops or ends while recording
+  keeps its recording for one ``record_stop`` (a take played once ends by itself);
 - ``{"type": "stop"}``: stop the source; every viewer then gets a neutral frame (flag bit 0,
   zero displacements) that puts the face back at rest;
 - ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
@@ -183,6 +184,8 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         hub.start_source(project_id, source)
         return {"type": "started", **source.describe()}
     source = hub.source(project_id)
+    if kind == "record_stop" and getattr(source, "recording", None) is None:
+        source = hub.unsaved_recording(project_id) or source  # it stopped or ended while recording
     wanted = {"settings": ((LiveSource, TakeSource), "take or live"), "neutral": (LiveSource, "live"),
               "record": (object, "demo, take or live"), "record_stop": (object, "demo, take or live")}
     if kind in wanted and (source is None or not isinstance(source, wanted[kind][0])):
