@@ -130,7 +130,14 @@ def test_recording_the_demo_gives_a_take_that_plays_once_to_its_end(server, page
     page.uncheck("#take-loop")
     page.evaluate("() => { window.log.length = 0; }")
     page.click("#play")
+    # recording while it plays: the take's end stops the source, and the recording is kept
+    page.wait_for_function("() => window.log.some(m => m.got === 'started')", timeout=30_000)
+    page.fill("#record-name", "to the end")
+    page.click("#record")
     page.wait_for_function("() => window.log.some(m => m.flags & 8)", timeout=30_000)
+    page.wait_for_selector("#take-list li.selected:has-text('to the end')", timeout=10_000)
+    replay = next(t for t in server.api("GET", f"/api/projects/{sample['id']}/takes") if t["name"] == "to the end")
+    assert replay["source"] == "take" and 0 < replay["n_frames"] <= take["n_frames"]
     log = page.evaluate("() => window.log")
     started = next(i for i, m in enumerate(log) if m.get("got") == "started")
     frames = [m for m in log[started:] if "flags" in m]  # the take's, not the demo's
@@ -138,4 +145,4 @@ def test_recording_the_demo_gives_a_take_that_plays_once_to_its_end(server, page
     assert max(f["moved"] for f in frames) > 1e-3
     page.wait_for_function("() => document.getElementById('play').textContent.includes('Play')", timeout=5_000)
     assert page.is_disabled("#stop") and page.is_disabled("#record")
-    assert page.inner_text("#source-note").startswith('Recorded "demo e2e"')  # no stale warning
+    assert page.inner_text("#source-note").startswith('Recorded "to the end"')

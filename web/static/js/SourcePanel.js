@@ -170,13 +170,13 @@ export class SourcePanel {
 	}
 
 	/**
-	 * The stream stopped (Stop, the end of a take played once, a reconnect): a recording
-	 * not stopped first went with its source.
+	 * The stream stopped (Stop, the end of a take played once, a reconnect): the server
+	 * keeps a recording its source ended with for one record_stop, so it is saved now
+	 * (queued until the stream is open again after a drop).
 	 */
 	onStopped() {
 
-		if ( this.recording ) this._note( 'The source stopped while recording: nothing was kept. Stop the recording (■ Stop & save) before the source.', true );
-		this._setRecording( false );
+		if ( this.recording ) this._saveRecording();
 		this._endNeutralWait();
 
 	}
@@ -538,15 +538,22 @@ export class SourcePanel {
 		if ( ! this.app.streaming ) throw new Error( 'Nothing is playing to record: press ▶ Play first.' );
 		if ( this.recording ) {
 
-			const name = $( 'record-name' ).value.trim() || `${ this._playing } ${ new Date().toLocaleTimeString() }`;
-			this.app.stream.send( { type: 'record_stop', name } );
-			this._setRecording( false );
+			this._saveRecording();
 
 		} else {
 
 			this.app.stream.send( { type: 'record' } );
 
 		}
+
+	}
+
+	/** Ask the server to store the recording as a take (its reply, 'recorded', lists it). */
+	_saveRecording() {
+
+		const name = $( 'record-name' ).value.trim() || `${ this._playing } ${ new Date().toLocaleTimeString() }`;
+		this.app.stream.send( { type: 'record_stop', name } );
+		this._setRecording( false );
 
 	}
 
