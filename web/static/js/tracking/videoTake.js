@@ -1,23 +1,30 @@
 import { FaceMeshTracker, FACE_MESH_POINTS } from './FaceMeshTracker.js';
+import { containerFrames, snappedFps } from './containerFrames.js';
 
 /**
  * A take from a video file, tracked in the page frame by frame: every frame of a <video>
  * goes through the face tracker, and the landmarks are read into a layout through its
  * `mediapipe468` indices (GET /api/layouts gives them per point).
  *
+ * Frames: how many and at what rate come from the container's index (containerFrames.js:
+ * MP4 / MOV, WebM / Matroska), so neither depends on how busy the page is; frame i is the
+ * one shown at start + i / fps. Other containers are measured from slowed playback and
+ * counted from the duration.
+ *
  * Stepping: the video plays at normal speed and pauses in each requestVideoFrameCallback
  * while that frame is tracked; a frame that playback skipped anyway (the page was too busy
- * to pause in time) is fetched by seeking to its middle, t + 0.5 / fps. Seeking alone
- * would do, but Chromium decodes from the previous key frame on every seek: on a 480 x 480
- * H.264 file with a key frame every 250 frames, 54 ms a frame over the first 150 frames
- * and 130-150 ms far from a key frame, against 28 ms (about one frame period at 30 fps)
- * for the paused playback (bench/markerless.py). Without requestVideoFrameCallback every
- * frame is sought.
+ * to pause in time), or that it ran past at the end, is fetched by seeking to its middle,
+ * start + (i + 0.5) / fps. Seeking alone would do, but Chromium decodes from the previous
+ * key frame on every seek: on a 480 x 480 H.264 file with a key frame every 250 frames,
+ * 54 ms a frame over the first 150 frames and 130-150 ms far from a key frame, against
+ * 28 ms (about one frame period at 30 fps) for the paused playback (bench/markerless.py).
+ * Without requestVideoFrameCallback every frame is sought.
  */
 
-const STANDARD_FPS = [ 23.976, 24, 25, 29.97, 30, 48, 50, 59.94, 60, 90, 100, 119.88, 120 ];
+const SINGLE_FRAME_FPS = 30; // a one-frame video has no rate; retarget.sources.take.DEFAULT_FPS
 const FPS_SAMPLES = 12;
-const FPS_TIMEOUT_MS = 5000;
+const FPS_PLAYBACK_RATE = 0.25; // slowed, so that a busy page still sees most frames
+const FPS_TIMEOUT_MS = 5000 / FPS_PLAYBACK_RATE;
 
 /**
  * Track a video file.
@@ -26,13 +33,12 @@ const FPS_TIMEOUT_MS = 5000;
  * @param {object} [options]
  * @param {ArrayLike<number>|null} [options.layoutIndices] - (N) face-mesh vertex per layout
  *   point; null keeps all 468 landmarks.
- * @param {number|null} [options.fps] - the video's frame rate when known (a <video> does not
- *   say); otherwise measured from a moment of muted playback. It sets the frame period by
- *   which skipped frames are noticed; the times returned are the frames' own.
+ * @param {number|null} [options.fps] - the video's frame rate, instead of the container's
+ *   (or, for other containers, one measured from playback).
  * @param {number} [options.maxFrames] - track at most this many frames from the start.
  * @param {function({done: number, total: number, faces: number}): void} [options.onProgress]
- *   total is the expected frame count (from the duration; null when the file does not
- *   state it).
+ *   total is the expected frame count (null when neither the container nor the duration
+ *   states it).
  * @param {AbortSignal} [options.signal] - aborting rejects with the signal's reason.
  * @param {FaceMeshTracker} [options.tracker] - a tracker to reuse (its init() is awaited).
  * @returns {Promise<{fps: number, width: number, height: number, n_frames: number,
@@ -48,6 +54,7 @@ export async function trackVideo( fileOrUrl, { layoutIndices = null, fps = null,
 
 	signal?.throwIfAborted();
 	if ( ! ( maxFrames >= 1 ) ) throw new Error( `trackVideo: maxFrames must be at least 1, got ${ maxFrames }.` );
+	if ( fps !== null && ! ( fps > 0 ) ) throw new Error( `trackVideo: fps must be positive, got ${ fps }.` );
 	const ownTracker = tracker === null;
 	tracker = tracker ?? new FaceMeshTracker();
 	const blob = await videoBlob( fileOrUrl, signal );
@@ -58,21 +65,24 @@ export async function trackVideo( fileOrUrl, { layoutIndices = null, fps = null,
 	video.preload = 'auto';
 	try {
 
-		await Promise.all( [ tracker.init(), loaded( video, url, fileOrUrl ) ] );
+		const [ listed ] = await Promise.all( [ containerFrames( blob ), tracker.init(), loaded( video, url, fileOrUrl ) ] );
 		const stepping = typeof video.requestVideoFrameCallback === 'function';
-		if ( fps === null ) fps = await measuredFps( video );
-		if ( ! ( fps > 0 ) ) throw new Error( `trackVideo: fps must be positive, got ${ fps }.` );
+		fps = fps ?? listed?.fps ?? ( listed?.count === 1 ? SINGLE_FRAME_FPS : await measuredFps( video, fileOrUrl ) );
 		// the duration runs to the end of the last frame, sometimes a little beyond; some
 		// files (streamed WebM) do not say it, and only playing them to the end can tell
-		const total = Number.isFinite( video.duration ) ? Math.min( Math.floor( video.duration * fps + 1e-3 ), maxFrames ) : null;
+		const stated = listed?.count ?? ( Number.isFinite( video.duration ) ? Math.floor( video.duration * fps + 1e-3 ) : null );
+		const total = stated === null ? null : Math.min( stated, maxFrames );
 		if ( total === null && ! stepping ) throw new Error( `trackVideo: ${ nameOf( fileOrUrl ) } does not state its duration, and this browser cannot play it frame by frame (no requestVideoFrameCallback).` );
 		if ( total !== null && ! ( total > 0 ) ) throw new Error( `trackVideo: ${ nameOf( fileOrUrl ) } holds no frames (duration ${ video.duration } s).` );
 
 		const nPoints = layoutIndices === null ? FACE_MESH_POINTS : layoutIndices.length;
 		const period = 1 / fps;
+		const start = listed?.start ?? 0;
+		const timeOf = ( i ) => start + i * period;
+		const last = total ?? Infinity;
 		const frames = []; // per frame: (N * 3) points, or null without a face
 		const times = []; // per frame: its presentation time, s
-		const start = performance.now();
+		const began = performance.now();
 		let faces = 0, sought = 0;
 		const record = async ( time ) => {
 
@@ -84,48 +94,37 @@ export async function trackVideo( fileOrUrl, { layoutIndices = null, fps = null,
 
 		};
 
-		const seekAndRecord = async ( time ) => {
+		// the next frame, frames.length, fetched by seeking to its middle: no rounding doubt
+		const seekAndRecord = async () => {
 
 			signal?.throwIfAborted();
-			await seek( video, time + period / 2 ); // the middle of the frame: no rounding doubt
+			const time = timeOf( frames.length );
+			await seek( video, time + period / 2 );
 			sought ++;
 			await record( time );
 
 		};
 
-		await seekAndRecord( 0 );
-		if ( stepping ) {
+		await seekAndRecord();
+		while ( stepping && frames.length < last ) {
 
-			// frames are counted from the time since the last tracked one, never from the
-			// start, so an fps a little off cannot add up to a wrong frame far into the video
-			while ( frames.length < maxFrames ) {
-
-				signal?.throwIfAborted();
-				const metadata = await nextFrame( video );
-				if ( metadata === null ) break; // played to the end
-				const last = times[ times.length - 1 ];
-				const periods = Math.round( ( metadata.mediaTime - last ) / period );
-				if ( periods < 1 ) continue; // the tracked frame again, shown after a seek
-				if ( periods > 1 ) {
-
-					// playback went past frames while the page was busy: fetch them by seeking,
-					// then come back to this one
-					for ( let k = 1; k < periods && frames.length < maxFrames; k ++ ) await seekAndRecord( last + k * period );
-					if ( frames.length < maxFrames ) await seekAndRecord( metadata.mediaTime );
-
-				} else {
-
-					await record( metadata.mediaTime );
-
-				}
-
-			}
-
-		} else {
-
-			for ( let i = 1; i < total; i ++ ) await seekAndRecord( i * period );
+			signal?.throwIfAborted();
+			const metadata = await nextFrame( video );
+			if ( metadata === null ) break; // played to the end
+			const i = Math.round( ( metadata.mediaTime - start ) / period );
+			if ( i < frames.length ) continue; // a tracked frame again, shown after a seek
+			// playback went past frames while the page was busy: fetch them by seeking, and
+			// this one too when the clock ran on into the next before the pause
+			while ( frames.length < Math.min( i, last ) ) await seekAndRecord();
+			if ( frames.length === last ) break;
+			if ( video.currentTime < timeOf( i + 1 ) ) await record( metadata.mediaTime );
+			else await seekAndRecord();
 
 		}
+
+		// frames after the last one playback showed (it ran to the end while one was tracked),
+		// or every frame without requestVideoFrameCallback
+		while ( total !== null && frames.length < total ) await seekAndRecord();
 
 		const points = new Float32Array( frames.length * nPoints * 3 ).fill( NaN );
 		frames.forEach( ( frame, i ) => {
@@ -135,7 +134,7 @@ export async function trackVideo( fileOrUrl, { layoutIndices = null, fps = null,
 		} );
 		return {
 			fps, width: video.videoWidth, height: video.videoHeight, n_frames: frames.length, n_points: nPoints,
-			points, times: Float64Array.from( times ), faces, sought, seconds: ( performance.now() - start ) / 1000,
+			points, times: Float64Array.from( times ), faces, sought, seconds: ( performance.now() - began ) / 1000,
 		};
 
 	} finally {
@@ -265,24 +264,28 @@ function nextFrame( video ) {
 }
 
 /**
- * The frame rate of a loaded video, from the presentation times of a few frames of muted
- * playback (requestVideoFrameCallback's mediaTime), snapped to the nearest standard rate
- * within 0.5 % (WebM times are in milliseconds: a few frames measure a rate to about that).
+ * The frame rate of a loaded video whose container does not index its frames, from the
+ * presentation times of a few frames of muted, slowed playback (requestVideoFrameCallback's
+ * mediaTime), snapped to the nearest standard rate within 0.5 % (WebM times are in
+ * milliseconds: a few frames measure a rate to about that).
  * @param {HTMLVideoElement} video
+ * @param {File|Blob|string} fileOrUrl - for messages.
  * @returns {Promise<number>}
  */
-async function measuredFps( video ) {
+async function measuredFps( video, fileOrUrl ) {
 
+	const unknown = `trackVideo: cannot tell the frame rate of ${ nameOf( fileOrUrl ) }: its container is neither MP4 nor WebM, whose index states it`;
+	const remedy = 'Convert it to MP4 or WebM (e.g. ffmpeg -i in.ogv out.mp4) and track that.';
 	if ( typeof video.requestVideoFrameCallback !== 'function' ) {
 
-		throw new Error( 'trackVideo: this browser cannot measure a video\'s frame rate (no requestVideoFrameCallback); pass fps.' );
+		throw new Error( `${ unknown }, and this browser cannot measure it (no requestVideoFrameCallback). ${ remedy }` );
 
 	}
 
 	const times = await new Promise( ( resolve, reject ) => {
 
 		const seen = [];
-		const timer = setTimeout( () => reject( new Error( 'trackVideo: the video did not play, so its frame rate is unknown; pass fps.' ) ), FPS_TIMEOUT_MS );
+		const timer = setTimeout( () => reject( new Error( `${ unknown }, and it did not play. ${ remedy }` ) ), FPS_TIMEOUT_MS );
 		const done = () => {
 
 			clearTimeout( timer );
@@ -301,24 +304,24 @@ async function measuredFps( video ) {
 
 		video.requestVideoFrameCallback( onFrame );
 		video.addEventListener( 'ended', done ); // a video shorter than the sample
+		video.playbackRate = FPS_PLAYBACK_RATE;
 		video.play().catch( ( error ) => {
 
 			clearTimeout( timer );
-			reject( new Error( `trackVideo: the video did not play, so its frame rate is unknown (${ error.message }); pass fps.` ) );
+			reject( new Error( `${ unknown }, and it did not play (${ error.message }). ${ remedy }` ) );
 
 		} );
 
 	} );
 	video.pause();
+	video.playbackRate = 1;
 	const steps = [];
 	for ( let k = 1; k < times.length; k ++ ) if ( times[ k ] > times[ k - 1 ] ) steps.push( times[ k ] - times[ k - 1 ] );
-	if ( steps.length === 0 ) throw new Error( 'trackVideo: the video showed fewer than two frames, so its frame rate is unknown; pass fps.' );
+	if ( steps.length === 0 ) throw new Error( `${ unknown }, and playing it showed fewer than two frames. ${ remedy }` );
 	// the median step tells how many periods each step spans (playback may drop a frame);
 	// the whole span over those periods averages out timestamps rounded to milliseconds
 	const median = [ ...steps ].sort( ( a, b ) => a - b )[ steps.length >> 1 ];
 	const periods = steps.reduce( ( sum, step ) => sum + Math.max( 1, Math.round( step / median ) ), 0 );
-	const fps = periods / steps.reduce( ( sum, step ) => sum + step, 0 );
-	const nearest = STANDARD_FPS.reduce( ( a, b ) => ( Math.abs( b - fps ) < Math.abs( a - fps ) ? b : a ) );
-	return Math.abs( nearest - fps ) < 5e-3 * nearest ? nearest : fps;
+	return snappedFps( periods / steps.reduce( ( sum, step ) => sum + step, 0 ), 5e-3 );
 
 }
