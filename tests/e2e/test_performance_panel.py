@@ -160,6 +160,8 @@ def play_to_the_end(page) -> tuple[dict, list[dict]]:
     started = page.evaluate("() => window.messages.find(m => m.type === 'started')")
     page.wait_for_function("n => window.streamFrames.some(f => f.index === n - 1)",
                            arg=started["frames"], timeout=30_000)
+    # the last frame says it is the last: the page is back at Play, nothing to stop
+    page.wait_for_function("() => document.getElementById('stop').disabled", timeout=5_000)
     return started, page.evaluate("() => window.streamFrames")
 
 
@@ -241,7 +243,6 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     assert index.max() == started["frames"] - 1
     assert max(f["time"] for f in frames) == pytest.approx(played)
     assert_motion_follows(jaw_weight((first + skipped + index) / FPS), size)
-    page.click("#stop")
 
     # download: the trimmed take's points
     with page.expect_download() as download:
@@ -328,7 +329,8 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
         for (let i = 0; i < rest.length; i++) most = Math.max(most, Math.abs(now[i] - rest[i]));
         return most > 0.05;
     }""", polling=200)
-    page.click("#stop")
+    if page.is_enabled("#stop"):  # a short take played once may have ended by now
+        page.click("#stop")
 
 
 def _cut_video(tmp_path, marker_video):
