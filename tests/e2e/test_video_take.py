@@ -13,6 +13,7 @@ skips only when ../shared is absent.
 
 from __future__ import annotations
 
+import mimetypes
 from pathlib import Path
 
 import cv2
@@ -71,7 +72,7 @@ def numbered_frames(n: int, size: int = 96) -> list[np.ndarray]:
 def serve(path: Path):
     """A route handler answering with the file at `path`."""
     def answer(route):
-        route.fulfill(body=path.read_bytes(), content_type="video/webm")
+        route.fulfill(body=path.read_bytes(), content_type=mimetypes.guess_type(path.name)[0] or "video/webm")
     return answer
 
 
@@ -123,6 +124,50 @@ def test_every_frame_is_tracked_at_the_videos_rate(tracking_page, videos, name, 
     assert [p["done"] for p in result["progress"]] == list(range(1, n_frames + 1))
     assert {p["total"] for p in result["progress"]} == {n_frames}
     assert (result["width"], result["height"]) == (96, 96)
+
+
+@pytest.mark.parametrize("kind", ["VP8 WebM", "MPEG-4 MP4", "H.264 MP4", "cut WebM", "text"])
+def test_the_container_states_the_frames_and_their_rate(tracking_page, server, tmp_path, kind):
+    """containerFrames reads the file's index, without decoding: OpenCV's count and rate
+    are the truth (the MPEG-4 Part 2 file is one Chromium cannot play; the index is read all
+    the same)."""
+    frames = numbered_frames(40)
+    if kind == "H.264 MP4":
+        if not VIDEO.exists():
+            pytest.skip("../shared is absent")
+        path = VIDEO
+    elif kind == "MPEG-4 MP4":
+        path = tmp_path / "clip.mp4"
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 50, (96, 96))
+        for frame in frames:
+            writer.write(frame)
+        writer.release()
+    elif kind == "text":
+        path = tmp_path / "notes.webm"
+        path.write_text("not a video at all\n" * 50)
+    else:
+        path = write_webm(tmp_path / "clip.webm", frames, 24)
+        if kind == "cut WebM":
+            data = path.read_bytes()
+            path.write_bytes(data[:len(data) // 2])
+    tracking_page.route(f"{server.url}/test-file/{path.name}", serve(path))
+    listed = tracking_page.evaluate("""async (url) => {
+        const { containerFrames } = await import('/static/js/tracking/containerFrames.js');
+        return containerFrames(await (await fetch(url)).blob());
+    }""", f"/test-file/{path.name}")
+    if kind == "text":
+        assert listed is None
+        return
+    reader = cv2.VideoCapture(str(path))
+    decoded = 0
+    while reader.read()[0]:
+        decoded += 1
+    if kind == "cut WebM":
+        # the blocks before the cut, the last of which OpenCV may not decode whole
+        assert 0 < decoded <= listed["count"] <= decoded + 1 and listed["count"] < len(frames)
+    else:
+        assert listed["count"] == decoded == int(reader.get(cv2.CAP_PROP_FRAME_COUNT))
+    assert listed["fps"] == reader.get(cv2.CAP_PROP_FPS) and listed["start"] == 0
 
 
 @needs_shared

@@ -10,6 +10,7 @@
 const STANDARD_FPS = [ 23.976, 24, 25, 29.97, 30, 48, 50, 59.94, 60, 90, 100, 119.88, 120 ];
 const CHUNK = 1 << 20; // bytes read from the file at a time
 const BOX_HEADER = 16; // bytes: 32-bit size, type, and a 64-bit size when the first is 1
+const MP4_FIRST_BOXES = new Set( [ 'ftyp', 'moov', 'mdat', 'wide', 'free', 'skip' ] ); // old QuickTime files have no ftyp
 
 // Matroska element IDs (with their length marker, as written)
 const EBML = 0x1A45DFA3;
@@ -22,11 +23,13 @@ const VIDEO_TRACK = 1;
 /**
  * The frames of a video file's first video track, from its container.
  * @param {Blob} blob
- * @returns {Promise<{count: number, fps: number, start: number}|null>} count: frames; fps:
- *   the mean rate (frames per second over the time they span), snapped to a standard rate
- *   (29.97, 30, ...) when it is one within the precision of the container's timestamps;
+ * @returns {Promise<{count: number, fps: number|null, start: number}|null>} count: frames;
+ *   fps: the mean rate (frames per second over the time they span; null for one frame),
+ *   snapped to a standard rate (29.97, 30, ...) when it is one within the precision of the
+ *   container's timestamps;
  *   start: the first frame's presentation time, s. Null for another container, or one
- *   that does not index its frames this way (fragmented MP4, a truncated file).
+ *   that does not index its frames this way (fragmented or cut MP4). A cut WebM counts the
+ *   frames before the cut.
  */
 export async function containerFrames( blob ) {
 
@@ -36,7 +39,7 @@ export async function containerFrames( blob ) {
 	try {
 
 		if ( head.getUint32( 0 ) === EBML ) return await matroskaFrames( reader );
-		if ( fourcc( head, 4 ) === 'ftyp' ) return await mp4Frames( reader );
+		if ( MP4_FIRST_BOXES.has( fourcc( head, 4 ) ) ) return await mp4Frames( reader );
 
 	} catch ( error ) {
 
@@ -119,7 +122,7 @@ async function mp4Frames( reader ) {
 		const hdlr = mdia && children( moov, mdia.start, mdia.end, 'hdlr' )[ 0 ];
 		if ( ! hdlr || fourcc( moov, hdlr.start + 8 ) !== 'vide' ) continue;
 		const mdhd = children( moov, mdia.start, mdia.end, 'mdhd' )[ 0 ];
-		const stbl = path( moov, mdia, [ 'minf', 'stbl' ] );
+		const stbl = descendant( moov, mdia, [ 'minf', 'stbl' ] );
 		const stts = stbl && children( moov, stbl.start, stbl.end, 'stts' )[ 0 ];
 		if ( ! mdhd || ! stts ) return null;
 		const timescale = moov.getUint32( mdhd.start + ( moov.getUint8( mdhd.start ) === 1 ? 20 : 12 ) );
@@ -197,7 +200,8 @@ function children( view, start, end, type ) {
 
 }
 
-function path( view, box, types ) {
+/** The first box down the chain of `types` from `box`, or undefined. */
+function descendant( view, box, types ) {
 
 	for ( const type of types ) {
 
