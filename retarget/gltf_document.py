@@ -42,8 +42,12 @@ class GltfDocument:
 
         self.label = label
         binary = data[:4] == b"glTF"
+        declared = int.from_bytes(data[8:12], "little") if binary else 0
+        if binary and declared > len(data):
+            raise RetargetError(f"{label} is truncated: the header says {declared} bytes, "
+                                f"the file has {len(data)}")
         if binary and (len(data) < 20 or int.from_bytes(data[4:8], "little") != 2
-                       or int.from_bytes(data[8:12], "little") > len(data) or data[16:20] != b"JSON"):
+                       or data[16:20] != b"JSON"):
             raise RetargetError(f"could not read {label} as glTF: not a version 2 GLB with a JSON chunk")
         try:
             with warnings.catch_warnings():
