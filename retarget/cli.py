@@ -757,25 +757,19 @@ def _cmd_layouts(args) -> int:
 def _cmd_serve(args) -> int:
     # the web stack is imported here only: the library stays usable without it
     try:
-        import uvicorn
-
-        from server.app import UVICORN_OPTIONS, create_app
+        from server.serve import serve
     except ImportError as exc:
         raise RetargetError(
             f"'{PROG} serve' needs the web server's packages ({exc.name} is missing): "
             "pip install fastapi 'uvicorn[standard]' python-multipart"
         ) from exc
-    data_dir = Path(args.data_dir)
     limits = {}  # flags not given keep the app's defaults
     if args.max_upload_mb is not None:
         limits["max_upload_bytes"] = int(args.max_upload_mb * 2**20)
     if args.max_vertices is not None:
         limits["max_vertices"] = args.max_vertices
-    app = create_app(data_dir, **limits)
-    host = f"[{args.host}]" if ":" in args.host else args.host
-    print(f"retarget server: http://{host}:{args.port}/ (API docs at /docs), "
-          f"projects in {data_dir.resolve()}", flush=True)
-    uvicorn.run(app, host=args.host, port=args.port, log_level="info", **UVICORN_OPTIONS)
+    serve(Path(args.data_dir), host=args.host, port=args.port,
+          allowed_hosts=tuple(args.allowed_host), token=args.token, **limits)
     return 0
 
 
@@ -988,7 +982,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = commands.add_parser("serve", help="run the web server",
                             description="Serve the web app and its REST API (docs at /docs); "
                             "projects are kept in --data-dir across restarts.")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default: 127.0.0.1, this machine only; any other "
+                   "address needs the access token the server prints)")
+    p.add_argument("--allowed-host", action="append", default=[], metavar="NAME",
+                   help="another host name the server is reached by (repeatable); requests "
+                   "naming other hosts are refused")
+    p.add_argument("--token", action="store_true",
+                   help="require the access token on loopback too")
     p.add_argument("--port", type=_port, default=8000, help="port (default: 8000)")
     p.add_argument("--data-dir", default=SERVE_DATA_DIR, metavar="DIR",
                    help=f"project store folder, created if missing (default: ./{SERVE_DATA_DIR})")

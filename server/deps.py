@@ -6,28 +6,21 @@ Tests may point the app at another store with
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Path, status
+from fastapi import Depends, Header, HTTPException, Path, status
 from starlette.requests import HTTPConnection
 
 from retarget.mesh import Mesh
 
 from server.hub import StreamHub
+from server.isolation import Isolation
 from server.jobs import JobRegistry
+from server.limits import Limits
 from server.store import ProjectStore
 
-__all__ = ["HubDep", "JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep",
+__all__ = ["HubDep", "IsolationDep", "JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep", "UploadKeyDep",
            "get_hub", "get_jobs", "get_limits", "get_store"]
-
-
-@dataclass(frozen=True)
-class Limits:
-    """Upload limits of the app: bytes per mesh upload and vertices per mesh."""
-
-    max_upload_bytes: int
-    max_vertices: int
 
 
 # The getters take an HTTPConnection so HTTP and WebSocket routes share them (and tests'
@@ -48,11 +41,20 @@ def get_hub(connection: HTTPConnection) -> StreamHub:
     return connection.app.state.hub
 
 
+def get_isolation(connection: HTTPConnection) -> Isolation:
+    return connection.app.state.isolation
+
+
 StoreDep = Annotated[ProjectStore, Depends(get_store)]
 JobsDep = Annotated[JobRegistry, Depends(get_jobs)]
 LimitsDep = Annotated[Limits, Depends(get_limits)]
 HubDep = Annotated[StreamHub, Depends(get_hub)]
+IsolationDep = Annotated[Isolation, Depends(get_isolation)]
 ProjectIdDep = Annotated[str, Path(description="Project id (22 URL-safe characters)")]
+UploadKeyDep = Annotated[str | None, Header(
+    alias="Idempotency-Key", min_length=1, max_length=128, pattern=r"^[A-Za-z0-9._:-]+$",
+    description="a key the client makes once per upload and sends again on a retry: an upload "
+    "already stored under it is answered (200) and not stored twice")]
 
 
 def get_project(project_id: ProjectIdDep, store: StoreDep) -> dict:

@@ -113,9 +113,13 @@ CREATE TABLE IF NOT EXISTS takes (
     duration   REAL NOT NULL,       -- seconds, untrimmed
     trim_start REAL NOT NULL DEFAULT 0,
     trim_stop  REAL,                -- NULL = to the end
-    file       TEXT NOT NULL
+    file       TEXT NOT NULL,
+    upload_key TEXT                 -- the uploader's Idempotency-Key, NULL = none
 );
 CREATE INDEX IF NOT EXISTS takes_project ON takes(project_id);
+"""
+_INDEXES = """
+CREATE UNIQUE INDEX IF NOT EXISTS takes_upload_key ON takes(project_id, upload_key);
 """
 
 
@@ -215,6 +219,9 @@ class ProjectStore:
                 if statement.strip():
                     db.execute(statement)
             self._upgrade(db)
+            for statement in _INDEXES.split(";"):
+                if statement.strip():
+                    db.execute(statement)
         self._sweep_all()
 
     def _upgrade(self, db) -> None:
@@ -233,6 +240,8 @@ class ProjectStore:
         for column in ("rig_version", "rig_painted"):
             if column not in columns:
                 db.execute(f"ALTER TABLE projects ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0")
+        if "upload_key" not in {row["name"] for row in db.execute("PRAGMA table_info(takes)")}:
+            db.execute("ALTER TABLE takes ADD COLUMN upload_key TEXT")
 
     def _sweep(self, project_id: str, row: sqlite3.Row | None = None) -> None:
         """Delete the store's files in the project's folder that its row does not name:
@@ -571,8 +580,10 @@ class ProjectStore:
             raise TakeNotFound(take_id)
         return row
 
-    def put_take(self, project_id: str, take: Take, *, name: str) -> dict:
-        """Store a new take (an already validated `Take`); answers its info."""
+    def put_take(self, project_id: str, take: Take, *, name: str, key: str | None = None) -> dict:
+        """Store a new take (an already validated `Take`); answers its info. With `key`
+        (the uploader's Idempotency-Key) a take already stored under that key in the
+        project is answered instead, and nothing is stored twice."""
         folder = self.folder(project_id)
         take_id = secrets.token_urlsafe(12)
         file = f"take-{take_id}.npz"
@@ -580,13 +591,30 @@ class ProjectStore:
         duration = float(times[-1] - times[0]) if len(times) else 0.0
         with self._transaction() as db:
             self._row(project_id)
+            earlier = self._keyed_take(project_id, key)
+            if earlier is not None:
+                return self._take_info(earlier)
             write_atomic(folder / file, writer=take.save)
             db.execute(
                 "INSERT INTO takes (id, project_id, name, created, source, layout, fps, n_frames, "
-                "n_points, dims, duration, file) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "n_points, dims, duration, file, upload_key) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (take_id, project_id, name[:255], _now(), take.source or "", take.layout,
-                 float(take.fps), take.n_frames, take.n_points, take.dims, duration, file))
+                 float(take.fps), take.n_frames, take.n_points, take.dims, duration, file, key))
         return self.take_info(project_id, take_id)
+
+    def keyed_take(self, project_id: str, key: str | None) -> dict | None:
+        """The info of the project's take stored under upload key `key`, or None."""
+        with self._lock:
+            self._row(project_id)
+            row = self._keyed_take(project_id, key)
+        return None if row is None else self._take_info(row)
+
+    def _keyed_take(self, project_id: str, key: str | None) -> sqlite3.Row | None:
+        if key is None:
+            return None
+        return self._db.execute("SELECT * FROM takes WHERE project_id = ? AND upload_key = ?",
+                                (project_id, key)).fetchone()
 
     def takes(self, project_id: str) -> list[dict]:
         """The project's takes, oldest first."""

@@ -18,10 +18,29 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
-__all__ = ["VENDORED", "WEB_DIR", "mount_web"]
+__all__ = ["APP_CSP", "VENDORED", "WEB_DIR", "mount_web"]
 
 WEB_DIR = Path(__file__).resolve().parent.parent / "web"
 VENDORED = ("three", "three-mesh-bvh", "swagger-ui-dist", "@mediapipe/face_mesh")
+
+APP_CSP = "; ".join((
+    "default-src 'self'",
+    # MediaPipe's face mesh compiles its WebAssembly in the page
+    "script-src 'self' 'wasm-unsafe-eval'",
+    "style-src 'self' 'unsafe-inline'",
+    "img-src 'self' data: blob:",
+    "media-src 'self' blob: mediastream:",
+    "connect-src 'self' data: blob:",
+    "worker-src 'self' blob:",
+    "object-src 'none'",
+    "base-uri 'none'",
+    "form-action 'self'",
+    "frame-ancestors 'none'",
+))
+"""The app page's Content-Security-Policy: its own scripts and connections only (the
+stream's WebSocket is 'self' too), nothing framed, no plugins."""
+_DOCS_CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 'unsafe-inline'; "
+             "img-src 'self' data:; frame-ancestors 'none'")
 
 _MISSING = """<!doctype html><meta charset="utf-8"><title>retarget: front-end packages missing</title>
 <h1>The browser client's packages are not installed</h1>
@@ -44,17 +63,20 @@ def mount_web(app: FastAPI, web_dir: Path = WEB_DIR) -> None:
         if missing:
             return HTMLResponse(_MISSING.format(missing=", ".join(missing), node_modules=node_modules),
                                 status_code=503)
-        return FileResponse(index, headers={"Cache-Control": "no-cache"})
+        return FileResponse(index, headers={"Cache-Control": "no-cache",
+                                            "Content-Security-Policy": APP_CSP})
 
     @app.get("/docs", include_in_schema=False, response_model=None)
     def docs_page() -> HTMLResponse:
         if "swagger-ui-dist" in missing:
             return HTMLResponse(_MISSING.format(missing="swagger-ui-dist", node_modules=node_modules),
                                 status_code=503)
-        return get_swagger_ui_html(openapi_url=app.openapi_url, title=f"{app.title} API",
+        page = get_swagger_ui_html(openapi_url=app.openapi_url, title=f"{app.title} API",
                                    swagger_js_url="/vendor/swagger-ui-dist/swagger-ui-bundle.js",
                                    swagger_css_url="/vendor/swagger-ui-dist/swagger-ui.css",
                                    swagger_favicon_url="/vendor/swagger-ui-dist/favicon-32x32.png")
+        page.headers["Content-Security-Policy"] = _DOCS_CSP
+        return page
 
     app.mount("/static", StaticFiles(directory=web_dir / "static"), name="static")
     app.mount("/shaders", StaticFiles(directory=web_dir / "shaders", check_dir=False), name="shaders")

@@ -25,7 +25,7 @@ from retarget.synthetic.stereo_rig import (
     stereo_cameras,
 )
 from server.app import create_app
-from server.routers.takes import _view_pairs
+from server.readers import _view_pairs
 from server.stream_codec import FLAG_HEAD_ROTATION, encode_points
 from tests.ws_messages import binary_frames, replies
 

@@ -97,6 +97,8 @@ def weight_edit(vertices, indices, weights, automatic: SkinWeights) -> WeightEdi
         raise RetargetError(f"vertices must be a non-empty list of vertex indices; got shape {v.shape}")
     if v.dtype.kind not in "iu":
         raise RetargetError(f"vertices must be integers; got {v.dtype} values")
+    if len(v) > n_vertices:  # checked before the rows are copied: each vertex at most once
+        raise RetargetError(f"the edit has {len(v)} rows; the mesh has only {n_vertices} vertices")
     try:
         idx, w = np.asarray(indices), np.asarray(weights)
     except ValueError as exc:  # ragged lists

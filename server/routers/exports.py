@@ -31,10 +31,12 @@ import re
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile, status
 
 from retarget.errors import RetargetError
-from retarget.export import export_gltf, export_mesh_gltf, read_gltf, take_clip
+from retarget.export import export_gltf, take_clip
 from retarget.landmarks import landmarks_from_json
-from retarget.mesh import load_mesh
-from server.deps import LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.deps import IsolationDep, LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.errors import responses
+from server.limits import body_limit
+from server.readers import imported_project
 from server.routers.meshes import read_capped, upload_extension
 
 router = APIRouter(tags=["exports"])
@@ -43,7 +45,7 @@ GLB_MEDIA_TYPE = "model/gltf-binary"
 
 
 @router.get("/api/projects/{project_id}/export.glb", response_class=Response,
-            responses={200: {"content": {GLB_MEDIA_TYPE: {}}}})
+            responses={200: {"content": {GLB_MEDIA_TYPE: {}}}, **responses(404, 409)})
 def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                    takes: str = Query(default="", description="take ids, comma-separated, or 'all'"),
                    settings: str = Query(default="", description="ConditionSettings JSON"),
@@ -74,45 +76,33 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
         "Content-Disposition": f'attachment; filename="{_file_name(project["name"])}.glb"'})
 
 
-@router.post("/api/projects/import", status_code=status.HTTP_201_CREATED)
-def import_project(store: StoreDep, limits: LimitsDep,
+@router.post("/api/projects/import", status_code=status.HTTP_201_CREATED,
+             responses=responses(415, 503))
+@body_limit(files=1)
+def import_project(store: StoreDep, limits: LimitsDep, isolation: IsolationDep,
                    file: UploadFile = File(description="a .glb exported by this app"),
                    name: str | None = Form(default=None, max_length=200)) -> dict:
     """A new project from an exported .glb, named `name` or after the file; answers
-    ``{project, deformation, animations}`` (the animation names, which are not imported)."""
+    ``{project, deformation, animations}`` (the animation names, which are not imported).
+    The file is read in a child process (`server.readers.imported_project`)."""
     upload_extension(file.filename, ("glb",))
     data = read_capped(file, limits.max_upload_bytes)
     shown = (file.filename or "upload.glb").replace("\\", "/").rsplit("/", 1)[-1]
     if not data:
         raise RetargetError(f"the uploaded file {shown!r} is empty")
-    try:
-        face = read_gltf(data)
-    except RetargetError as exc:
-        text = str(exc).replace("the given bytes", "the file")
-        raise RetargetError(f"{shown!r} cannot be imported (only a .glb exported by this app "
-                            f"can): {text}") from exc
-    mesh = face.mesh
-    if mesh.n_vertices > limits.max_vertices:
-        raise RetargetError(f"{shown!r} has a mesh of {mesh.n_vertices} vertices, over the "
-                            f"server's limit of {limits.max_vertices}")
-    mesh_file = export_mesh_gltf(mesh)
-    stored = load_mesh(mesh_file, "glb")  # what the project will read back, checked first
-    if stored.n_vertices != mesh.n_vertices:
-        raise RetargetError(f"{shown!r}: its mesh does not read back as {mesh.n_vertices} vertices")
-    layout = face.points.layout or ""
+    face = isolation.call(imported_project, data, shown, limits.max_vertices,
+                          what=f"{shown!r} cannot be imported: not a readable .glb")
     project = store.create((name or "").strip() or shown.rsplit(".", 1)[0] or "imported")
     try:
-        project = store.put_mesh(project["id"], mesh_file, "glb", filename=shown,
-                                 n_vertices=mesh.n_vertices, n_faces=mesh.n_faces)
-        project = store.put_landmarks(project["id"], face.points.to_json(),
-                                      n_points=face.points.n_points, layout=layout,
-                                      revision=project["revision"])
+        project = store.put_mesh(project["id"], face.mesh_file, "glb", filename=shown,
+                                 n_vertices=face.n_vertices, n_faces=face.n_faces)
+        project = store.put_landmarks(project["id"], face.landmarks, n_points=face.n_points,
+                                      layout=face.layout, revision=project["revision"])
         project = store.put_rig(project["id"], face.weights, revision=project["revision"])
     except BaseException:
         store.delete(project["id"])  # no half-imported project
         raise
-    return {"project": project, "deformation": face.deformation,
-            "animations": [clip.name for clip in face.clips]}
+    return {"project": project, "deformation": face.deformation, "animations": face.animations}
 
 
 def _takes(store, project_id: str, wanted: str) -> list[dict]:

@@ -9,8 +9,9 @@ from retarget import __version__
 from retarget.weights import DEFAULT_METHOD, METHODS
 from server.deps import LimitsDep
 from server.store import MESH_EXTENSIONS
+from server.errors import responses
 
-router = APIRouter(prefix="/api/info", tags=["info"])
+router = APIRouter(prefix="/api/info", tags=["info"], responses=responses())
 
 
 @router.get("")

@@ -22,15 +22,18 @@ from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from server.deps import MeshDep, ProjectDep, StoreDep
+from server.errors import responses
 
-router = APIRouter(prefix="/api/projects/{project_id}/landmarks", tags=["landmarks"])
+router = APIRouter(prefix="/api/projects/{project_id}/landmarks", tags=["landmarks"],
+                   responses=responses(404))
 
 
-@router.put("")
+@router.put("", responses=responses(404, 409))
 def put_landmarks(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                   body: dict[str, Any] = Body(examples=[{"vertex_indices": [0, 1, 2]}])) -> dict:
     """Validate the landmarks against the mesh and store them; answers them as stored."""
-    layout_name = body.get("layout") or ""
+    layout_name = body.get("layout")
+    layout_name = "" if layout_name is None else layout_name
     if not isinstance(layout_name, str):
         raise RetargetError(f"landmarks 'layout' must be a layout name, got {layout_name!r}")
     layout = get_layout(layout_name) if layout_name else None

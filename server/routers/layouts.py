@@ -12,8 +12,9 @@ from fastapi import APIRouter
 
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, get_layout
 from retarget.sample_face import sample_face
+from server.errors import responses
 
-router = APIRouter(prefix="/api/layouts", tags=["layouts"])
+router = APIRouter(prefix="/api/layouts", tags=["layouts"], responses=responses())
 
 
 @lru_cache(maxsize=1)

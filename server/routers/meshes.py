@@ -25,11 +25,14 @@ from fastapi import APIRouter, File, HTTPException, Response, UploadFile, status
 from fastapi.responses import FileResponse
 
 from retarget.errors import RetargetError
-from retarget.mesh import load_mesh
-from server.deps import LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.deps import IsolationDep, LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.errors import responses
+from server.limits import body_limit
+from server.readers import mesh_counts
 from server.store import MESH_EXTENSIONS
 
-router = APIRouter(prefix="/api/projects/{project_id}/mesh", tags=["meshes"])
+router = APIRouter(prefix="/api/projects/{project_id}/mesh", tags=["meshes"],
+                   responses=responses(404))
 
 ARRAYS_MAGIC = b"RTMA"
 ARRAYS_VERSION = 1
@@ -76,24 +79,22 @@ def read_capped(upload: UploadFile, max_bytes: int) -> bytes:
     return b"".join(chunks)
 
 
-@router.put("")
-def put_mesh(project: ProjectDep, store: StoreDep, limits: LimitsDep,
+@router.put("", responses=responses(404, 415, 503))
+@body_limit(files=1)
+def put_mesh(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolation: IsolationDep,
              file: UploadFile = File(description="obj, ply, stl, off, glb or gltf (embedded buffers)")) -> dict:
-    """Upload the project's mesh. It is parsed by `retarget.mesh.load_mesh` and stored
-    (its bytes unchanged) only if valid; the landmarks and rig of a previous mesh are
-    dropped. Answers the project."""
+    """Upload the project's mesh. It is parsed by `retarget.mesh.load_mesh` (in a child
+    process, `server.isolation`) and stored (its bytes unchanged) only if valid; the
+    landmarks and rig of a previous mesh are dropped. Answers the project."""
     ext = upload_extension(file.filename)
     data = read_capped(file, limits.max_upload_bytes)
     if not data:
         raise RetargetError(f"the uploaded file {file.filename!r} is empty")
-    try:
-        mesh = load_mesh(data, ext, max_vertices=limits.max_vertices,
-                         max_bytes=limits.max_upload_bytes)
-    except RetargetError as exc:
-        text = str(exc).replace("the given bytes", "the file")
-        raise RetargetError(f"uploaded mesh {file.filename!r} refused: {text}") from exc
+    n_vertices, n_faces = isolation.call(
+        mesh_counts, data, ext, file.filename, limits.max_vertices, limits.max_upload_bytes,
+        what=f"uploaded mesh {file.filename!r} refused: not a readable {ext.upper()} file")
     return store.put_mesh(project["id"], data, ext, filename=file.filename or "",
-                          n_vertices=mesh.n_vertices, n_faces=mesh.n_faces)
+                          n_vertices=n_vertices, n_faces=n_faces)
 
 
 @router.get("", response_class=FileResponse)
@@ -115,7 +116,7 @@ def mesh_arrays(vertices: np.ndarray, faces: np.ndarray) -> bytes:
 
 
 @router.get("/arrays", response_class=Response,
-            responses={200: {"content": {"application/octet-stream": {}}}})
+            responses={200: {"content": {"application/octet-stream": {}}}, **responses(404, 409)})
 def get_mesh_arrays(mesh: MeshDep) -> Response:
     """Vertices and faces as little-endian binary (format in the module docstring)."""
     return Response(mesh_arrays(mesh.vertices, mesh.faces), media_type="application/octet-stream")

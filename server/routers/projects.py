@@ -12,14 +12,17 @@ A project is JSON::
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 from fastapi import APIRouter, Response, status
 from pydantic import BaseModel, Field
 
-from server.deps import ProjectDep, StoreDep
+from retarget.errors import RetargetError
+from server.deps import LimitsDep, ProjectDep, StoreDep
+from server.errors import responses
 
-router = APIRouter(prefix="/api/projects", tags=["projects"])
+router = APIRouter(prefix="/api/projects", tags=["projects"], responses=responses())
 
 _NAME = {"min_length": 1, "max_length": 200, "pattern": r"\S"}
 
@@ -35,10 +38,20 @@ class ProjectPatch(BaseModel):
         default=None, description="merged into the stored settings; a key set to null is removed")
 
 
+def _bounded(settings: dict, limits) -> dict:
+    """`settings`, refused when its JSON is over `Limits.max_settings_bytes` (every list
+    call answers it)."""
+    size = len(json.dumps(settings))
+    if size > limits.max_settings_bytes:
+        raise RetargetError(f"project settings would take {size} bytes of JSON; the limit is "
+                            f"{limits.max_settings_bytes}")
+    return settings
+
+
 @router.post("", status_code=status.HTTP_201_CREATED)
-def create_project(body: ProjectCreate, store: StoreDep) -> dict:
+def create_project(body: ProjectCreate, store: StoreDep, limits: LimitsDep) -> dict:
     """Create an empty project."""
-    return store.create(body.name.strip(), body.settings)
+    return store.create(body.name.strip(), _bounded(body.settings, limits))
 
 
 @router.get("")
@@ -47,19 +60,22 @@ def list_projects(store: StoreDep) -> list[dict]:
     return store.list()
 
 
-@router.get("/{project_id}")
+@router.get("/{project_id}", responses=responses(404))
 def get_project(project: ProjectDep) -> dict:
     return project
 
 
-@router.patch("/{project_id}")
-def patch_project(project: ProjectDep, body: ProjectPatch, store: StoreDep) -> dict:
+@router.patch("/{project_id}", responses=responses(404))
+def patch_project(project: ProjectDep, body: ProjectPatch, store: StoreDep, limits: LimitsDep) -> dict:
     """Rename the project and/or merge `settings` into its settings."""
     name = None if body.name is None else body.name.strip()
+    if body.settings:
+        merged = {**project["settings"], **body.settings}
+        _bounded({k: v for k, v in merged.items() if v is not None}, limits)
     return store.update(project["id"], name=name, settings=body.settings)
 
 
-@router.delete("/{project_id}", status_code=status.HTTP_204_NO_CONTENT)
+@router.delete("/{project_id}", status_code=status.HTTP_204_NO_CONTENT, responses=responses(404))
 def delete_project(project: ProjectDep, store: StoreDep) -> Response:
     """Delete the project and its files."""
     store.delete(project["id"])

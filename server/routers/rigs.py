@@ -56,10 +56,12 @@ from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
 from retarget.weights.painting import painted_rig, painted_rows, reset_joints, weight_edit
 from server.deps import JobsDep, LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.errors import responses
 from server.jobs import JobBusy
+from server.limits import body_limit
 from server.store import StaleRig
 
-router = APIRouter(tags=["rigs"])
+router = APIRouter(tags=["rigs"], responses=responses(404))
 
 WEIGHTS_MAGIC = b"RTSW"
 WEIGHTS_VERSION = 1
@@ -75,7 +77,8 @@ class RigRequest(BaseModel):
                           description="influences kept per vertex (default: the method's own)")
 
 
-@router.post("/api/projects/{project_id}/rig", status_code=status.HTTP_202_ACCEPTED)
+@router.post("/api/projects/{project_id}/rig", status_code=status.HTTP_202_ACCEPTED,
+             responses=responses(404, 409))
 def start_rig(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep,
               body: RigRequest) -> dict:
     """Start computing the rig from the stored mesh and landmarks; answers the job
@@ -206,22 +209,24 @@ def edit_arrays(body: bytes) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarr
     return version, n, vertices, joints, weights
 
 
-@router.patch("/api/projects/{project_id}/rig/weights",
+@router.patch("/api/projects/{project_id}/rig/weights", responses=responses(404, 409),
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/octet-stream": {}, "application/json": {}}}})
+@body_limit(files=1)
 async def patch_rig_weights(project: ProjectDep, store: StoreDep, limits: LimitsDep,
                             request: Request) -> dict:
     """Replace the rows of some vertices (binary or JSON form in the module docstring);
     answers the rig's info. 409 when the rig changed since the edit's version, 422 with
     the reason for a row the library refuses."""
-    if int(request.headers.get("content-length") or 0) > limits.max_upload_bytes:
-        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE,
-                            f"a weight edit may be at most {limits.max_upload_bytes} bytes")
-    body = await request.body()
+    body = await request.body()  # `server.limits.BodyLimit` caps it as it streams in
     if len(body) > limits.max_upload_bytes:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE,
                             f"a weight edit may be at most {limits.max_upload_bytes} bytes")
     if request.headers.get("content-type", "").startswith("application/json"):
+        if len(body) > limits.max_json_bytes:  # Python lists of numbers take ~20x the text
+            raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE,
+                                f"a JSON weight edit may be at most {limits.max_json_bytes} bytes; "
+                                "send larger edits in the binary form")
         try:
             edit = WeightEditJSON.model_validate_json(body)
         except ValidationError as exc:
@@ -243,7 +248,7 @@ async def patch_rig_weights(project: ProjectDep, store: StoreDep, limits: Limits
     return await run_in_threadpool(paint)
 
 
-@router.post("/api/projects/{project_id}/rig/reset")
+@router.post("/api/projects/{project_id}/rig/reset", responses=responses(404, 409))
 def reset_rig(project: ProjectDep, store: StoreDep, body: ResetRequest) -> dict:
     """Paint `joints` back to the automatic rig (null: the whole rig); answers the rig's
     info."""

@@ -38,11 +38,14 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import time
 
 import numpy as np
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
+from uvicorn.protocols.utils import ClientDisconnected
+from websockets.exceptions import ConnectionClosed
 
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
@@ -55,12 +58,25 @@ from server.stream_codec import FLAG_NEUTRAL, decode_points, encode_frame
 from server.store import ProjectNotFound, TakeNotFound
 
 router = APIRouter(tags=["stream"])
+log = logging.getLogger(__name__)
 POLICY_VIOLATION = 1008
 DEFAULT_FPS = 60.0
 
 
 @router.websocket("/api/projects/{project_id}/stream")
 async def stream(websocket: WebSocket, project_id: str, store: StoreDep, hub: HubDep) -> None:
+    try:
+        await _serve(websocket, project_id, store, hub)
+    except _GONE:
+        return  # the viewer left (even before the hello): nothing to answer, nothing to log
+
+
+_GONE = (WebSocketDisconnect, ConnectionClosed, ClientDisconnected)
+"""What sending or receiving raises once the viewer has gone (uvicorn's websockets or
+wsproto implementation)."""
+
+
+async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -> None:
     await websocket.accept()
     try:
         project = store.get(project_id)
@@ -78,6 +94,8 @@ async def stream(websocket: WebSocket, project_id: str, store: StoreDep, hub: Hu
             sender = group.create_task(_send_frames(websocket, box, sending))
             group.create_task(_receive_controls(websocket, sending, hub, store, project_id,
                                                 target_points, layout, on_disconnect=sender.cancel))
+    except* _GONE:
+        pass
     finally:
         hub.unsubscribe(project_id, box)
 
@@ -98,7 +116,7 @@ async def _send_frames(websocket: WebSocket, box: Mailbox, sending: asyncio.Lock
             frame = await box.take()
             async with sending:
                 await websocket.send_bytes(frame)
-    except (WebSocketDisconnect, RuntimeError):
+    except (*_GONE, RuntimeError):
         return  # the receiver sees the disconnect and ends the task group
 
 
@@ -116,6 +134,10 @@ async def _receive_controls(websocket, sending, hub, store, project_id, target_p
                 reply = await _control(message.get("text"), hub, store, project_id, target_points, layout)
         except (ValueError, RetargetError, TakeNotFound) as exc:
             reply = {"type": "error", "detail": str(exc)}
+        except Exception as exc:  # noqa: BLE001 - one bad message never ends the stream
+            log.exception("stream control message of project %s failed", project_id)
+            reply = {"type": "error", "detail": f"the server could not act on this message "
+                                                f"({type(exc).__name__}); the stream goes on"}
         if reply is not None and websocket.client_state == WebSocketState.CONNECTED:
             async with sending:
                 await websocket.send_json(reply)
@@ -174,6 +196,8 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         msg = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"control message is not JSON: {exc}") from exc
+    except RecursionError:
+        raise ValueError("control message is nested too deeply to be one of ours") from None
     if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
         raise ValueError('control message must be an object with a "type"')
     kind = msg["type"]

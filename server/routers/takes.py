@@ -17,7 +17,10 @@ A take's info is ``{id, name, created, source, layout, fps, n_frames, n_points, 
 duration, trim: [start, stop]}``. Takes keep the source's own point names; playing one
 maps them to the project's layout by name (`server.sources`). Files are parsed by
 `retarget.sources.files.read_take`, videos tracked by `retarget.sources.markers` and
-`retarget.sources.stereo`; the server only moves bytes and schedules.
+`retarget.sources.stereo`, all in child processes (`server.readers` through
+`server.isolation`: no file can crash the server); the server only moves bytes and
+schedules. An upload sent with an ``Idempotency-Key`` header is stored once however
+often it is retried.
 
 Stereo (Woodward §5): the calibration is an uploaded .npz (`retarget calibrate`, or a
 stereo take's calibration download) or is computed here from two checkerboard videos.
@@ -35,7 +38,6 @@ from __future__ import annotations
 import io
 import json
 import math
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -44,22 +46,17 @@ from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
-from retarget.sources.files import read_take
-from retarget.sources.markers import track_marker_video
-from retarget.sources.stereo import (
-    StereoCalibration,
-    calibrate_stereo,
-    pattern_points,
-    track_stereo_frames,
-    track_stereo_videos,
-)
+from retarget.sources.stereo import StereoCalibration, pattern_points
 from retarget.sources.take import Take
-from retarget.sources.video import VideoReader
-from server.deps import JobsDep, LimitsDep, ProjectDep, StoreDep
+from server.deps import IsolationDep, JobsDep, LimitsDep, ProjectDep, StoreDep, UploadKeyDep
+from server.errors import responses
 from server.jobs import JobBusy
+from server.limits import body_limit
+from server.readers import marker_take, stereo_calibration, stereo_take, take_from_upload, video_opens
 from server.routers.meshes import read_capped, upload_extension
 
-router = APIRouter(prefix="/api/projects/{project_id}/takes", tags=["takes"])
+router = APIRouter(prefix="/api/projects/{project_id}/takes", tags=["takes"],
+                   responses=responses(404))
 
 TAKE_EXTENSIONS = ("csv", "json", "npy", "trc", "c3d", "glb", "gltf", "zip")
 """Files a take is read from (`retarget.sources.files.read_take`)."""
@@ -70,10 +67,6 @@ TRACK_METHODS = ("markers", "stereo")
 which uploads its result as a take file."""
 CALIBRATION_EXTENSIONS = ("npz",)
 """A stereo calibration as `StereoCalibration.save` writes it."""
-CALIBRATION_VIEWS = 20
-"""Checkerboard frame pairs a server calibration uses at most, spread over the videos:
-the pattern search costs about 0.15 s an image, and 20 well spread views calibrate as well
-as hundreds of neighbouring frames."""
 STEREO_FIELDS = ("right", "calibration", "calibration_left", "calibration_right")
 
 
@@ -97,8 +90,12 @@ def list_takes(project: ProjectDep, store: StoreDep) -> list[dict]:
     return store.takes(project["id"])
 
 
-@router.post("", status_code=status.HTTP_201_CREATED)
-def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep,
+@router.post("", status_code=status.HTTP_201_CREATED,
+             responses={200: {"description": "the take already stored under this Idempotency-Key"},
+                        **responses(404, 415, 503)})
+@body_limit(files=1)
+def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolation: IsolationDep,
+                response: Response, key: UploadKeyDep = None,
                 file: UploadFile = File(description=", ".join(f".{e}" for e in TAKE_EXTENSIONS)),
                 name: str | None = Form(default=None, max_length=200),
                 fps: float | None = Form(default=None, gt=0, le=1000,
@@ -108,27 +105,36 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep,
                                            description='JSON {"file label": "layout point name"}'),
                 labelled_vertices: str | None = Form(
                     default=None, description='animated faces: JSON {"point name": vertex index}')) -> dict:
-    """Read a take from a file and store it; answers the take's info. The file is
-    refused (422, with the reason) and nothing is stored if it does not parse."""
+    """Read a take from a file (in a child process, `server.isolation`) and store it;
+    answers the take's info. The file is refused (422, with the reason) and nothing is
+    stored if it does not parse. A retry with the same Idempotency-Key answers the take
+    the first try stored (200)."""
+    earlier = store.keyed_take(project["id"], key)
+    if earlier is not None:
+        response.status_code = status.HTTP_200_OK
+        return earlier
     ext = upload_extension(file.filename, TAKE_EXTENSIONS)
     data = read_capped(file, limits.max_upload_bytes)
     if not data:
         raise RetargetError(f"the uploaded file {file.filename!r} is empty")
     try:
-        take = read_take(data, filename=f"{_default_name(file.filename, 'take')}.{ext}",
-                         layout=layout or None, mapping=_json_form(mapping, "mapping"), fps=fps,
-                         labelled_vertices=_json_form(labelled_vertices, "labelled_vertices"))
-        if project["landmarks"]:
-            # a take naming none of the project's points could never drive it: refused
-            # now rather than when it is played
-            take.to_layout(project["landmarks"]["layout"] or "ibug68", partial=True)
+        options = {"layout": layout or None, "mapping": _json_form(mapping, "mapping"), "fps": fps,
+                   "labelled_vertices": _json_form(labelled_vertices, "labelled_vertices")}
     except RetargetError as exc:
         raise RetargetError(f"take file {file.filename!r} refused: {exc}") from exc
-    return store.put_take(project["id"], take, name=name or _default_name(file.filename, "take"))
+    project_layout = (project["landmarks"]["layout"] or "ibug68") if project["landmarks"] else None
+    take = isolation.call(
+        take_from_upload, data, f"{_default_name(file.filename, 'take')}.{ext}", file.filename,
+        options, project_layout,
+        what=f"take file {file.filename!r} refused: not a readable {ext.upper()} file")
+    return store.put_take(project["id"], take, name=name or _default_name(file.filename, "take"),
+                          key=key)
 
 
-@router.post("/track", status_code=status.HTTP_202_ACCEPTED)
+@router.post("/track", status_code=status.HTTP_202_ACCEPTED, responses=responses(404, 409, 415, 503))
+@body_limit(files=4)
 def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: JobsDep,
+                isolation: IsolationDep,
                 file: UploadFile | None = File(
                     default=None, description="the video; for stereo the left camera's: "
                     + ", ".join(f".{e}" for e in VIDEO_EXTENSIONS)),
@@ -171,7 +177,7 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
     scratch = _Scratch(store, limits.max_upload_bytes)
     try:
         if method == "stereo":
-            run, answer = _stereo_tracker(scratch, file, right, calibration,
+            run, answer = _stereo_tracker(scratch, isolation, file, right, calibration,
                                           (calibration_left, calibration_right),
                                           (pattern, cols, rows, square), layout)
         else:
@@ -179,7 +185,7 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                                                        calibration_right)) if v is not None]
             if stray:
                 raise RetargetError(f"{', '.join(stray)}: for method 'stereo', not {method!r}")
-            run, answer = _marker_tracker(scratch, file, layout), {}
+            run, answer = _marker_tracker(scratch, isolation, file, layout), {}
         take_name = name or _default_name(file.filename, method)
 
         def work(job) -> str:
@@ -223,75 +229,47 @@ class _Scratch:
         path.write_bytes(data)
         return path
 
-    @contextmanager
-    def naming(self):
-        """Library refusals that name a scratch file name the upload instead (the paths
-        are the server's own and mean nothing to the user)."""
-        try:
-            yield
-        except RetargetError as exc:
-            message = str(exc)
-            for path, shown in self.names.items():
-                message = message.replace(repr(str(path)), repr(shown))
-                message = message.replace(str(path), repr(shown))
-            raise RetargetError(message) from exc
-
     def remove(self) -> None:
         for path in self.names:
             path.unlink(missing_ok=True)
 
 
-def _marker_tracker(scratch: _Scratch, video: UploadFile, layout: str):
-    """The marker job's work, ``run(progress) -> Take``, once the video opens."""
+def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str):
+    """The marker job's work, ``run(progress) -> Take``, once the video opens. Videos
+    are decoded by FFmpeg, so both run in a child process (`server.isolation`)."""
     path = scratch.save(video, VIDEO_EXTENSIONS, "video")
-    shown = scratch.names[path]
-    with scratch.naming():
-        VideoReader(path).close()
+    what = f"video {scratch.names[path]!r} refused: not a readable video"
+    isolation.call(video_opens, path, scratch.names, what=what)
 
     def run(progress) -> Take:
-        try:
-            with scratch.naming():
-                return track_marker_video(path, layout=layout, progress=progress)
-        except RetargetError as exc:
-            if repr(shown) in str(exc):
-                raise
-            raise RetargetError(f"video {shown!r}: {exc}") from exc
+        return isolation.call(marker_take, path, layout, scratch.names, what=what,
+                              progress=progress, job=True)
 
     return run
 
 
-def _stereo_tracker(scratch: _Scratch, left: UploadFile, right: UploadFile | None,
+def _stereo_tracker(scratch: _Scratch, isolation, left: UploadFile, right: UploadFile | None,
                     calibration: UploadFile | None, boards: tuple, pattern: tuple, layout: str):
     """The stereo job's work, ``run(progress) -> Take``, once everything that can be
-    checked before tracking is (see the module docstring); and the answer's extras."""
+    checked before tracking is (see the module docstring, `server.readers.stereo_calibration`);
+    and the answer's extras."""
     _require_stereo_fields(right, calibration, boards, pattern)
     videos = [scratch.save(left, VIDEO_EXTENSIONS, "left video"),
               scratch.save(right, VIDEO_EXTENSIONS, "right video")]
+    cal_file = board_videos = None
     if calibration is not None:
         cal_file = scratch.save(calibration, CALIBRATION_EXTENSIONS, "calibration file")
     else:
         board_videos = [scratch.save(v, VIDEO_EXTENSIONS, f"{side} checkerboard video")
                         for v, side in zip(boards, ("left", "right"))]
-    with scratch.naming():
-        size = _pair_size(videos, scratch.names)
-        if calibration is not None:
-            cal, source = StereoCalibration.load(cal_file), "file"
-        else:
-            _pair_size(board_videos, scratch.names)
-            cal, source = _calibration(board_videos, pattern, scratch.names), "checkerboard"
-        if cal.size != size:
-            raise RetargetError(
-                f"the stereo videos are {size[0]}x{size[1]} but the calibration is for "
-                f"{cal.size[0]}x{cal.size[1]}: calibrate the cameras at the size they film")
-        _check_first_markers(videos, cal, layout, scratch.names)
-    names = [scratch.names[v] for v in videos]
+    what = (f"the stereo pair {scratch.names[videos[0]]!r} and {scratch.names[videos[1]]!r} "
+            "refused: not readable videos or calibration")
+    cal, source = isolation.call(stereo_calibration, videos, cal_file, board_videos, pattern,
+                                 layout, scratch.names, what=what)
 
     def run(progress) -> Take:
-        with scratch.naming():
-            take = track_stereo_videos(*videos, cal, layout=layout, head_motion="keep",
-                                       progress=progress)
-        take.meta.update(videos=names, calibration=cal.to_dict())
-        return take
+        return isolation.call(stereo_take, videos, cal, layout, scratch.names, what=what,
+                              progress=progress, job=True)
 
     views = cal.meta.get("views")
     return run, {"calibration": {"source": source, "rms": cal.rms, "baseline": cal.baseline,
@@ -323,66 +301,6 @@ def _require_stereo_fields(right, calibration, boards, pattern) -> None:
         raise RetargetError(f"a checkerboard calibration needs the pattern's {', '.join(absent)} "
                             "(inner corners per row and per column, square side in mm)")
     pattern_points(pattern)  # refuses a malformed pattern before any upload is read
-
-
-def _pair_size(videos: list[Path], names: dict[Path, str]) -> tuple[int, int]:
-    """(width, height) of two videos of one moment, which must agree in size and in the
-    frame count their headers state (frames are paired by index)."""
-    sizes, counts = [], []
-    for path in videos:
-        with VideoReader(path) as reader:
-            sizes.append(tuple(reader.size))
-            counts.append(reader.n_frames)
-    a, b = (names[v] for v in videos)
-    if sizes[0] != sizes[1]:
-        raise RetargetError(f"{a!r} is {sizes[0][0]}x{sizes[0][1]} but {b!r} is "
-                            f"{sizes[1][0]}x{sizes[1][1]}: the two cameras must film at one size")
-    if all(counts) and counts[0] != counts[1]:
-        raise RetargetError(f"{a!r} has {counts[0]} frames but {b!r} has {counts[1]}: a stereo "
-                            "pair is matched frame by frame, so both videos must start and end "
-                            "on the same moment")
-    return sizes[0]
-
-
-def _calibration(boards: list[Path], pattern: tuple, names: dict[Path, str]) -> StereoCalibration:
-    """The pair's calibration from its checkerboard videos (`CALIBRATION_VIEWS` pairs)."""
-    lefts, rights = _view_pairs(*boards, CALIBRATION_VIEWS)
-    try:
-        return calibrate_stereo(lefts, rights, pattern)
-    except RetargetError as exc:
-        a, b = (names[v] for v in boards)
-        raise RetargetError(f"checkerboard videos {a!r} and {b!r} ({len(lefts)} frame pairs "
-                            f"searched): {exc}") from exc
-
-
-def _view_pairs(left: Path, right: Path, count: int) -> tuple[list, list]:
-    """At most `count` frame pairs spread over two calibration videos, (H, W, 3) uint8 BGR.
-
-    Every `step`-th pair is kept; when more than ``2 count`` are held the step doubles and
-    every other pair goes, so memory stays bounded without trusting the headers' counts.
-    """
-    kept, step = [], 1
-    with VideoReader(left) as a, VideoReader(right) as b:
-        for (index, image_a), (_, image_b) in zip(a, b):
-            if index % step == 0:
-                kept.append((image_a, image_b))
-                if len(kept) > 2 * count:
-                    kept, step = kept[::2], 2 * step
-    kept = kept[::-(-len(kept) // count)]
-    return [a for a, _ in kept], [b for _, b in kept]
-
-
-def _check_first_markers(videos: list[Path], cal: StereoCalibration, layout: str,
-                         names: dict[Path, str]) -> None:
-    """Refuse a pair whose first frames show too few of the layout's colour markers, so
-    it fails in the request rather than in the job (tracking one pair costs ~0.2 s)."""
-    with VideoReader(videos[0]) as a, VideoReader(videos[1]) as b:
-        first = (next(iter(a))[1], next(iter(b))[1])
-    try:
-        track_stereo_frames([first], cal, layout=layout, head_motion="keep")
-    except RetargetError as exc:
-        raise RetargetError(f"the colour markers of {layout!r} in the first frames of "
-                            f"{names[videos[0]]!r} and {names[videos[1]]!r}: {exc}") from exc
 
 
 @router.get("/{take_id}")
