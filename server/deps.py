@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import Depends, Header, HTTPException, Path, status
+from pydantic import BaseModel, ConfigDict
 from starlette.requests import HTTPConnection
 
 from retarget.mesh import Mesh
@@ -20,7 +21,14 @@ from server.limits import Limits
 from server.store import ProjectStore
 
 __all__ = ["HubDep", "IsolationDep", "JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep", "UploadKeyDep",
-           "get_hub", "get_jobs", "get_limits", "get_store"]
+           "JsonBody", "get_hub", "get_jobs", "get_limits", "get_store"]
+
+
+class JsonBody(BaseModel):
+    """A JSON request body, validated strictly: `false` is not 0, "3" is not 3 (what the
+    schema says a field is, it must be)."""
+
+    model_config = ConfigDict(strict=True)
 
 
 # The getters take an HTTPConnection so HTTP and WebSocket routes share them (and tests'

@@ -3,18 +3,19 @@ wrong>"}``, one shape for all, and the OpenAPI schema says so.
 
 `install(app)` maps the library's and the store's exceptions to statuses, turns FastAPI's
 request validation errors (a list of dicts) into one sentence, answers 405 with the
-``Allow`` header of every route on the path (Starlette names only the first route's
-methods), and documents the answers: `responses(*codes)` is what a router declares.
+``Allow`` header of every method the schema has for the path (Starlette names only the
+first route's), and documents the answers: `responses(*codes)` is what a router declares.
 """
 
 from __future__ import annotations
+
+import re
 
 from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 from starlette.exceptions import HTTPException as StarletteHTTPException
-from starlette.routing import Match
 
 from retarget.errors import RetargetError
 from server.isolation import IsolationBusy
@@ -113,11 +114,16 @@ def install(app: FastAPI) -> None:
 
 
 def _allowed(request: Request) -> list[str]:
-    """The methods of every route on the request's path (a route whose path matches but
-    whose methods do not is a partial match)."""
-    methods: set[str] = set()
-    for route in request.app.router.routes:
-        match, _ = route.matches(request.scope)
-        if match != Match.NONE and getattr(route, "methods", None):
-            methods |= set(route.methods)
+    """The methods the app's schema lists for the request's path, from its most specific
+    path templates (``/api/projects/import`` before ``/api/projects/{project_id}``, as the
+    routes are matched); a GET route answers HEAD too."""
+    matching = []
+    for template, operations in request.app.openapi().get("paths", {}).items():
+        pattern = re.sub(r"\\\{[^/]+?\\\}", "[^/]+", re.escape(template))
+        if re.fullmatch(pattern, request.url.path):
+            matching.append((template.count("{"), {m.upper() for m in operations}))
+    fewest = min((n for n, _ in matching), default=0)
+    methods = set().union(*(m for n, m in matching if n == fewest))
+    if "GET" in methods:
+        methods.add("HEAD")
     return sorted(methods)

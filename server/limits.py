@@ -54,9 +54,11 @@ class _TooLarge(HTTPException):
     FastAPI's body parsing re-raises it as it is and it answers 413."""
 
     def __init__(self, cap: int):
+        # Connection: close, so the server stops receiving the rest instead of draining it
         super().__init__(status.HTTP_413_CONTENT_TOO_LARGE,
                          f"the request body is over the limit of {cap} bytes "
-                         f"({cap / 2**20:.3g} MiB) for this request")
+                         f"({cap / 2**20:.3g} MiB) for this request",
+                         headers={"Connection": "close"})
 
 
 class BodyLimit:

@@ -11,6 +11,9 @@ packages installed by ``npm ci --prefix web`` (served from here, never from a CD
 
 from __future__ import annotations
 
+import base64
+import hashlib
+import re
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -18,27 +21,34 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
-__all__ = ["APP_CSP", "VENDORED", "WEB_DIR", "mount_web"]
+__all__ = ["VENDORED", "WEB_DIR", "app_csp", "mount_web"]
 
 WEB_DIR = Path(__file__).resolve().parent.parent / "web"
 VENDORED = ("three", "three-mesh-bvh", "swagger-ui-dist", "@mediapipe/face_mesh")
 
-APP_CSP = "; ".join((
-    "default-src 'self'",
-    # MediaPipe's face mesh compiles its WebAssembly in the page
-    "script-src 'self' 'wasm-unsafe-eval'",
-    "style-src 'self' 'unsafe-inline'",
-    "img-src 'self' data: blob:",
-    "media-src 'self' blob: mediastream:",
-    "connect-src 'self' data: blob:",
-    "worker-src 'self' blob:",
-    "object-src 'none'",
-    "base-uri 'none'",
-    "form-action 'self'",
-    "frame-ancestors 'none'",
-))
-"""The app page's Content-Security-Policy: its own scripts and connections only (the
-stream's WebSocket is 'self' too), nothing framed, no plugins."""
+def app_csp(page: str) -> str:
+    """The app page's Content-Security-Policy: its own scripts (and, by hash, the inline
+    ones `page` has: the import map), its own connections (the stream's WebSocket is
+    'self' too), nothing framed, no plugins."""
+    inline = re.findall(r"<script(?![^>]*\bsrc=)[^>]*>(.*?)</script>", page, flags=re.DOTALL)
+    hashes = " ".join(f"'sha256-{base64.b64encode(hashlib.sha256(s.encode()).digest()).decode()}'"
+                      for s in inline)
+    return "; ".join((
+        "default-src 'self'",
+        # MediaPipe's face mesh compiles its WebAssembly in the page
+        f"script-src 'self' 'wasm-unsafe-eval' {hashes}".strip(),
+        "style-src 'self' 'unsafe-inline'",
+        "img-src 'self' data: blob:",
+        "media-src 'self' blob: mediastream:",
+        "connect-src 'self' data: blob:",
+        "worker-src 'self' blob:",
+        "object-src 'none'",
+        "base-uri 'none'",
+        "form-action 'self'",
+        "frame-ancestors 'none'",
+    ))
+
+
 _DOCS_CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 'unsafe-inline'; "
              "img-src 'self' data:; frame-ancestors 'none'")
 
@@ -57,6 +67,7 @@ def mount_web(app: FastAPI, web_dir: Path = WEB_DIR) -> None:
     node_modules = web_dir / "node_modules"
     missing = [name for name in VENDORED if not (node_modules / name / "package.json").is_file()]
     index = web_dir / "static" / "index.html"
+    csp = app_csp(index.read_text(encoding="utf-8"))
 
     @app.get("/", include_in_schema=False, response_model=None)
     def index_page() -> FileResponse | HTMLResponse:
@@ -64,7 +75,7 @@ def mount_web(app: FastAPI, web_dir: Path = WEB_DIR) -> None:
             return HTMLResponse(_MISSING.format(missing=", ".join(missing), node_modules=node_modules),
                                 status_code=503)
         return FileResponse(index, headers={"Cache-Control": "no-cache",
-                                            "Content-Security-Policy": APP_CSP})
+                                            "Content-Security-Policy": csp})
 
     @app.get("/docs", include_in_schema=False, response_model=None)
     def docs_page() -> HTMLResponse:

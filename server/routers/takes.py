@@ -42,13 +42,13 @@ from pathlib import Path
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Response, UploadFile, status
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sources.stereo import StereoCalibration, pattern_points
 from retarget.sources.take import Take
-from server.deps import IsolationDep, JobsDep, LimitsDep, ProjectDep, StoreDep, UploadKeyDep
+from server.deps import IsolationDep, JobsDep, JsonBody, LimitsDep, ProjectDep, StoreDep, UploadKeyDep
 from server.errors import responses
 from server.jobs import JobBusy
 from server.limits import body_limit
@@ -337,7 +337,7 @@ def get_take_calibration(project: ProjectDep, store: StoreDep, take_id: str) -> 
                              f'attachment; filename="calibration-{take_id}.npz"'})
 
 
-class TakePatch(BaseModel):
+class TakePatch(JsonBody):
     name: str | None = Field(default=None, min_length=1, max_length=200, pattern=r"\S")
     trim: tuple[float, float | None] | None = Field(
         default=None, description="[start, stop] in seconds from the first frame; stop null = end")

@@ -14,6 +14,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,6 +63,10 @@ class Server:
                 with urllib.request.urlopen(self.url + "/api/projects", timeout=1) as reply:
                     if reply.status == 200:
                         return self
+            except urllib.error.HTTPError as refused:
+                if refused.code == 401:  # up, and asking for its access token
+                    return self
+                time.sleep(0.1)
             except OSError:
                 time.sleep(0.1)
         raise RuntimeError(f"server did not answer within {_STARTUP_S} s:\n{self.log.read_text()}")
