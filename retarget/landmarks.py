@@ -9,7 +9,10 @@ deformation of the mesh that keeps its topology.
 JSON form (what the CLI and the server read and write): ``{"vertex_indices": [...]}``,
 ``{"positions": [[x, y, z], ...]}`` (snapped to the closest surface point), or
 ``{"triangles": [[a, b, c], ...], "barycentric": [[u, v, w], ...]}``; an optional
-``"layout"`` names the landmark layout the points follow.
+``"layout"`` (a string, or null for none) names the landmark layout the points follow.
+
+Every constructor refuses more than `MAX_LANDMARKS` points before any work that grows with
+their number, and finds repeated points in O(K log K).
 """
 
 from __future__ import annotations
@@ -20,9 +23,14 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy.spatial.distance import pdist, squareform
+from scipy.spatial import cKDTree
 
 from retarget.errors import RetargetError
+
+MAX_LANDMARKS = 2048
+"""Most landmarks a set may hold. The largest layout is MediaPipe's face mesh (468
+points); the cap leaves room for denser custom sets while bounding the work one request
+can ask for (snapping positions to the surface, checking them for repeats)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +74,7 @@ def from_vertex_indices(indices, n_vertices: int, layout: str = "") -> SurfacePo
     idx = np.asarray(indices)
     if idx.ndim != 1 or len(idx) == 0 or not np.issubdtype(idx.dtype, np.integer):
         raise RetargetError(f"vertex_indices must be a non-empty list of integers; got {np.asarray(indices).tolist()!r:.80}")
+    _refuse_too_many(len(idx), "vertex_indices")
     bad = (idx < 0) | (idx >= n_vertices)
     if bad.any():
         raise RetargetError(
@@ -84,6 +93,7 @@ def from_positions(positions, vertices: np.ndarray, faces: np.ndarray, layout: s
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
         raise RetargetError(f"positions must have shape (K, 3); got {p.shape}")
+    _refuse_too_many(len(p), "positions")
     if not np.isfinite(p).all():
         raise RetargetError("positions contain NaN or inf")
     mesh = trimesh.Trimesh(vertices, faces, process=False)
@@ -98,10 +108,12 @@ def from_positions(positions, vertices: np.ndarray, faces: np.ndarray, layout: s
 
 
 def from_barycentric(triangles, barycentric, n_vertices: int, layout: str = "") -> SurfacePoints:
+    """SurfacePoints from (K, 3) triangle vertex indices and (K, 3) barycentric weights."""
     tri = np.asarray(triangles)
     bary = np.asarray(barycentric, dtype=np.float64)
     if tri.ndim != 2 or tri.shape[1] != 3 or bary.shape != tri.shape or len(tri) == 0:
         raise RetargetError(f"triangles and barycentric must both have shape (K, 3); got {tri.shape} and {bary.shape}")
+    _refuse_too_many(len(tri), "triangles")
     if not np.issubdtype(tri.dtype, np.integer) or tri.min() < 0 or tri.max() >= n_vertices:
         raise RetargetError(f"triangles must hold vertex indices in [0, {n_vertices})")
     if not np.isfinite(bary).all() or (bary < -1e-9).any() or not np.allclose(bary.sum(1), 1.0, atol=1e-6):
@@ -113,7 +125,11 @@ def landmarks_from_json(data: dict, vertices: np.ndarray, faces: np.ndarray) -> 
     """Parse the JSON form (see module docstring) against a mesh."""
     if not isinstance(data, dict):
         raise RetargetError("landmarks JSON must be an object with 'vertex_indices', 'positions' or 'triangles'")
-    layout = str(data.get("layout", ""))
+    layout = data.get("layout")
+    if layout is None:
+        layout = ""
+    elif not isinstance(layout, str):
+        raise RetargetError(f"landmarks JSON 'layout' must be a string or null, got {_shown(layout)}")
     if "vertex_indices" in data:
         return from_vertex_indices(data["vertex_indices"], len(vertices), layout)
     if "positions" in data:
@@ -133,6 +149,22 @@ def load_landmarks(path, vertices: np.ndarray, faces: np.ndarray) -> SurfacePoin
     return landmarks_from_json(data, vertices, faces)
 
 
+def _refuse_too_many(k: int, name: str):
+    if k > MAX_LANDMARKS:
+        raise RetargetError(
+            f"{name} holds {k:,} landmarks, above the limit of {MAX_LANDMARKS:,}; "
+            "a landmark set marks feature points, not the whole surface")
+
+
+def _shown(value) -> str:
+    """`value` as the JSON text it came from (cut to 80 characters)."""
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 def _refuse_repeats(idx: np.ndarray, name: str):
     uniq, counts = np.unique(idx, return_counts=True)
     if (counts > 1).any():
@@ -142,11 +174,15 @@ def _refuse_repeats(idx: np.ndarray, name: str):
 
 
 def _refuse_repeats_positions(p: np.ndarray):
+    """Refuse two of the (K, 3) points `p` closer than 1e-9 of their extent: each point's
+    nearest other point from a k-d tree, O(K log K) time and O(K) memory."""
     if len(p) < 2:
         return
-    d = squareform(pdist(p))
-    np.fill_diagonal(d, np.inf)
     scale = float(np.ptp(p, axis=0).max()) or 1.0
-    i, j = np.unravel_index(d.argmin(), d.shape)
-    if d[i, j] <= 1e-9 * scale:
+    distance, nearest = cKDTree(p).query(p, k=2)
+    # a point's own index comes first, unless another point sits exactly on it
+    other = np.where(nearest[:, 0] == np.arange(len(p)), nearest[:, 1], nearest[:, 0])
+    i = int(distance[:, 1].argmin())
+    if distance[i, 1] <= 1e-9 * scale:
+        j = int(other[i])
         raise RetargetError(f"landmarks {min(i, j)} and {max(i, j)} sit on the same surface point; each feature point needs its own place")
