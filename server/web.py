@@ -35,8 +35,10 @@ def app_csp(page: str) -> str:
                       for s in inline)
     return "; ".join((
         "default-src 'self'",
-        # MediaPipe's face mesh compiles its WebAssembly in the page
-        f"script-src 'self' 'wasm-unsafe-eval' {hashes}".strip(),
+        # MediaPipe's face mesh compiles its WebAssembly in the page, and its loader
+        # evaluates strings as JavaScript (an EvalError without 'unsafe-eval'); scripts
+        # still come from this server only
+        f"script-src 'self' 'wasm-unsafe-eval' 'unsafe-eval' {hashes}".strip(),
         "style-src 'self' 'unsafe-inline'",
         "img-src 'self' data: blob:",
         "media-src 'self' blob: mediastream:",

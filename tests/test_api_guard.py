@@ -173,7 +173,7 @@ def test_answers_carry_the_security_headers_and_the_page_its_policy(client):
     assert policy == app_csp((WEB_DIR / "static" / "index.html").read_text())
     assert "frame-ancestors 'none'" in policy and "object-src 'none'" in policy
     # the import map is the page's one inline script, allowed by its hash alone
-    assert re.search(r"script-src 'self' 'wasm-unsafe-eval' 'sha256-[A-Za-z0-9+/]{43}='$",
+    assert re.search(r"script-src 'self' 'wasm-unsafe-eval' 'unsafe-eval' 'sha256-[A-Za-z0-9+/]{43}='$",
                      policy.split(";")[1].strip())
 
 

@@ -200,3 +200,32 @@ def test_off_loopback_the_printed_address_is_the_way_in(tmp_path, page):
         assert page.evaluate("() => document.cookie") == ""  # HttpOnly: scripts cannot read it
     finally:
         srv.stop()
+
+
+def test_a_take_upload_whose_answer_is_lost_is_retried_and_stored_once(guarded, page):
+    project = guarded.api("POST", "/api/projects", {"name": "lost answer"})["id"]
+    page.goto(f"{guarded.url}/#p={project}")
+    page.wait_for_function("() => window.app && window.app.projectId")
+    keys = []
+
+    def lose_first_answer(route):
+        if route.request.method != "POST":  # the page lists the takes too
+            return route.continue_()
+        keys.append(route.request.headers.get("idempotency-key"))
+        answer = route.fetch()  # the server stores the take...
+        if len(keys) == 1:
+            route.abort("connectionreset")  # ...and the page never hears of it
+        else:
+            route.fulfill(response=answer)
+
+    page.route(f"**/api/projects/{project}/takes", lose_first_answer)
+    page.console_errors.clear()
+    info = page.evaluate("""async () => {
+        const { api } = await import('/static/js/api.js');
+        const csv = 'frame,time,a_x,a_y\\n0,0,1,2\\n1,0.04,1.5,2\\n';
+        return api.uploadTake(window.app.projectId, new File([csv], 'take.csv'), {});
+    }""")
+    page.console_errors.clear()  # the lost answer is logged by the browser
+    assert len(keys) == 2 and keys[0] == keys[1] and re.fullmatch(r"[0-9a-f]{32}", keys[0])
+    takes = guarded.api("GET", f"/api/projects/{project}/takes")
+    assert [t["id"] for t in takes] == [info["id"]]

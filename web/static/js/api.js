@@ -223,11 +223,29 @@ export const api = {
 	takes: ( id ) => request( 'GET', `/api/projects/${ id }/takes` ),
 
 	/**
-	 * Upload a take file (csv, json, npy, trc, c3d, glb, gltf, zip) with progress.
+	 * Upload a take file (csv, json, npy, trc, c3d, glb, gltf, zip) with progress. When no
+	 * answer comes it is sent once more with the same Idempotency-Key, so a take stored by
+	 * the first try whose answer was lost is answered, not stored twice.
 	 * @param {Object<string, string>} fields - optional form fields: name, fps, layout, mapping, labelled_vertices.
 	 * @returns {Promise<object>} the stored take's info
 	 */
-	uploadTake: ( id, file, fields, onProgress ) => upload( 'POST', `/api/projects/${ id }/takes`, file, fields, onProgress ),
+	uploadTake: async ( id, file, fields, onProgress ) => {
+
+		// a retry after a lost answer sends the same key, so the take is stored once
+		const key = uploadKey();
+		const send = () => upload( 'POST', `/api/projects/${ id }/takes`, file, fields, onProgress, { 'Idempotency-Key': key } );
+		try {
+
+			return await send();
+
+		} catch ( error ) {
+
+			if ( error.status !== 0 || error.cancelled ) throw error;
+			return send();
+
+		}
+
+	},
 
 	/**
 	 * Upload a marker video; the server tracks it in a job.
@@ -308,16 +326,29 @@ function weightEdit( version, nJoints, k, vertices, rows ) {
 }
 
 /**
+ * A fresh Idempotency-Key: 128 random bits as hex (crypto.getRandomValues, which pages
+ * served over plain http on a LAN address have too, unlike crypto.randomUUID).
+ * @returns {string}
+ */
+function uploadKey() {
+
+	return Array.from( crypto.getRandomValues( new Uint8Array( 16 ) ), ( b ) => b.toString( 16 ).padStart( 2, '0' ) ).join( '' );
+
+}
+
+/**
  * A multipart upload (field "file" plus `fields`, whose Files go as files) with progress;
  * XHR because fetch reports no upload progress.
+ * @param {Object<string, string>} [headers] - extra request headers
  * @returns {Promise<object>} the JSON answer
  */
-function upload( method, url, file, fields, onProgress ) {
+function upload( method, url, file, fields, onProgress, headers = {} ) {
 
 	return new Promise( ( resolve, reject ) => {
 
 		const xhr = new XMLHttpRequest();
 		xhr.open( method, url );
+		for ( const [ name, value ] of Object.entries( headers ) ) xhr.setRequestHeader( name, value );
 		xhr.responseType = 'text';
 		xhr.upload.onprogress = ( event ) => {
 
@@ -346,7 +377,7 @@ function upload( method, url, file, fields, onProgress ) {
 		// the server closes early on an oversized body, which browsers may report as a
 		// network error rather than the 413 it sent
 		xhr.onerror = () => reject( new ApiError( 0, `upload of ${ file.name } failed: the connection was closed (is the file over the server's size limit?)` ) );
-		xhr.onabort = () => reject( new ApiError( 0, `upload of ${ file.name } was cancelled` ) );
+		xhr.onabort = () => reject( Object.assign( new ApiError( 0, `upload of ${ file.name } was cancelled` ), { cancelled: true } ) );
 		const form = new FormData();
 		form.append( 'file', file, file.name );
 		for ( const [ key, value ] of Object.entries( fields ?? {} ) ) {
