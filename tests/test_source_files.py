@@ -18,6 +18,8 @@ from retarget.errors import RetargetError
 from retarget.layouts import IBUG68_TO_MEDIAPIPE468, get_layout
 from retarget.mesh import load_mesh
 from retarget.sample_face import demo_weights, posed_vertices, sample_face
+from retarget.sources import c3d_header
+from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.files import read_take, write_take_csv
 from retarget.sources.take import Take
 
@@ -261,6 +263,157 @@ def test_c3d_without_points_and_repeated_labels(tmp_path):
     assert take.names == ("A", "A_2", "B")
     with pytest.raises(RetargetError, match="is not a C3D file"):
         read_take(b"x" * 600, filename="bad.c3d")
+
+
+def _c3d_points_and_analogs(tmp_path) -> bytes:
+    """A valid 2 KB C3D written by ezc3d: 6 frames of 3 float points at 100 Hz and 2
+    analog channels at 400 Hz (4 samples per frame)."""
+    import ezc3d
+
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c3d["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = ("A", "B", "C")
+    c3d["parameters"]["ANALOG"]["RATE"]["value"] = [400.0]
+    c3d["parameters"]["ANALOG"]["LABELS"]["value"] = ("emg1", "emg2")
+    points = np.ones((4, 3, 6))
+    points[:3] = np.random.default_rng(0).normal(size=(3, 3, 6))
+    c3d["data"]["points"] = points
+    c3d["data"]["analogs"] = np.random.default_rng(1).normal(size=(1, 2, 24))
+    c3d["data"]["meta_points"]["residuals"] = np.zeros((1, 3, 6))
+    c3d["data"]["meta_points"]["camera_masks"] = np.zeros((7, 3, 6), dtype=bool)
+    path = tmp_path / "valid.c3d"
+    c3d.write(str(path))
+    return path.read_bytes()
+
+
+def test_c3d_check_passes_a_valid_file_which_reads_as_ezc3d_reads_it(tmp_path):
+    import ezc3d
+
+    data = _c3d_points_and_analogs(tmp_path)
+    layout = c3d_layout(data, "'v.c3d'")
+    assert (layout.frames, layout.points, layout.analog_channels, layout.analog_per_frame) == (6, 3, 2, 4)
+    assert layout.labels == ("A", "B", "C") and layout.header.processor == "Intel"
+    assert layout.frame_bytes == 3 * 16 + 4 * 2 * 4  # float points, float analog samples
+    take = read_take(data, filename="v.c3d")
+    direct = ezc3d.c3d(str(tmp_path / "valid.c3d"))["data"]["points"]
+    np.testing.assert_array_equal(take.points, direct[:3].transpose(2, 1, 0).astype(np.float32))
+    assert take.names == ("A", "B", "C") and take.fps == 100
+
+
+def _record(data: bytes, group: str, name: str) -> tuple[int, int]:
+    """(byte of the record's name-length byte, byte of its next-record offset)."""
+    offset = c3d_layout(data, "x").groups[group][name].offset
+    return offset, offset + 2 + len(name)
+
+
+def _set(data: bytes, at: int, raw: bytes) -> bytes:
+    return data[:at] + raw + data[at + len(raw):]
+
+
+def _labels_dims(data, dims: bytes) -> bytes:
+    """POINT:LABELS given len(dims) dimensions of those sizes (over its values)."""
+    _, field = _record(data, "POINT", "LABELS")
+    return _set(data, field + 3, bytes([len(dims)]) + dims)
+
+
+def _frames(data, count: int) -> bytes:
+    _, field = _record(data, "POINT", "FRAMES")
+    return _set(data, field + 4, count.to_bytes(2, "little"))
+
+
+@pytest.mark.parametrize("corrupt, message", [
+    (lambda d: _set(d, 1, b"\x51"),
+     r"'c.c3d' is not a C3D file \(no C3D header\): byte 1 is 0x51 where a C3D header has the key 0x50"),
+    (lambda d: _set(d, 0, b"\xc8"),
+     r"not a readable C3D file: byte 0 puts the parameter section in block 200, at byte 101888, "
+     r"past the end of the 2048-byte file"),
+    (lambda d: _set(d, 515, b"\x63"),
+     r"byte 515, the processor type in the parameter section's first 4 bytes, is 99"),
+    (lambda d: _set(d, 16, (100).to_bytes(2, "little")),
+     r"bytes 16-17 put the data section in block 100, at byte 50688, past the end of the 2048-byte file"),
+    (lambda d: _set(d, _record(d, "POINT", "USED")[0], b"\x7f"),
+     r"the name of the record at byte 526 \(127 bytes by its length byte\) holds the control "
+     r"byte 0x07 at byte 532: its name length is wrong"),
+    (lambda d: _set(d, _record(d, "POINT", "USED")[1], b"\x01\x00"),
+     r"the parameter 'USED' record at byte 526 ends at byte 539, but its next-record offset "
+     r"\(1, at byte 532\) points to byte 533, back inside the record"),
+    (lambda d: _set(d, _record(d, "POINT", "USED")[1], b"\xff\xff"),
+     r"points to byte 66067, past the end of the parameter section \(bytes 512-1535\)"),
+    (lambda d: _labels_dims(d, b"\xff" * 4),
+     r"the parameter 'LABELS' record at byte 539 has dimensions 255x255x255x255, 4228250625 "
+     r"values of 1 byte\(s\), more than a parameter record can hold \(65535 bytes\)"),
+    (lambda d: _set(d, _record(d, "POINT", "LABELS")[1] + 3, b"\xa0"),
+     r"the parameter 'LABELS' record at byte 539 has -96 dimensions \(byte 550\)"),
+    (lambda d: _set(d, _record(d, "POINT", "USED")[1] + 6, b"\xff"),
+     r"the parameter 'USED' record at byte 526 gives a negative description length \(-1\) at byte 538"),
+    (lambda d: _frames(d, 1000),
+     r"1000 frames of 80 bytes \(3 point\(s\) of 4 floats, 4 x 2 analog samples\) need 80000 "
+     r"bytes from byte 1536 \(block 4\), but the file has 512 bytes there"),
+    (lambda d: _set(d, _record(d, "POINT", "USED")[1] + 4, b"\x07"),
+     r"POINT:USED is 7 but POINT:LABELS \(with LABELS2, ...\) names 3 points"),
+    (lambda d: _set(d, _record(d, "ANALOG", "USED")[1] + 4, b"\x05"),
+     r"ANALOG:USED is 5 but ANALOG:SCALE \(with SCALE2, ...\) holds 2 values, one per channel"),
+    (lambda d: _set(d, 16, b"\x02"),
+     r"bytes 16-17 put the data section in block 2, not after the parameter section \(block 2"),
+])
+def test_c3d_corruptions_are_refused_before_ezc3d_naming_the_byte(tmp_path, corrupt, message):
+    data = corrupt(_c3d_points_and_analogs(tmp_path))
+    with pytest.raises(RetargetError, match=message):
+        read_take(data, filename="c.c3d")
+
+
+def test_c3d_budget_is_checked_before_ezc3d_reads(tmp_path, monkeypatch):
+    monkeypatch.setattr(c3d_header, "MAX_C3D_POINT_SAMPLES", 10)
+    with pytest.raises(RetargetError, match=r"declares 18 point samples \(6 frames x 3 points\); at most 10"):
+        read_take(_c3d_points_and_analogs(tmp_path), filename="big.c3d")
+
+
+def _mutants(data: bytes, count: int, seed: int):
+    """`count` copies of `data` with 1 to 4 random bytes changed (seeded)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        mutant = bytearray(data)
+        for at in rng.choice(len(mutant), size=int(rng.integers(1, 5)), replace=False):
+            mutant[at] = (mutant[at] + int(rng.integers(1, 256))) % 256
+        yield bytes(mutant)
+
+
+def _read_in_child(data: bytes, filename: str, outcome) -> None:
+    """read_take in a forked child: outcome 0 read, 1 RetargetError, 2 anything else."""
+    import signal
+
+    signal.alarm(60)  # a hang ends the child with SIGALRM
+    try:
+        read_take(data, filename=filename)
+        outcome.value = 0
+    except RetargetError:
+        outcome.value = 1
+    except BaseException:
+        outcome.value = 2
+
+
+def test_c3d_random_mutants_read_or_are_refused_and_never_crash(tmp_path):
+    """300 mutants of a valid file, each read in its own forked child (ezc3d crashed on 7
+    of them before the check; see the module docstring of retarget.sources.c3d_header)."""
+    import multiprocessing
+    import resource
+
+    context = multiprocessing.get_context("fork")
+    data = _c3d_points_and_analogs(tmp_path)
+    results = []
+    for i, mutant in enumerate(_mutants(data, 300, seed=0)):
+        outcome = context.Value("i", -1)
+        child = context.Process(target=_read_in_child, args=(mutant, "m.c3d", outcome))
+        child.start()
+        child.join()
+        results.append((i, child.exitcode, outcome.value))
+    crashed = [(i, code) for i, code, _ in results if code != 0]
+    assert not crashed, f"mutants that killed their child (index, -signal): {crashed}"
+    assert not [i for i, _, value in results if value == 2], "mutants raised other than RetargetError"
+    counts = np.bincount([value for _, _, value in results], minlength=2)
+    assert counts[0] > 100 and counts[1] > 30  # both outcomes occur
+    assert resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss < 1 << 20  # KiB: < 1 GiB
 
 
 # --- animated meshes ---------------------------------------------------------------------

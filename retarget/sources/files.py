@@ -7,7 +7,11 @@ this module bounds what a file can make it allocate beyond its own size
 (`MAX_ARCHIVE_BYTES` unpacked from a zip, `retarget.gltf_document.MAX_ACCESSOR_ELEMENTS`,
 `retarget.sources.gltf_take.MAX_SAMPLED_FRAMES`,
 table cells no longer than a number) and reads no file a glTF names outside its own
-folder. C3D files are parsed by ezc3d, in-process, after a header check.
+folder. C3D files are parsed by ezc3d, in-process, and only after
+`retarget.sources.c3d_header.c3d_layout` has walked their header and parameter section
+as ezc3d will and checked every offset, length, dimension and count ezc3d trusts against
+the file (and its budgets, `MAX_C3D_POINT_SAMPLES` ...): ezc3d crashes the process on
+some malformed files.
 
 Accepted files
 --------------
@@ -77,6 +81,7 @@ import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.layouts import LAYOUTS, from_ibug68, from_mediapipe468, get_layout
+from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.gltf_take import gltf_points
 from retarget.sources.obj_sequence import obj_sequence_points
 from retarget.sources.take import DEFAULT_FPS, Take
@@ -468,8 +473,9 @@ def _read_trc(text: str, label: str, fps, layout) -> Take:
 def _read_c3d(data: bytes, label: str, fps) -> Take:
     import ezc3d
 
-    if len(data) < 512 or data[1] != 0x50:
-        raise RetargetError(f"{label} is not a C3D file (no C3D header)")
+    layout = c3d_layout(data, label)  # ezc3d trusts the file: only a checked one reaches it
+    if layout.points == 0 or layout.frames == 0:
+        raise RetargetError(f"{label} holds no 3D point data (POINT:USED is 0 or there are no frames)")
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "take.c3d"
         path.write_bytes(data)
