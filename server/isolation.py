@@ -13,9 +13,12 @@ starts in milliseconds and never inherits the server's threads or sockets) under
 - CPU time: `cpu_seconds` (RLIMIT_CPU, then SIGXCPU kills it); wall time: `wall_seconds`,
   after which the parent kills it;
 - concurrency: at most `slots` children read at once; a call waits up to `queue_seconds`
-  for a slot and is then refused as busy (503). Jobs (tracking a video) have slots and
-  a time limit of their own (`job_slots`, `job_seconds`), so a long job never holds up
-  an upload.
+  for a slot and is then refused as busy (503). Jobs (tracking a video, computing a rig)
+  have slots and limits of their own (`job_slots`, `job_seconds`, `job_memory_bytes`),
+  so a long job never holds up an upload.
+
+Rigs are computed here too, though their input is a validated mesh: a dense rig of a
+large mesh needs gigabytes, which would otherwise be the server's own growth.
 
 This module is also the one place where a failure to read untrusted input becomes a
 refusal: whatever the child raises or however it dies, the caller gets a `RetargetError`
@@ -50,8 +53,10 @@ class IsolationLimits:
     """What one child may use. memory_bytes: address space beyond what the child holds
     when it starts (the preloaded libraries); cpu_seconds, wall_seconds: CPU and wall
     time of one call; slots: children at once; queue_seconds: how long a call waits for a
-    free slot. job_slots, job_seconds: the same for jobs (CPU and wall time alike; a job
-    waits for its slot as long as it takes)."""
+    free slot. job_slots, job_seconds, job_memory_bytes: the same for jobs (CPU and wall
+    time alike; a job waits for its slot as long as it takes): a dense rig of a
+    133k-vertex face peaks at about 0.7 GiB, one of the largest meshes allowed (500k
+    vertices) at about 2.7 GiB."""
 
     memory_bytes: int = 1 << 30
     cpu_seconds: int = 120
@@ -60,6 +65,7 @@ class IsolationLimits:
     queue_seconds: float = 60.0
     job_slots: int = 2
     job_seconds: int = 3600
+    job_memory_bytes: int = 4 << 30
 
 
 class IsolationBusy(RuntimeError):
@@ -99,7 +105,8 @@ class Isolation:
         """
         limits = self.limits
         if job:
-            limits = replace(limits, cpu_seconds=limits.job_seconds, wall_seconds=limits.job_seconds)
+            limits = replace(limits, cpu_seconds=limits.job_seconds, wall_seconds=limits.job_seconds,
+                             memory_bytes=limits.job_memory_bytes)
         slots = self._job_slots if job else self._slots
         if not slots.acquire(timeout=None if job else limits.queue_seconds):
             raise IsolationBusy(f"the server is busy reading other files ({limits.slots} at "

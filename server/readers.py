@@ -10,13 +10,16 @@ a scratch path). No FastAPI here: the forkserver imports this module once.
 
 from __future__ import annotations
 
+import inspect
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 from retarget.errors import RetargetError
 from retarget.export import export_mesh_gltf, read_gltf
-from retarget.mesh import load_mesh
+from retarget.landmarks import SurfacePoints
+from retarget.layouts import get_layout
+from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 from retarget.sources.files import read_take
 from retarget.sources.markers import track_marker_video
@@ -28,9 +31,11 @@ from retarget.sources.stereo import (
 )
 from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
+from retarget.weights import METHODS, compute_weights
 
 __all__ = ["CALIBRATION_VIEWS", "ImportedProject", "imported_project", "marker_take",
-           "mesh_counts", "stereo_calibration", "stereo_take", "take_from_upload", "video_opens"]
+           "mesh_counts", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
+           "video_opens"]
 
 CALIBRATION_VIEWS = 20
 """Checkerboard frame pairs a server calibration uses at most, spread over the videos:
@@ -61,6 +66,16 @@ def take_from_upload(data: bytes, filename: str, shown: str, options: dict,
     except RetargetError as exc:
         raise RetargetError(f"take file {shown!r} refused: {exc}") from None
     return take
+
+
+def rig(mesh: Mesh, points: SurfacePoints, method: str, options: dict, progress) -> SkinWeights:
+    """The skin weights of `method` (`retarget.weights.compute_weights`) for a stored mesh
+    and its landmarks; not an upload, but a dense rig of a large mesh needs gigabytes
+    (see `server.isolation`)."""
+    if "progress" in inspect.signature(METHODS[method]).parameters:
+        options = {**options, "progress": progress}
+    layout = get_layout(points.layout) if points.layout else None
+    return compute_weights(method, mesh.vertices, mesh.faces, points, layout, **options)
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,6 @@ The painted rows are stored beside the automatic rig, so both survive a restart.
 
 from __future__ import annotations
 
-import inspect
 import struct
 
 import numpy as np
@@ -51,14 +50,14 @@ from pydantic import Field, ValidationError
 
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
-from retarget.layouts import get_layout
 from retarget.skin import SkinWeights
-from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
+from retarget.weights import DEFAULT_METHOD, METHODS
 from retarget.weights.painting import painted_rig, painted_rows, reset_joints, weight_edit
-from server.deps import JobsDep, JsonBody, LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.deps import IsolationDep, JobsDep, JsonBody, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.jobs import JobBusy
 from server.limits import body_limit
+from server.readers import rig
 from server.store import StaleRig
 
 router = APIRouter(tags=["rigs"], responses=responses(404))
@@ -80,9 +79,10 @@ class RigRequest(JsonBody):
 @router.post("/api/projects/{project_id}/rig", status_code=status.HTTP_202_ACCEPTED,
              responses=responses(404, 409))
 def start_rig(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep,
-              body: RigRequest) -> dict:
-    """Start computing the rig from the stored mesh and landmarks; answers the job
-    (poll ``GET /api/jobs/{job_id}``). 409 while another job of the project runs."""
+              isolation: IsolationDep, body: RigRequest) -> dict:
+    """Start computing the rig from the stored mesh and landmarks, in a child process
+    (`server.readers.rig`); answers the job (poll ``GET /api/jobs/{job_id}``). 409 while
+    another job of the project runs."""
     if body.method not in METHODS:
         raise RetargetError(
             f"unknown rig method {body.method!r}; choose one of {', '.join(METHODS)}")
@@ -92,15 +92,12 @@ def start_rig(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep
                             f"project {project['id']!r} has no landmarks yet: "
                             f"PUT /api/projects/{project['id']}/landmarks first")
     points = landmarks_from_json(data, mesh.vertices, mesh.faces)
-    layout = get_layout(points.layout) if points.layout else None
     options = {} if body.k is None else {"k": body.k}
     revision = project["revision"]
 
     def work(job) -> str:
-        if "progress" in inspect.signature(METHODS[body.method]).parameters:
-            options["progress"] = job.report
-        weights = compute_weights(body.method, mesh.vertices, mesh.faces, points, layout,
-                                  **options)
+        weights = isolation.call(rig, mesh, points, body.method, options, job=True,
+                                 progress=job.report, what=f"the {body.method} rig")
         store.put_rig(project["id"], weights, revision=revision)
         return (f"rig {weights.method}: {weights.n_joints} joints, "
                 f"{weights.n_influences} influences per vertex")
