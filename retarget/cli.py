@@ -994,7 +994,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data-dir", default=SERVE_DATA_DIR, metavar="DIR",
                    help=f"project store folder, created if missing (default: ./{SERVE_DATA_DIR})")
     p.add_argument("--max-upload-mb", type=_positive_float, metavar="MB",
-                   help="largest mesh upload accepted, MiB (default: 64)")
+                   help="largest uploaded file (mesh, take, video, .glb), MiB (default: 64)")
     p.add_argument("--max-vertices", type=_positive_int, metavar="V",
                    help="most vertices an uploaded mesh may have (default: 500000)")
     p.set_defaults(run=_cmd_serve, quiet=True)
