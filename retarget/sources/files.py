@@ -84,7 +84,7 @@ from retarget.layouts import LAYOUTS, from_ibug68, from_mediapipe468, get_layout
 from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.gltf_take import gltf_points
 from retarget.sources.obj_sequence import obj_sequence_points
-from retarget.sources.take import DEFAULT_FPS, Take
+from retarget.sources.take import DEFAULT_FPS, MAX_TAKE_VALUES, Take
 
 __all__ = ["TAKE_FORMATS", "read_take", "write_take_csv"]
 
@@ -229,6 +229,47 @@ def _fps(fps, file_fps, times) -> tuple[float, bool]:
     return DEFAULT_FPS, True
 
 
+class _Table:
+    """Rows of string cells read into a (R, C) float64 array a block at a time, so that
+    no more than a block of cells is held as strings; empty or "nan" cells become NaN.
+
+    `add(cells, number)` takes a row (`number` names it in messages, `column_of(j)` a
+    column); a table past `MAX_TAKE_VALUES` cells is refused there, before its arrays.
+    """
+
+    _BLOCK = 1 << 16  # cells converted at once: at most 16 MB of 64-character strings
+
+    def __init__(self, label: str, width: int, column_of):
+        self.label, self.width, self.column_of = label, width, column_of
+        self.numbers: list[int] = []
+        self._pending: list[list[str]] = []
+        self._blocks: list[np.ndarray] = []
+
+    def add(self, cells: list[str], number: int) -> None:
+        if (len(self.numbers) + 1) * self.width > MAX_TAKE_VALUES:
+            raise RetargetError(
+                f"{self.label}: row {number} takes the table past {MAX_TAKE_VALUES} values "
+                f"({len(self.numbers) + 1} rows of {self.width} columns); split the take")
+        self.numbers.append(number)
+        self._pending.append(cells)
+        if len(self._pending) * self.width >= self._BLOCK:
+            self._flush()
+
+    def values(self) -> np.ndarray:
+        """(R, C) float64 of every row added."""
+        self._flush()
+        if not self._blocks:
+            return np.zeros((0, self.width))
+        return np.concatenate(self._blocks) if len(self._blocks) > 1 else self._blocks[0]
+
+    def _flush(self) -> None:
+        if self._pending:
+            first = len(self.numbers) - len(self._pending)
+            self._blocks.append(_numeric(self._pending, self.label,
+                                         lambda i: self.numbers[first + i], self.column_of))
+            self._pending = []
+
+
 def _numeric(rows: list[list[str]], label: str, row_of, column_of) -> np.ndarray:
     """(R, C) float64 from rows of string cells; empty or "nan" cells become NaN. A cell
     that is not a number raises naming its row and column (via `row_of(i)`, `column_of(j)`)."""
@@ -265,23 +306,11 @@ def _numeric(rows: list[list[str]], label: str, row_of, column_of) -> np.ndarray
 
 def _read_csv(text: str, label: str, fps, layout) -> Take:
     reader = csv.reader(io.StringIO(text))
-    rows, lines = [], []
-    header = None
-    for cells in reader:
-        if not any(c.strip() for c in cells):
-            continue
-        if header is None:
-            header = [c.strip() for c in cells]
-            continue
-        if len(cells) != len(header):
-            raise RetargetError(
-                f"{label}: row {reader.line_num} has {len(cells)} cells, the header has {len(header)}")
-        rows.append(cells)
-        lines.append(reader.line_num)
+    rows = _csv_rows(reader, label)
+    header = next(rows, None)
     if header is None:
         raise RetargetError(f"{label} is empty")
-    if not rows:
-        raise RetargetError(f"{label} has a header but no frames")
+    header = [c.strip() for c in header]
     frame_col = time_col = None
     axes: dict[str, dict[str, int]] = {}
     for j, column in enumerate(header):
@@ -309,11 +338,18 @@ def _read_csv(text: str, label: str, fps, layout) -> Take:
             raise RetargetError(
                 f"{label}: point {point!r} has no {'/'.join(missing)} column"
                 + (" (other points have z)" if missing == ["z"] else ""))
-    values = _numeric(rows, label,
-                      lambda i: lines[i], lambda j: repr(header[j]))
+    table = _Table(label, len(header), lambda j: repr(header[j]))
+    for cells in rows:
+        if len(cells) != len(header):
+            raise RetargetError(
+                f"{label}: row {reader.line_num} has {len(cells)} cells, the header has {len(header)}")
+        table.add(cells, reader.line_num)
+    if not table.numbers:
+        raise RetargetError(f"{label} has a header but no frames")
+    values, lines = table.values(), table.numbers
     names = tuple(axes)
     columns = [axes[p][a] for p in names for a in wanted]
-    points = values[:, columns].reshape(len(rows), len(names), dims)
+    points = values[:, columns].reshape(len(lines), len(names), dims)
     times = None
     if time_col is not None:
         times = values[:, time_col]
@@ -323,6 +359,25 @@ def _read_csv(text: str, label: str, fps, layout) -> Take:
         times = times - times[0]
     rate, assumed = _fps(fps, None, times)
     return _take(points, names, rate, times, "csv", {"fps_assumed": assumed}, label)
+
+
+def _csv_rows(reader, label: str):
+    """The reader's rows that hold something; a row the csv module cannot parse (a cell
+    over its field size limit, say) is refused naming the row."""
+    while True:
+        try:
+            cells = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            row = reader.line_num
+            if "field larger than field limit" in str(exc):
+                raise RetargetError(
+                    f"{label}: row {row} has a cell longer than {csv.field_size_limit()} "
+                    "characters; a cell holds one number") from None
+            raise RetargetError(f"{label}: row {row} is not valid CSV: {exc}") from None
+        if any(c.strip() for c in cells):
+            yield cells
 
 
 def _read_json(text: str, label: str, fps, layout) -> Take:
@@ -445,7 +500,8 @@ def _read_trc(text: str, label: str, fps, layout) -> Take:
     if declared != len(markers):
         raise RetargetError(f"{label}: NumMarkers is {declared} but line 4 names {len(markers)} markers")
     width = 2 + 3 * len(markers)
-    rows, numbers = [], []
+    columns = ["Frame#", "Time"] + [f"{m} {a}" for m in markers for a in "XYZ"]
+    table = _Table(label, width, lambda j: repr(columns[j]))
     for number, line in enumerate(lines[5:], start=6):
         if not line.strip():
             continue
@@ -455,16 +511,13 @@ def _read_trc(text: str, label: str, fps, layout) -> Take:
         if len(cells) > width:
             raise RetargetError(
                 f"{label}: row {number} has {len(cells)} cells; {len(markers)} markers take {width}")
-        rows.append(cells + [""] * (width - len(cells)))
-        numbers.append(number)
-    if not rows:
+        table.add(cells + [""] * (width - len(cells)), number)
+    if not table.numbers:
         raise RetargetError(f"{label} has no frames")
-    columns = ["Frame#", "Time"] + [f"{m} {a}" for m in markers for a in "XYZ"]
-    values = _numeric(rows, label,
-                      lambda i: numbers[i], lambda j: repr(columns[j]))
+    values = table.values()
     times = values[:, 1]
     times = None if np.isnan(times).any() else times - times[0]
-    points = values[:, 2:].reshape(len(rows), len(markers), 3)
+    points = values[:, 2:].reshape(len(values), len(markers), 3)
     rate, _ = _fps(fps, rate, times)
     meta = {"units": info.get("Units", "")}
     return _take(points, _unique(markers), rate, times, "trc", meta, label)

@@ -28,7 +28,13 @@ from retarget.layouts import get_layout
 DEFAULT_FPS = 30.0
 """The nominal frame rate of a take whose source states none (a file, a video container)."""
 
-__all__ = ["Take"]
+MAX_TAKE_VALUES = 30_000_000
+"""Most coordinates (frames x points x 2|3) a take read from a file may hold; the readers
+refuse a file that declares more before they make its arrays. 30 million are 240 MB as
+float64 (120 MB as the take's float32): a 478-point MediaPipe mesh in 3D for 20,000
+frames, 11 minutes at 30 fps."""
+
+__all__ = ["MAX_TAKE_VALUES", "Take"]
 
 _FORMAT = "retarget-take-1"
 
