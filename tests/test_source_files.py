@@ -138,6 +138,23 @@ def test_json_errors(doc, message):
         read_take(b"{", filename="bad.json")
 
 
+def test_json_nested_too_deeply_is_refused_before_parsing():
+    with pytest.raises(RetargetError, match=r"'deep.json' is nested too deeply: 200000 levels of \[ and \{"):
+        read_take(b"[" * 200_000, filename="deep.json")
+    with pytest.raises(RetargetError, match="nested too deeply: 65 levels"):
+        read_take(b'{"frames": ' + b"[" * 64 + b"]" * 64 + b"}", filename="deep.json")
+    # brackets inside strings do not count
+    doc = {"names": ["[" * 100 + '\\"{'], "frames": [[[1, 2]]]}
+    assert read_take(json.dumps(doc).encode(), filename="ok.json").names == ("[" * 100 + '\\"{',)
+
+
+def test_json_take_over_the_value_budget_is_refused_before_its_array(monkeypatch):
+    monkeypatch.setattr(files, "MAX_TAKE_VALUES", 10)
+    doc = {"names": ["a", "b"], "frames": [[[1, 2, 3], [4, 5, 6]]] * 2}
+    with pytest.raises(RetargetError, match="2 frames of 2 points in 3D are 12 values; at most 10"):
+        read_take(json.dumps(doc).encode(), filename="long.json")
+
+
 def test_npy_of_layout_ibug_and_mediapipe_points():
     def npy(array):
         buffer = io.BytesIO()

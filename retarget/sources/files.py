@@ -95,6 +95,11 @@ MAX_ARCHIVE_BYTES = 2 << 30
 """Most uncompressed bytes read out of an OBJ-sequence zip (a zip bomb stops here)."""
 
 _MAX_NUMBER_CHARS = 64  # longer cells cannot be numbers worth reading
+_MAX_JSON_DEPTH = 64  # a take is 4 deep; json.loads recurses once per level
+_JSON_STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"')
+_JSON_STEPS = np.zeros(256, np.int8)  # +1 for [ and {, -1 for ] and }
+_JSON_STEPS[[ord("["), ord("{")]] = 1
+_JSON_STEPS[[ord("]"), ord("}")]] = -1
 _AXIS_COLUMN = re.compile(r"^(.+?)[_.: ]([xyzXYZ])$")
 _FRAME_COLUMNS = ("frame", "frame#", "frame_index", "index")
 _TIME_COLUMNS = ("time", "time_s", "timestamp", "t")
@@ -381,10 +386,17 @@ def _csv_rows(reader, label: str):
 
 
 def _read_json(text: str, label: str, fps, layout) -> Take:
+    depth = _json_depth(text)
+    if depth > _MAX_JSON_DEPTH:
+        raise RetargetError(
+            f"{label} is nested too deeply: {depth} levels of [ and {{ (a take has 4; at most "
+            f"{_MAX_JSON_DEPTH} are read)")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise RetargetError(f"{label} is not JSON: {exc}") from None
+    except RecursionError:
+        raise RetargetError(f"{label} is nested too deeply to be read as JSON") from None
     if not isinstance(doc, dict) or "frames" not in doc:
         raise RetargetError(f'{label}: a JSON take is an object with "frames" (and "names" or "layout")')
     frames = doc["frames"]
@@ -417,6 +429,10 @@ def _read_json(text: str, label: str, fps, layout) -> Take:
         rows.append(frame)
     if dims is None:
         raise RetargetError(f"{label}: every point is null in every frame")
+    if len(frames) * n * dims > MAX_TAKE_VALUES:
+        raise RetargetError(
+            f"{label}: {len(frames)} frames of {n} points in {dims}D are "
+            f"{len(frames) * n * dims} values; at most {MAX_TAKE_VALUES} are read")
     points = np.full((len(frames), n, dims), np.nan)
     for f, frame in enumerate(rows):
         for p, point in enumerate(frame):
@@ -449,6 +465,15 @@ def _read_json(text: str, label: str, fps, layout) -> Take:
     if file_layout is not None and layout is None:
         take = take.to_layout(file_layout)
     return take
+
+
+def _json_depth(text: str) -> int:
+    """How deep [ and { nest in a JSON text, its strings skipped: a cheap scan made before
+    `json.loads` builds anything (or recurses once per level)."""
+    bare = np.frombuffer(_JSON_STRING.sub('""', text).encode("utf-8", "replace"), np.uint8)
+    steps = _JSON_STEPS[bare]
+    steps = steps[steps != 0]
+    return int(np.cumsum(steps, dtype=np.int32).max(initial=0))
 
 
 def _read_npy(data: bytes, label: str, layout, fps) -> Take:
