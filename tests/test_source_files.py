@@ -19,6 +19,7 @@ from retarget.layouts import IBUG68_TO_MEDIAPIPE468, get_layout
 from retarget.mesh import load_mesh
 from retarget.sample_face import demo_weights, posed_vertices, sample_face
 from retarget.sources import c3d_header, files
+from retarget.sources import take as take_module
 from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.files import read_take, write_take_csv
 from retarget.sources.take import Take
@@ -178,6 +179,42 @@ def test_npy_of_layout_ibug_and_mediapipe_points():
         read_take(npy(np.zeros((2, 68))), filename="t.npy", layout="ibug68")
     with pytest.raises(RetargetError, match="not a NumPy .npy array"):
         read_take(b"junk", filename="t.npy", layout="ibug68")
+
+
+def _npy_with_header(header: dict, data: bytes = b"\0" * 24) -> bytes:
+    out = io.BytesIO()
+    np.lib.format.write_array_header_1_0(out, header)
+    return out.getvalue() + data
+
+
+@pytest.mark.parametrize("header, message", [
+    # 1.48 TiB claimed by a 152-byte file
+    ({"descr": "<f8", "fortran_order": False, "shape": (10 ** 8, 678, 3)},
+     r"'t.npy': its header declares a 100000000x678x3 float64 array, 1627200000000 bytes, but "
+     r"24 bytes of data follow it"),
+    ({"descr": "<f8", "fortran_order": False, "shape": (-1, 68, 3)}, "negative shape"),
+    ({"descr": "<f8", "fortran_order": 1, "shape": (1, 1, 3)},
+     r"is not a NumPy .npy array: its header is malformed \(ValueError: fortran_order is not a valid bool"),
+    ({"descr": [("x", "<f8"), ("y", "<f8")], "fortran_order": False, "shape": (1, 1, 3)},
+     r"has dtype \[\('x', '<f8'\), \('y', '<f8'\)\]; a plain number or string type is read"),
+])
+def test_npy_header_is_checked_before_the_array_is_loaded(header, message):
+    with pytest.raises(RetargetError, match=message):
+        read_take(_npy_with_header(header), filename="t.npy", layout="ibug68")
+
+
+def test_npy_objects_budget_and_fortran_order(monkeypatch):
+    buffer = io.BytesIO()
+    np.save(buffer, np.array([[[1, 2]]], dtype=object), allow_pickle=True)
+    with pytest.raises(RetargetError, match=r"'o.npy' holds Python objects \(dtype object\)"):
+        read_take(buffer.getvalue(), filename="o.npy", layout="ibug68")
+    buffer = io.BytesIO()
+    np.save(buffer, np.asfortranarray(TRUTH))
+    take = read_take(buffer.getvalue(), filename="f.npy", layout="ibug68")
+    np.testing.assert_array_equal(take.points, TRUTH.astype(np.float32))
+    monkeypatch.setattr(take_module, "MAX_TAKE_VALUES", 100)
+    with pytest.raises(RetargetError, match=r"declares a 10x68x3 array, 2040 values; at most 100 are read"):
+        read_take(buffer.getvalue(), filename="f.npy", layout="ibug68")
 
 
 def test_npz_take_files_are_read():

@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 import io
+import zipfile
 
 import numpy as np
 import pytest
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
+from retarget.sources import take as take_module
 from retarget.sources.take import Take
 
 IBUG = get_layout("ibug68")
@@ -164,3 +166,46 @@ def test_load_refuses_other_files(tmp_path):
              names=np.array(take.names), info=np.array('{"format": "retarget-take-1", "fps": 30}'))
     with pytest.raises(RetargetError, match="3 points but 68 names"):
         Take.load(buffer.getvalue())
+
+
+def _npz(take: Take, **replace) -> bytes:
+    """A take file whose members are `take`'s, those named in `replace` swapped for bytes."""
+    buffer = io.BytesIO()
+    take.save(buffer)
+    out = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(buffer.getvalue())) as src, zipfile.ZipFile(out, "w") as dst:
+        for info in src.infolist():
+            key = info.filename[:-4]
+            dst.writestr(info.filename, replace.get(key, src.read(info)))
+    return out.getvalue()
+
+
+def test_load_checks_member_headers_before_unpacking():
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f4", "fortran_order": False, "shape": (10 ** 8, 678, 3)})
+    data = _npz(_take(frames=2), points=header.getvalue() + b"\0" * 16)
+    with pytest.raises(RetargetError, match=r"'t.npz': member 'points.npy': its header declares a "
+                                            r"100000000x678x3 float32 array, 813600000000 bytes, but 16"):
+        Take.load(data, label="'t.npz'")
+    objects = io.BytesIO()
+    np.save(objects, np.array(["a", 1], dtype=object), allow_pickle=True)
+    with pytest.raises(RetargetError, match=r"member 'names.npy' holds Python objects"):
+        Take.load(_npz(_take(frames=2), names=objects.getvalue()))
+
+
+def test_load_refuses_encrypted_damaged_and_oversized_members(monkeypatch):
+    data = _npz(_take(frames=2))
+    # the central directory entry of points.npy: its flag bits at offset 8
+    entry = next(i for i in range(len(data)) if data.startswith(b"PK\x01\x02", i)
+                 and data[i + 46:i + 56] == b"points.npy")
+    encrypted = data[:entry + 8] + bytes([data[entry + 8] | 1]) + data[entry + 9:]
+    with pytest.raises(RetargetError, match="member 'points.npy' is encrypted"):
+        Take.load(encrypted)
+    at = data.index(b"points.npy") + 10 + 200  # a byte of the stored points data
+    damaged = data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1:]
+    with pytest.raises(RetargetError, match=r"member 'points.npy' is damaged: Bad CRC-32"):
+        Take.load(damaged)
+    monkeypatch.setattr(take_module, "_MAX_NPZ_BYTES", 1000)
+    with pytest.raises(RetargetError, match=r"its arrays unpack to \d+ bytes \(points.npy \d+, .*\); at most 1000"):
+        Take.load(data)

@@ -84,7 +84,7 @@ from retarget.layouts import LAYOUTS, from_ibug68, from_mediapipe468, get_layout
 from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.gltf_take import gltf_points
 from retarget.sources.obj_sequence import obj_sequence_points
-from retarget.sources.take import DEFAULT_FPS, MAX_TAKE_VALUES, Take
+from retarget.sources.take import DEFAULT_FPS, MAX_TAKE_VALUES, Take, npy_array
 
 __all__ = ["TAKE_FORMATS", "read_take", "write_take_csv"]
 
@@ -131,7 +131,7 @@ def read_take(source, *, filename: str | None = None, layout: str | None = None,
     if kind == "npy":
         take = _read_npy(data, label, layout, fps)
     elif kind == "npz":
-        take = Take.load(data)
+        take = Take.load(data, label=label)
         if fps is not None:
             take = Take(take.points, take.names, fps, take.times, take.layout, take.source, take.meta)
     elif kind in ("glb", "gltf"):
@@ -480,10 +480,7 @@ def _read_npy(data: bytes, label: str, layout, fps) -> Take:
     if layout is None:
         raise RetargetError(f"{label}: an .npy take holds no point names; choose its layout")
     lay = get_layout(layout)
-    try:
-        points = np.load(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise RetargetError(f"{label} is not a NumPy .npy array: {exc}") from None
+    points = npy_array(io.BytesIO(data), label, len(data))  # the header checked before the data
     if not isinstance(points, np.ndarray) or points.dtype.kind not in "fiu" \
             or points.ndim != 3 or points.shape[2] not in (2, 3):
         raise RetargetError(

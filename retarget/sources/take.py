@@ -16,7 +16,10 @@ from __future__ import annotations
 import difflib
 import io
 import json
+import math
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -34,9 +37,14 @@ refuse a file that declares more before they make its arrays. 30 million are 240
 float64 (120 MB as the take's float32): a 478-point MediaPipe mesh in 3D for 20,000
 frames, 11 minutes at 30 fps."""
 
-__all__ = ["MAX_TAKE_VALUES", "Take"]
+__all__ = ["MAX_TAKE_VALUES", "Take", "npy_array"]
 
 _FORMAT = "retarget-take-1"
+_MEMBERS = ("points", "times", "names", "info")
+_ZIP_METHODS = (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED)  # what np.savez writes
+_MAX_NPZ_BYTES = 8 * MAX_TAKE_VALUES + (64 << 20)
+"""Most uncompressed bytes read from a take's .npz: the points as float64 and 64 MiB for
+the times, names and info."""
 
 
 @dataclass(eq=False)
@@ -260,22 +268,41 @@ class Take:
             names=np.array(self.names, dtype=str), info=np.array(json.dumps(info)))
 
     @classmethod
-    def load(cls, source) -> "Take":
+    def load(cls, source, *, label: str | None = None) -> "Take":
         """Read a take written by `save` from a path, bytes or binary file; validated as
-        by construction. Raises `RetargetError` for anything else."""
-        label = repr(str(source)) if isinstance(source, (str, os.PathLike)) else "the take data"
+        by construction. Raises `RetargetError` for anything else; its messages name the
+        file as `label` (default: the path, or "the take data").
+
+        The .npz is read member by member as a zip of .npy files: each member's size and
+        .npy header are checked (`npy_array`: shape, dtype, bytes, `MAX_TAKE_VALUES`)
+        before its data is unpacked, and at most `_MAX_NPZ_BYTES` are unpacked in all.
+        """
+        if label is None:
+            label = repr(str(source)) if isinstance(source, (str, os.PathLike)) else "the take data"
         if isinstance(source, (bytes, bytearray, memoryview)):
             source = io.BytesIO(bytes(source))
         elif isinstance(source, (str, os.PathLike)):
-            source = Path(source)
+            try:
+                source = io.BytesIO(Path(source).read_bytes())
+            except OSError as exc:
+                raise RetargetError(f"could not read {label} as a take (.npz): {exc}") from None
         try:
-            with np.load(source, allow_pickle=False) as data:
-                lacking = [key for key in ("points", "times", "names", "info") if key not in data]
-                if lacking:
-                    raise RetargetError(f"{label} is not a take file: it lacks {', '.join(lacking)}")
-                arrays = {key: data[key] for key in ("points", "times", "names", "info")}
-        except (OSError, ValueError, EOFError) as exc:
+            archive = zipfile.ZipFile(source)
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
             raise RetargetError(f"could not read {label} as a take (.npz): {exc}") from None
+        with archive:
+            found = {info.filename: info for info in archive.infolist()}
+            lacking = [key for key in _MEMBERS if f"{key}.npy" not in found]
+            if lacking:
+                raise RetargetError(f"{label} is not a take file: it lacks {', '.join(lacking)}")
+            members = [found[f"{key}.npy"] for key in _MEMBERS]
+            total = sum(info.file_size for info in members)
+            if total > _MAX_NPZ_BYTES:
+                raise RetargetError(
+                    f"{label}: its arrays unpack to {total} bytes "
+                    f"({', '.join(f'{i.filename} {i.file_size}' for i in members)}); at most "
+                    f"{_MAX_NPZ_BYTES} are read")
+            arrays = {key: _npz_member(archive, info, label) for key, info in zip(_MEMBERS, members)}
         try:
             info = json.loads(str(arrays["info"]))
         except json.JSONDecodeError as exc:
@@ -284,6 +311,75 @@ class Take:
             raise RetargetError(f"{label} is not a take file (format {_FORMAT!r} expected)")
         if arrays["names"].dtype.kind != "U" or arrays["names"].ndim != 1:
             raise RetargetError(f"{label}: names must be a 1D array of strings")
+        meta = info.get("meta") or {}
         return cls(points=arrays["points"], names=tuple(arrays["names"].tolist()),
                    fps=info.get("fps"), times=arrays["times"], layout=info.get("layout"),
-                   source=info.get("source", ""), meta=info.get("meta") or {})
+                   source=info.get("source", ""), meta=meta)
+
+
+def npy_array(source, where: str, size: int, max_values: int | None = None) -> np.ndarray:
+    """The array of a .npy file read from the binary file object `source` (positioned at
+    its start; `size` bytes long), its header read and checked before its data: a plain
+    numeric, boolean or string dtype (no Python objects, no fields), no negative
+    dimension, at most `max_values` elements (default `MAX_TAKE_VALUES`) and exactly the
+    bytes the shape needs.
+
+    Refusals are `RetargetError`s that start with `where` (a file or member name). The
+    array may be a read-only view of the bytes read.
+    """
+    from numpy.lib import format as npy
+
+    try:
+        version = npy.read_magic(source)
+    except ValueError as exc:
+        raise RetargetError(f"{where} is not a NumPy .npy array: {exc}") from None
+    if version not in ((1, 0), (2, 0)):
+        raise RetargetError(f"{where}: .npy format version {version[0]}.{version[1]} is not read "
+                            "(1.0 and 2.0 are)")
+    try:
+        read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+        shape, fortran, dtype = read_header(source)
+    except Exception as exc:  # numpy raises ValueError, literal_eval others on a hostile header
+        raise RetargetError(
+            f"{where} is not a NumPy .npy array: its header is malformed "
+            f"({type(exc).__name__}: {str(exc)[:200]})") from None
+    if dtype.hasobject:
+        raise RetargetError(f"{where} holds Python objects (dtype {dtype}), which are not read "
+                            "(they would need pickle)")
+    if dtype.fields is not None or dtype.subdtype is not None or dtype.kind not in "biufUS" \
+            or dtype.itemsize == 0:
+        raise RetargetError(f"{where} has dtype {dtype}; a plain number or string type is read")
+    if any(d < 0 for d in shape):
+        raise RetargetError(f"{where}: its header gives the negative shape {shape}")
+    count = math.prod(shape)
+    need = count * dtype.itemsize
+    max_values = MAX_TAKE_VALUES if max_values is None else max_values
+    present = size - source.tell()
+    if need != present:
+        raise RetargetError(
+            f"{where}: its header declares a {'x'.join(map(str, shape)) or 'scalar'} {dtype} "
+            f"array{' (Fortran order)' if fortran else ''}, {need} bytes, but {present} bytes "
+            "of data follow it")
+    if count > max_values:
+        raise RetargetError(
+            f"{where}: its header declares a {'x'.join(map(str, shape))} array, {count} "
+            f"values; at most {max_values} are read")
+    raw = source.read(need + 1)  # past the end, so that a zip member's CRC is checked
+    if len(raw) != need:
+        raise RetargetError(f"{where}: its data ends after {len(raw)} of {need} bytes")
+    return np.frombuffer(raw, dtype, count).reshape(shape, order="F" if fortran else "C")
+
+
+def _npz_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo, label: str) -> np.ndarray:
+    """The array of one member of a take's .npz, its zip entry and .npy header checked."""
+    where = f"{label}: member {info.filename!r}"
+    if info.flag_bits & 0x1:
+        raise RetargetError(f"{where} is encrypted")
+    if info.compress_type not in _ZIP_METHODS:
+        raise RetargetError(f"{where} uses compression method {info.compress_type}, which is "
+                            "not read (stored and deflate are)")
+    try:
+        with archive.open(info) as handle:
+            return npy_array(handle, where, info.file_size)
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, NotImplementedError) as exc:
+        raise RetargetError(f"{where} is damaged: {exc}") from None
