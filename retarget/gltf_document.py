@@ -307,7 +307,8 @@ def _json_and_binary(data: bytes, where: str):
     try:
         header = json.loads(text.decode("utf-8"))
     except UnicodeDecodeError as exc:
-        raise RetargetError(f"{where}: its glTF JSON is not UTF-8 text (byte {exc.start})") from None
+        raise RetargetError(f"{where}: its glTF JSON is not UTF-8 text "
+                            f"(byte {exc.start})") from None
     except json.JSONDecodeError as exc:
         raise RetargetError(f"{where}: its glTF JSON is malformed: {exc.msg} at line "
                             f"{exc.lineno}, column {exc.colno}") from None
@@ -440,7 +441,8 @@ class _Checker:
             if largest is None or nbytes > largest[1]:
                 largest = (a, nbytes, "bufferView" in accessor)
             if "bufferView" in accessor:
-                v = self.index(accessor["bufferView"], len(views), f"{subject} refers to", "bufferView")
+                v = self.index(accessor["bufferView"], len(views), f"{subject} refers to",
+                               "bufferView")
                 offset = self.whole(accessor, "byteOffset", subject, 0, default=0)
                 _, length, stride = views[v]
                 if stride is not None and stride < element:
@@ -484,7 +486,8 @@ class _Checker:
             self.refuse(f"{subject} has no attributes object")
         attributes = primitive["attributes"]
         for name, value in attributes.items():
-            self.index(value, len(accessors), f"{subject}: its {name} attribute refers to", "accessor")
+            self.index(value, len(accessors), f"{subject}: its {name} attribute refers to",
+                       "accessor")
         mode = self.whole(primitive, "mode", subject, 0, 6, default=4)
         if "material" in primitive:
             self.index(primitive["material"], n_materials, f"{subject} refers to", "material")
@@ -497,7 +500,8 @@ class _Checker:
             if name in attributes:
                 a = attributes[name]
                 if accessors[a][0] != kind:
-                    self.refuse(f"{subject}: {name} (accessor {a}) must be {kind}, got {accessors[a][0]}")
+                    self.refuse(f"{subject}: {name} (accessor {a}) must be {kind}, "
+                                f"got {accessors[a][0]}")
                 if accessors[a][2] != n:
                     self.refuse(f"{subject}: {name} (accessor {a}) has {accessors[a][2]:,} "
                                 f"values but POSITION has {n:,}")
@@ -505,7 +509,8 @@ class _Checker:
             return 0, 0
         k = n
         if "indices" in primitive:
-            i = self.index(primitive["indices"], len(accessors), f"{subject}: its indices refer to", "accessor")
+            i = self.index(primitive["indices"], len(accessors),
+                           f"{subject}: its indices refer to", "accessor")
             kind, component, k = accessors[i]
             if kind != "SCALAR" or component not in (5121, 5123, 5125):
                 self.refuse(f"{subject}: its indices (accessor {i}) must be unsigned integer "

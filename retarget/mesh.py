@@ -641,12 +641,11 @@ def _gltf_checked(data, kind, label, resolver, max_vertices, max_faces):
             f"could not read {label} as {kind.upper()}: it is not a GLB file (one starts "
             "with 'glTF') nor glTF JSON"
         )
-    external = None
-    if resolver is not None:
-        def external(uri):
-            return len(resolver.get(uri))
+    def external(uri):  # a path's folder; bytes and file objects have none
+        return len(resolver.get(uri))
+
     where = f"could not read {label} as {kind.upper()}"
-    size = scene_size(data, where, external)
+    size = scene_size(data, where, None if resolver is None else external)
     if size is None:  # no glTF 2.0 document: trimesh's error says so
         return data, read_as
     if size.scene is None:

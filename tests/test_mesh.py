@@ -1,6 +1,7 @@
 """Tests for retarget.mesh: loading each format, the refusals, save/load round trips.
 
-Every file is written into tmp_path by hand or by trimesh; no external data.
+Every file is built in code, by hand (text, a GLB's chunks, a glTF's JSON) or by trimesh,
+and written into tmp_path or passed as bytes; no external data.
 """
 
 import base64
@@ -563,9 +564,11 @@ def test_stl_too_short_for_a_header_is_refused():
         load_mesh(b"not a mesh!", "stl")
 
 
-def test_binary_stl_whose_header_starts_with_solid_loads():
+@pytest.mark.parametrize("header", [b"solid exported by a CAD tool", b"COLOR=\xff\xfe\x80"])
+def test_binary_stl_whose_header_starts_with_solid_or_is_not_text_loads(
+        no_charset_normalizer, header):
     data = binary_stl(PYRAMID[PYRAMID_FACES])
-    data = b"solid exported by a CAD tool".ljust(80, b" ") + data[80:]
+    data = header.ljust(80, b" ") + data[80:]
     mesh = load_mesh(data, "stl")
     np.testing.assert_allclose(mesh.vertices[mesh.faces], PYRAMID[PYRAMID_FACES])
 
@@ -751,7 +754,8 @@ def broken(change):
 def test_gltf_layout_is_checked_against_its_buffers(not_parsed, change, message):
     document, blob = broken(change)
     for data, kind in ((gltf_bytes(document, blob), "GLTF"), (glb_bytes(document, blob), "GLB")):
-        with pytest.raises(RetargetError, match=rf"could not read the given bytes as {kind}: {message}"):
+        prefix = rf"could not read the given bytes as {kind}: "
+        with pytest.raises(RetargetError, match=prefix + message):
             load_mesh(data, kind)
 
 
@@ -937,7 +941,8 @@ def test_non_utf8_off_loads(no_charset_normalizer):
 
 
 def test_ply_whose_header_is_not_utf8_loads(no_charset_normalizer):
-    header = PLY_HEADER.format(n=4, f=2, extra="").replace("end_header", "comment caf\xe9\nend_header")
+    header = PLY_HEADER.format(n=4, f=2, extra="")
+    header = header.replace("end_header", "comment caf\xe9\nend_header")
     body = ply_text(SQUARE, SQUARE_FACES.tolist()).split("end_header\n")[1]
     mesh = load_mesh((header + body).encode("latin-1"), "ply")
     np.testing.assert_array_equal(mesh.vertices, SQUARE)
