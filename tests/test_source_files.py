@@ -18,7 +18,7 @@ from retarget.errors import RetargetError
 from retarget.layouts import IBUG68_TO_MEDIAPIPE468, get_layout
 from retarget.mesh import load_mesh
 from retarget.sample_face import demo_weights, posed_vertices, sample_face
-from retarget.sources import c3d_header, files
+from retarget.sources import c3d_header, files, obj_sequence
 from retarget.sources import take as take_module
 from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.files import read_take, write_take_csv
@@ -784,3 +784,71 @@ def _obj_zip_with(data: bytes, name: str, member: bytes) -> bytes:
             dst.writestr(info, src.read(info))
         dst.writestr(name, member)
     return out.getvalue()
+
+
+def _central(data: bytes, name: str, offset: int, raw: bytes) -> bytes:
+    """`data` with `raw` written at `offset` into the central directory entry of `name`
+    (8 flag bits, 10 method, 16 CRC, 20 packed size, 24 unpacked size)."""
+    entry = next(i for i in range(len(data)) if data.startswith(b"PK\x01\x02", i)
+                 and data[i + 46:i + 46 + len(name)] == name.encode())
+    return data[:entry + offset] + raw + data[entry + offset + len(raw):]
+
+
+def _stored_zip(frames, faces) -> bytes:
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as archive:
+        for i, frame in enumerate(frames):
+            archive.writestr(f"f_{i + 1}.obj", _obj(frame, faces))
+    return out.getvalue()
+
+
+def test_obj_sequence_members_that_cannot_be_read_are_refused_by_name():
+    frames = posed_vertices(FACE, WEIGHTS[:3])
+    labelled = {"a": 0}
+    data = _stored_zip(frames, FACE.faces)
+    encrypted = _central(data, "f_2.obj", 8, b"\x01")
+    with pytest.raises(RetargetError, match="'s.zip': 'f_2.obj' is encrypted; zip the frames without a password"):
+        read_take(encrypted, filename="s.zip", labelled_vertices=labelled)
+    for method, name in ((99, "AES encryption"), (9, "Deflate64"), (77, "an unknown method")):
+        odd = _central(data, "f_3.obj", 10, method.to_bytes(2, "little"))
+        with pytest.raises(RetargetError, match=rf"'f_3.obj' is compressed with {name} \(zip method {method}\), "
+                                                "which is not read; zip the frames with Deflate"):
+            read_take(odd, filename="s.zip", labelled_vertices=labelled)
+    at = data.index(b"v ", data.index(b"f_2.obj") + 10) + 2  # a coordinate of frame 2, stored
+    digit = b"1" if data[at:at + 1] != b"1" else b"2"
+    damaged = data[:at] + digit + data[at + 1:]
+    with pytest.raises(RetargetError, match=r"'f_2.obj' could not be unpacked: its data does not match its checksum"):
+        read_take(damaged, filename="s.zip", labelled_vertices=labelled)
+    # a central directory that understates a member's size: the read stops there
+    short = _central(data, "f_2.obj", 24, (100).to_bytes(4, "little"))
+    with pytest.raises(RetargetError, match=r"'f_2.obj' could not be unpacked: its data does not match"):
+        read_take(short, filename="s.zip", labelled_vertices=labelled)
+
+
+def test_obj_sequence_zip_bomb_is_refused_from_its_declared_sizes_before_unpacking(monkeypatch):
+    import tracemalloc
+
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("face_0001.obj", _obj(FACE.vertices, FACE.faces))
+        archive.writestr("face_0002.obj", b"v 0 0 0\n" * (1 << 20))
+    bomb = out.getvalue()
+    assert len(bomb) < 300_000
+    tracemalloc.start()
+    with pytest.raises(RetargetError, match=r"'face_0002.obj' claims to unpack \d+ bytes to 8388608 "
+                                            r"\(\d+:1\); OBJ text packs at most 100:1"):
+        read_take(bomb, filename="b.zip", labelled_vertices={"a": 0})
+    assert tracemalloc.get_traced_memory()[1] < 4 << 20  # nothing was unpacked
+    tracemalloc.stop()
+    data = _obj_zip(posed_vertices(FACE, WEIGHTS[:3]), FACE.faces)
+    monkeypatch.setattr(files, "MAX_ARCHIVE_BYTES", 1 << 20)
+    with pytest.raises(RetargetError, match=r"'s.zip': its 3 .obj files unpack to \d+ bytes; at most 1048576 are read"):
+        read_take(data, filename="s.zip", labelled_vertices={"a": 0})
+    monkeypatch.setattr(obj_sequence, "MAX_SEQUENCE_VERTICES", 20_000)
+    monkeypatch.setattr(files, "MAX_ARCHIVE_BYTES", 256 << 20)
+    with pytest.raises(RetargetError, match=r"3 frames of 8430 vertices are 25290 vertices to parse; at most 20000"):
+        read_take(data, filename="s.zip", labelled_vertices={"a": 0})
+    monkeypatch.setattr(obj_sequence, "MAX_FRAME_BYTES", 1000)
+    with pytest.raises(RetargetError, match=r"'seq/face_0001.obj' unpacks to \d+ bytes; a frame may have at most 1000"):
+        read_take(data, filename="s.zip", labelled_vertices={"a": 0})
+

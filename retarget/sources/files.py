@@ -53,7 +53,10 @@ Accepted files
     one ``.obj`` per frame, ordered by the last number in each file name (``face_0001.obj``
     ...), all with the first file's vertex count and faces; other members (``.mtl``,
     images, ``__MACOSX/``) are ignored. Vertex order is the file's ``v`` order, as in
-    `retarget.mesh.load_mesh`. Needs `labelled_vertices`.
+    `retarget.mesh.load_mesh`. Needs `labelled_vertices`. Members are stored or
+    Deflate-compressed (not encrypted, not bzip2 / LZMA / Deflate64); their declared
+    sizes are bounded before anything is unpacked (`MAX_ARCHIVE_BYTES` in all, and the
+    limits of `retarget.sources.obj_sequence`).
 
 Animated meshes and `labelled_vertices`: ``{point name: vertex index}``, or a landmarks
 JSON object of the project's kind (`retarget.landmarks`: ``vertex_indices``,
@@ -91,8 +94,13 @@ __all__ = ["TAKE_FORMATS", "read_take", "write_take_csv"]
 TAKE_FORMATS = ("csv", "json", "npy", "npz", "trc", "c3d", "glb", "gltf", "zip")
 """File extensions `read_take` reads."""
 
-MAX_ARCHIVE_BYTES = 2 << 30
-"""Most uncompressed bytes read out of an OBJ-sequence zip (a zip bomb stops here)."""
+MAX_ARCHIVE_BYTES = 256 << 20
+"""Most bytes the .obj members of an OBJ-sequence zip may unpack to in all, checked on
+their declared sizes before any is unpacked and on every read. An upload is at most
+64 MiB (`server.app.DEFAULT_MAX_UPLOAD_BYTES`) and OBJ text deflates about 4:1, so a real
+sequence that fits the upload fits here: 300 frames of an 8,000-vertex face (0.8 MB
+each); parsing 256 MiB of OBJ text takes tens of seconds, which is the point of the
+bound (`retarget.sources.obj_sequence` bounds the rest)."""
 
 _MAX_NUMBER_CHARS = 64  # longer cells cannot be numbers worth reading
 _MAX_JSON_DEPTH = 64  # a take is 4 deep; json.loads recurses once per level

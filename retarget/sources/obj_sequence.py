@@ -1,11 +1,24 @@
 """Animated faces as a zip of OBJ frames: one ``.obj`` per frame, ordered by the last
-number in each file name, all of one topology."""
+number in each file name, all of one topology.
+
+A zip can claim anything in its central directory and unpack to far more than its own
+size, so the work is bounded before it is done: the entry count before the directory is
+parsed; the members' declared sizes (in all, `max_bytes`; each, `MAX_FRAME_BYTES`) and
+compression ratios (`MAX_COMPRESSION_RATIO`) before any is unpacked; frames x vertices
+(`MAX_SEQUENCE_VERTICES`, from the first frame's vertex count) before the other frames
+are parsed. Members are unpacked and parsed a block at a time, so memory stays
+proportional to one block and the labelled points, not to the members; every read is
+bounded whatever the headers say, and a frame that runs past the first frame's vertex
+count is refused there.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import io
 import re
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -13,15 +26,46 @@ from retarget.errors import RetargetError
 from retarget.mesh import load_mesh
 from retarget.sources.labelled_points import labelled_positions, labelled_surface_points
 
-__all__ = ["obj_sequence_points"]
+__all__ = ["MAX_ARCHIVE_MEMBERS", "MAX_COMPRESSION_RATIO", "MAX_FRAME_BYTES",
+           "MAX_SEQUENCE_VERTICES", "obj_sequence_points"]
+
+MAX_ARCHIVE_MEMBERS = 100_000
+"""Most entries a zip's central directory may hold (zipfile makes an object for each)."""
+
+MAX_COMPRESSION_RATIO = 100
+"""Most a member over 4 KiB may claim to unpack to per packed byte: OBJ text deflates
+3-5:1 (10:1 for coarse coordinates), while a zip bomb's members claim ~1000:1."""
+
+MAX_FRAME_BYTES = 16 << 20
+"""Most bytes one frame may unpack to: an OBJ of about 230,000 vertices with their faces,
+far above a face mesh (the sample face has 8,430). The first frame is parsed whole by
+`retarget.mesh.load_mesh`, whose trimesh parser holds about 10 times the text, so this
+keeps that under 200 MB."""
+
+MAX_SEQUENCE_VERTICES = 50_000_000
+"""Most vertices parsed over the whole sequence (frames x the first frame's vertex
+count): 3,000 frames of a 16,000-vertex face; about a minute of parsing."""
+
+_BLOCK = 1 << 20  # bytes unpacked and parsed at once
+_MAX_LINE = 1 << 20  # no OBJ line is longer
+_RATIO_FLOOR = 4096  # tiny members may pack better than MAX_COMPRESSION_RATIO
+_METHODS = {zipfile.ZIP_STORED: "stored", zipfile.ZIP_DEFLATED: "Deflate"}
+_METHOD_NAMES = {zipfile.ZIP_BZIP2: "bzip2", zipfile.ZIP_LZMA: "LZMA", 9: "Deflate64",
+                 93: "Zstandard", 99: "AES encryption"}
+_V_LINE = re.compile(r"^[ \t]*v[ \t]", re.MULTILINE)
+_ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, OSError, ValueError,
+               NotImplementedError, UnicodeError)
 
 
 def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: int):
     """((F, K, 3) points, K names, meta) of the labelled points of a zip of OBJ frames;
-    at most `max_bytes` are unpacked."""
+    at most `max_bytes` are unpacked (see the module docstring for the other bounds)."""
+    entries = data.count(b"PK\x01\x02")  # central directory entries, at most
+    if entries > MAX_ARCHIVE_MEMBERS:
+        raise RetargetError(f"{label} holds {entries} zip entries; at most {MAX_ARCHIVE_MEMBERS} are read")
     try:
         archive = zipfile.ZipFile(io.BytesIO(data))
-    except zipfile.BadZipFile as exc:
+    except _ZIP_ERRORS as exc:
         raise RetargetError(f"{label} is not a zip archive: {exc}") from None
     members = []
     for info in archive.infolist():
@@ -40,39 +84,150 @@ def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: in
         if a == b:
             raise RetargetError(
                 f"{label}: {first.filename!r} and {second.filename!r} have the same frame number {a}")
-    budget = max_bytes
+    infos = [info for _, info in members]
+    _check_declared(infos, label, max_bytes)
+    budget = [max_bytes]  # bytes still to unpack: the headers may lie, the reads may not
 
-    def member_text(info) -> str:
-        nonlocal budget
-        with archive.open(info) as handle:
-            raw = handle.read(budget + 1)  # the header's size may lie: bound the read itself
-        budget -= len(raw)
-        if budget < 0:
-            raise RetargetError(f"{label} unpacks to more than {max_bytes} bytes")
-        return raw.decode("utf-8", errors="replace")
-
-    first_name = members[0][1].filename
-    first_text = member_text(members[0][1])
-    mesh = load_mesh(first_text.encode("utf-8"), "obj")
+    first = infos[0]
+    raw = _unpacked(archive, first, label, budget)
+    mesh = load_mesh(raw, "obj")
+    if len(infos) * mesh.n_vertices > MAX_SEQUENCE_VERTICES:
+        raise RetargetError(
+            f"{label}: {len(infos)} frames of {mesh.n_vertices} vertices are "
+            f"{len(infos) * mesh.n_vertices} vertices to parse; at most {MAX_SEQUENCE_VERTICES} "
+            "are read (fewer frames, or a coarser mesh)")
     vertex_indices, barycentric, names = labelled_surface_points(
         labelled, mesh.vertices, mesh.faces, layout, label)
     used = np.unique(vertex_indices)
-    topology = _obj_faces(first_text)
-    posed = np.empty((len(members), len(used), 3))
-    for f, (_, info) in enumerate(members):
-        text = first_text if f == 0 else member_text(info)
-        vertices = _obj_vertices(text, f"{label}: {info.filename!r}")
-        if len(vertices) != mesh.n_vertices:
-            raise RetargetError(
-                f"{label}: {info.filename!r} has {len(vertices)} vertices, {first_name!r} has "
-                f"{mesh.n_vertices}; every frame needs the same topology")
-        if f and _obj_faces(text) != topology:
-            raise RetargetError(
-                f"{label}: {info.filename!r} has other faces than {first_name!r}; every frame "
-                "needs the same topology")
+    posed = np.empty((len(infos), len(used), 3))
+    topology = None
+    for f, info in enumerate(infos):
+        where = f"{label}: {info.filename!r}"
+        if f == 0:
+            vertices, faces = _frame(io.BytesIO(raw), where, mesh.n_vertices, first.filename)
+            del raw
+            topology = faces
+        else:
+            vertices, faces = _read_frame(archive, info, label, budget, mesh.n_vertices, first.filename)
+            if faces != topology:
+                raise RetargetError(
+                    f"{where} has other faces than {first.filename!r}; every frame needs the "
+                    "same topology")
         posed[f] = vertices[used]
     points = labelled_positions(posed, used, vertex_indices, barycentric)
     return points, names, {"n_vertices": mesh.n_vertices}
+
+
+def _check_declared(infos, label: str, max_bytes: int) -> None:
+    """Refuse, from the central directory alone, members that cannot be read or that
+    claim too much: encrypted, compressed other than stored or Deflate (zipfile unpacks
+    bzip2 and LZMA without bounding the output), over `MAX_FRAME_BYTES` or
+    `MAX_COMPRESSION_RATIO`, or over `max_bytes` in all."""
+    for info in infos:
+        where = f"{label}: {info.filename!r}"
+        if info.flag_bits & 0x1:
+            raise RetargetError(f"{where} is encrypted; zip the frames without a password")
+        if info.compress_type not in _METHODS:
+            method = _METHOD_NAMES.get(info.compress_type, "an unknown method")
+            raise RetargetError(
+                f"{where} is compressed with {method} (zip method {info.compress_type}), which is "
+                "not read; zip the frames with Deflate (the usual zip compression)")
+        if info.file_size > MAX_FRAME_BYTES:
+            raise RetargetError(
+                f"{where} unpacks to {info.file_size} bytes; a frame may have at most "
+                f"{MAX_FRAME_BYTES}")
+        if info.file_size > _RATIO_FLOOR \
+                and info.file_size > MAX_COMPRESSION_RATIO * max(info.compress_size, 1):
+            raise RetargetError(
+                f"{where} claims to unpack {info.compress_size} bytes to {info.file_size} "
+                f"({info.file_size / max(info.compress_size, 1):.0f}:1); OBJ text packs at most "
+                f"{MAX_COMPRESSION_RATIO}:1, so the archive is damaged or a zip bomb")
+    total = sum(info.file_size for info in infos)
+    if total > max_bytes:
+        raise RetargetError(
+            f"{label}: its {len(infos)} .obj files unpack to {total} bytes; at most {max_bytes} "
+            "are read (fewer frames, or a coarser mesh)")
+
+
+def _unpacked(archive, info, label: str, budget: list) -> bytes:
+    """The member's bytes, the read bounded by its declared size and the budget left."""
+    where = f"{label}: {info.filename!r}"
+    try:
+        with archive.open(info) as handle:
+            raw = handle.read(min(info.file_size, budget[0]) + 1)
+            if len(raw) <= info.file_size:
+                handle.read(1)  # reach the end, where zipfile checks the CRC
+    except _ZIP_ERRORS as exc:
+        raise RetargetError(f"{where} could not be unpacked: {_zip_problem(exc)}") from None
+    budget[0] -= len(raw)
+    if budget[0] < 0 or len(raw) > info.file_size:
+        raise RetargetError(f"{where} unpacks to more than its declared {info.file_size} bytes")
+    return raw
+
+
+def _read_frame(archive, info, label, budget: list, n_vertices: int, first: str):
+    """(vertices, faces digest) of a member, unpacked a block at a time (`_frame`)."""
+    where = f"{label}: {info.filename!r}"
+    try:
+        with archive.open(info) as handle:
+            return _frame(_Bounded(handle, info.file_size, budget, where), where, n_vertices, first)
+    except RetargetError:
+        raise
+    except _ZIP_ERRORS as exc:
+        raise RetargetError(f"{where} could not be unpacked: {_zip_problem(exc)}") from None
+
+
+class _Bounded:
+    """A member's stream that refuses to give more than its declared size or the budget."""
+
+    def __init__(self, handle, size: int, budget: list, where: str):
+        self.handle, self.left, self.budget, self.where = handle, size, budget, where
+
+    def read(self, n: int) -> bytes:
+        chunk = self.handle.read(min(n, self.left + 1, self.budget[0] + 1))
+        self.left -= len(chunk)
+        self.budget[0] -= len(chunk)
+        if self.left < 0 or self.budget[0] < 0:
+            raise RetargetError(f"{self.where} unpacks to more than it declares")
+        return chunk
+
+
+def _frame(stream, where: str, n_vertices: int, first: str) -> tuple[np.ndarray, str]:
+    """((V, 3) float64 vertices in file order, a digest of the faces' vertex indices) of
+    one OBJ frame, parsed `_BLOCK` bytes at a time; a frame whose vertex count differs
+    from `n_vertices` (the first frame's, of file `first`) is refused, as soon as it runs
+    past it."""
+    digest = hashlib.blake2b(digest_size=16)
+    blocks, count, rest = [], 0, b""
+    while True:
+        chunk = stream.read(_BLOCK)
+        text = rest + chunk
+        if chunk:
+            cut = text.rfind(b"\n") + 1
+            text, rest = text[:cut], text[cut:]
+            if len(rest) > _MAX_LINE:
+                raise RetargetError(f"{where} has a line longer than {_MAX_LINE} bytes")
+        lines = text.decode("utf-8", errors="replace")
+        if count > n_vertices:  # too many already: only count the rest, for the message
+            count += len(_V_LINE.findall(lines))
+        else:
+            vertices = _obj_vertices(lines, where)
+            count += len(vertices)
+            blocks.append(vertices)
+            digest.update(_obj_faces(lines).encode("utf-8"))
+        if not chunk:
+            break
+    if count != n_vertices:
+        raise RetargetError(
+            f"{where} has {count} vertices, {first!r} has {n_vertices}; every frame needs "
+            "the same topology")
+    return np.concatenate(blocks), digest.hexdigest()
+
+
+def _zip_problem(exc: Exception) -> str:
+    if isinstance(exc, zipfile.BadZipFile) and "CRC" in str(exc):
+        return f"its data does not match its checksum ({exc})"
+    return f"{type(exc).__name__}: {exc}"
 
 
 def _obj_vertices(text: str, where: str) -> np.ndarray:
@@ -82,14 +237,15 @@ def _obj_vertices(text: str, where: str) -> np.ndarray:
         vertices = np.array(found, dtype=np.float64).reshape(-1, 3)
     except ValueError:
         raise RetargetError(f"{where}: a v line holds something that is not a number") from None
-    if len(vertices) != len(re.findall(r"^[ \t]*v[ \t]", text, re.MULTILINE)):
+    if len(vertices) != len(_V_LINE.findall(text)):
         raise RetargetError(f"{where}: a v line has fewer than 3 coordinates")
     if not np.isfinite(vertices).all():
         raise RetargetError(f"{where}: a vertex is NaN or infinite")
     return vertices
 
 
-def _obj_faces(text: str) -> int:
-    """A hash of the vertex indices of an OBJ's ``f`` lines (texture / normal indices out)."""
+def _obj_faces(text: str) -> str:
+    """The vertex indices of an OBJ's ``f`` lines (texture / normal indices out), a line
+    each."""
     lines = re.findall(r"^[ \t]*f[ \t]+(.*?)[ \t]*$", text, re.MULTILINE)
-    return hash(re.sub(r"/\S*", "", "\n".join(lines)))
+    return re.sub(r"/\S*", "", "\n".join(lines)) + "\n" if lines else ""
