@@ -727,6 +727,40 @@ def test_gltf_errors():
         read_take(b.glb(), filename="x.glb", labelled_vertices=labelled)
 
 
+def test_gltf_mesh_instanced_by_many_nodes_is_refused_from_the_json_counts():
+    import tracemalloc
+
+    b = _GlbBuilder()
+    mesh = b.mesh(FACE.vertices, FACE.faces, targets=FACE.expressions)
+    nodes = [b.node(mesh=mesh) for _ in range(40)]  # 126,006 vertices counted per node
+    b.animate([(nodes[0], "weights", KEYS, WEIGHTS, "LINEAR")])
+    data = b.glb()
+    labelled = {"vertex_indices": FACE.landmarks68.tolist(), "layout": "ibug68"}
+    tracemalloc.start()
+    with pytest.raises(RetargetError, match=r"'many.glb': its 40 mesh node\(s\) instance 5040240 vertices "
+                                            r"\(each morph target and joint set counting again\); at most 4000000"):
+        read_take(data, filename="many.glb", labelled_vertices=labelled)
+    assert tracemalloc.get_traced_memory()[1] < 8 * len(data)  # no instance was read
+    tracemalloc.stop()
+
+
+def test_gltf_keyframes_and_sampling_are_budgeted_before_they_are_made():
+    labelled = {"vertex_indices": FACE.landmarks68.tolist(), "layout": "ibug68"}
+    b = _GlbBuilder()
+    node = b.node(mesh=b.mesh(FACE.vertices, FACE.faces, targets=FACE.expressions))
+    b.animate([(node, "weights", KEYS, WEIGHTS, "LINEAR")])
+    # key times that are 20 million zeros out of nothing (no bufferView)
+    b.doc.accessors.append(pygltflib.Accessor(componentType=pygltflib.FLOAT, count=20_000_000, type="SCALAR"))
+    b.doc.animations[0].samplers[0].input = len(b.doc.accessors) - 1
+    with pytest.raises(RetargetError, match=r"'keys.glb': the animation's channels hold 20000120 key times "
+                                            r"and values; at most 16000000 are read"):
+        read_take(b.glb(), filename="keys.glb", labelled_vertices=labelled)
+    # 198,900 frames (float32 key times) of 1 node and 68 labelled vertices
+    with pytest.raises(RetargetError, match=r"'fast.glb': sampling 198900 frames of 1 node\(s\) and 68 labelled "
+                                            r"vertices makes 303919200 values; at most 25000000"):
+        read_take(_morph_glb(), filename="fast.glb", labelled_vertices=labelled, fps=221_000)
+
+
 def _obj(vertices, faces) -> bytes:
     out = io.BytesIO()
     trimesh.Trimesh(vertices, faces, process=False).export(out, file_type="obj")

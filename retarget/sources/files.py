@@ -5,7 +5,8 @@ refuses bad input with a `RetargetError` that names the file and, where it appli
 row, column, frame, label or member file. Size limits on the upload are the caller's;
 this module bounds what a file can make it allocate beyond its own size
 (`MAX_ARCHIVE_BYTES` unpacked from a zip, `retarget.gltf_document.MAX_ACCESSOR_ELEMENTS`,
-`retarget.sources.gltf_take.MAX_SAMPLED_FRAMES`,
+`retarget.sources.gltf_take.MAX_SAMPLED_FRAMES`, ``MAX_INSTANCED_VERTICES``,
+``MAX_KEYFRAME_VALUES`` and ``MAX_SAMPLED_VALUES``, counted from the glTF JSON,
 table cells no longer than a number) and reads no file a glTF names outside its own
 folder. C3D files are parsed by ezc3d, in-process, and only after
 `retarget.sources.c3d_header.c3d_layout` has walked their header and parameter section
