@@ -886,3 +886,79 @@ def test_obj_sequence_zip_bomb_is_refused_from_its_declared_sizes_before_unpacki
     with pytest.raises(RetargetError, match=r"'seq/face_0001.obj' unpacks to \d+ bytes; a frame may have at most 1000"):
         read_take(data, filename="s.zip", labelled_vertices={"a": 0})
 
+
+# --- malformed files of every format ----------------------------------------------------
+
+_TETRA = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+_TETRA_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def _small_take() -> Take:
+    points = np.random.default_rng(2).normal(size=(5, 4, 3))
+    points[2, 1] = np.nan
+    return Take(points, ("a", "b", "c", "d"), 25.0)
+
+
+def _small_csv() -> bytes:
+    out = io.StringIO()
+    write_take_csv(_small_take(), out)
+    return out.getvalue().encode()
+
+
+def _small_json() -> bytes:
+    take = _small_take()
+    frames = [[None if np.isnan(p).any() else p.tolist() for p in frame] for frame in take.points]
+    return json.dumps({"fps": 25, "names": list(take.names), "frames": frames,
+                       "times": take.frame_times().tolist(), "units": "mm"}).encode()
+
+
+def _small_npy() -> bytes:
+    out = io.BytesIO()
+    np.save(out, TRUTH[:3].astype(np.float32))
+    return out.getvalue()
+
+
+def _small_gltf_builder() -> _GlbBuilder:
+    b = _GlbBuilder()
+    node = b.node(mesh=b.mesh(_TETRA, _TETRA_FACES, targets=[_TETRA * 0.1]))
+    keys = np.arange(4) / 10.0
+    b.animate([(node, "weights", keys, np.array([[0.0], [0.5], [1.0], [0.2]]), "LINEAR"),
+               (node, "translation", keys, np.c_[keys, keys, keys], "STEP")])
+    return b
+
+
+def _small_obj_zip() -> bytes:
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
+        for i in range(3):
+            archive.writestr(f"seq/f_{i + 1}.obj", _obj(_TETRA * (1 + 0.1 * i), _TETRA_FACES))
+    return out.getvalue()
+
+
+_MUTATED = [  # (file name, its valid bytes, read_take options, mutants)
+    ("m.csv", _small_csv, {}, 80),
+    ("m.json", _small_json, {}, 80),
+    ("m.npy", _small_npy, {"layout": "ibug68"}, 60),
+    ("m.trc", lambda: _trc(["A", "B", "C"], np.ones((3, 3, 3)) * 1.5).encode(), {}, 80),
+    ("m.glb", lambda: _small_gltf_builder().glb(), {"labelled_vertices": {"a": 0, "b": 2}}, 80),
+    ("m.gltf", lambda: _small_gltf_builder().gltf(), {"labelled_vertices": {"a": 0, "b": 2}}, 60),
+    ("m.zip", _small_obj_zip, {"labelled_vertices": {"a": 0, "b": 2}}, 60),
+]
+
+
+@pytest.mark.parametrize("filename, make, options, count", _MUTATED, ids=[m[0] for m in _MUTATED])
+def test_mutants_of_every_format_read_or_raise_only_retarget_errors(filename, make, options, count):
+    data = make()
+    assert read_take(data, filename=filename, **options).n_frames >= 3
+    outcomes = {"read": 0, "refused": 0}
+    for i, mutant in enumerate(_mutants(data, count, seed=1)):
+        try:
+            read_take(mutant, filename=filename, **options)
+            outcomes["read"] += 1
+        except RetargetError as exc:
+            assert str(exc).startswith(f"'{filename}'") or f"'{filename}'" in str(exc), str(exc)
+            outcomes["refused"] += 1
+        except Exception as exc:  # noqa: BLE001 - the point of the test
+            pytest.fail(f"mutant {i} of {filename} raised {type(exc).__name__}: {exc}")
+    assert outcomes["refused"] > 0
+

@@ -78,7 +78,10 @@ import json
 import math
 import os
 import re
+import struct
 import tempfile
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +97,11 @@ __all__ = ["TAKE_FORMATS", "read_take", "write_take_csv"]
 
 TAKE_FORMATS = ("csv", "json", "npy", "npz", "trc", "c3d", "glb", "gltf", "zip")
 """File extensions `read_take` reads."""
+
+_KINDS = {"csv": "a CSV landmark table", "json": "a JSON take", "npy": "a NumPy .npy array",
+          "npz": "a take file (.npz)", "trc": "a TRC file", "c3d": "a C3D file",
+          "glb": "a GLB animated face", "gltf": "a glTF animated face",
+          "zip": "a zip of OBJ frames"}
 
 MAX_ARCHIVE_BYTES = 256 << 20
 """Most bytes the .obj members of an OBJ-sequence zip may unpack to in all, checked on
@@ -137,26 +145,56 @@ def read_take(source, *, filename: str | None = None, layout: str | None = None,
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float))
                             or not math.isfinite(fps) or fps <= 0):
         raise RetargetError(f"fps must be a positive number, got {fps!r}")
+    try:
+        take = _read(kind, data, label, folder, layout, fps, labelled_vertices)
+        return _finished(take, label, layout, mapping)
+    except RetargetError:
+        raise
+    except Exception as exc:  # a reader's or library's own error on a malformed file
+        raise RetargetError(f"{label} could not be read as {_KINDS[kind]}: {_plain(exc)}") from exc
+
+
+def _read(kind: str, data: bytes, label: str, folder, layout, fps, labelled_vertices) -> Take:
+    """The take in `data`, read by the reader of `kind`."""
     if kind == "npy":
-        take = _read_npy(data, label, layout, fps)
-    elif kind == "npz":
+        return _read_npy(data, label, layout, fps)
+    if kind == "npz":
         take = Take.load(data, label=label)
         if fps is not None:
             take = Take(take.points, take.names, fps, take.times, take.layout, take.source, take.meta)
-    elif kind in ("glb", "gltf"):
+        return take
+    if kind in ("glb", "gltf"):
         points, names, rate, meta = gltf_points(data, label, kind, folder, labelled_vertices, layout, fps)
-        take = _take(points, names, rate, None, "gltf", meta, label)
-    elif kind == "zip":
+        return _take(points, names, rate, None, "gltf", meta, label)
+    if kind == "zip":
         points, names, meta = obj_sequence_points(data, label, labelled_vertices, layout, MAX_ARCHIVE_BYTES)
         rate, assumed = _fps(fps, None, None)
-        take = _take(points, names, rate, None, "obj", {"fps_assumed": assumed, **meta}, label)
-    elif kind == "c3d":
-        take = _read_c3d(data, label, fps)
-    else:
-        text = _text(data, label)
-        reader = {"csv": _read_csv, "json": _read_json, "trc": _read_trc}[kind]
-        take = reader(text, label, fps, layout)
-    return _finished(take, label, layout, mapping)
+        return _take(points, names, rate, None, "obj", {"fps_assumed": assumed, **meta}, label)
+    if kind == "c3d":
+        return _read_c3d(data, label, fps)
+    text = _text(data, label)
+    reader = {"csv": _read_csv, "json": _read_json, "trc": _read_trc}[kind]
+    return reader(text, label, fps, layout)
+
+
+def _plain(exc: Exception) -> str:
+    """What an unexpected exception from reading a file says about the file, in words."""
+    detail = f"{type(exc).__name__}: {str(exc)[:160]}"
+    if isinstance(exc, MemoryError):
+        return "it would take more memory than there is"
+    if isinstance(exc, RecursionError):
+        return "it is nested too deeply"
+    if isinstance(exc, UnicodeError):
+        return f"it holds text that cannot be decoded ({detail})"
+    if isinstance(exc, OverflowError):
+        return f"a number in it is too large ({detail})"
+    if isinstance(exc, (zipfile.BadZipFile, zlib.error)):
+        return f"its compressed data is damaged ({detail})"
+    if isinstance(exc, (struct.error, EOFError)):
+        return f"it is truncated or malformed ({detail})"
+    if isinstance(exc, (IndexError, KeyError)):
+        return f"it refers to a part it does not hold ({detail})"
+    return f"it is malformed ({detail})"
 
 
 def write_take_csv(take: Take, path) -> None:
