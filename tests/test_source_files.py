@@ -946,6 +946,22 @@ _MUTATED = [  # (file name, its valid bytes, read_take options, mutants)
 ]
 
 
+@pytest.mark.parametrize("error, words", [
+    (IndexError("list index out of range"),
+     r"it refers to a part it does not hold \(IndexError: list index out of range\)"),
+    (MemoryError(), "it would take more memory than there is"),
+    (RecursionError("maximum recursion depth exceeded"), "it is nested too deeply"),
+    (UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte"), "it holds text that cannot be decoded"),
+])
+def test_unexpected_errors_of_a_reader_become_retarget_errors_naming_the_file(monkeypatch, error, words):
+    def broken(*args):
+        raise error
+
+    monkeypatch.setattr(files, "_read_trc", broken)
+    with pytest.raises(RetargetError, match=rf"^'x.trc' could not be read as a TRC file: {words}"):
+        read_take(b"PathFileType\t4", filename="x.trc")
+
+
 @pytest.mark.parametrize("filename, make, options, count", _MUTATED, ids=[m[0] for m in _MUTATED])
 def test_mutants_of_every_format_read_or_raise_only_retarget_errors(filename, make, options, count):
     data = make()
