@@ -16,7 +16,7 @@ named     the audit's inputs: a 500 MB mesh upload (declared and chunked), a chu
           and a 0.9 MB settings object, OBJ-frame zip bombs (1 GiB in one member; 4 GiB in
           200 members, sizes honest and sizes lying), a glTF mesh instanced by 5,000
           nodes (as a mesh of the small face, of the 8,430-vertex sample face, and as an
-          animated take), 10,000 landmark positions, JSON nested 200,000 deep (request
+          animated take; and a triangle instanced by 5,000 nodes as a take), 10,000 landmark positions, JSON nested 200,000 deep (request
           bodies, a take file, a take form field, a stream control message), a .npy whose
           header claims 1.48 TiB.
 origin    requests a page on http://evil.example could make, and a DNS-rebound Host:
@@ -448,6 +448,25 @@ def instanced_glb(data: bytes, n: int) -> bytes:
     return glb_bytes(doc, blob)
 
 
+def triangles_glb(n: int) -> bytes:
+    """A .glb of one triangle instanced by `n` nodes, node 0 moved by an animation: a
+    take whose instanced vertices (3 n) are few, but whose instances are many."""
+    blob = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "<f4").tobytes() + np.arange(3, dtype="<u4").tobytes()
+            + np.array([0, 1], "<f4").tobytes() + np.array([[0, 0, 0], [0, 1, 0]], "<f4").tobytes())
+    views = [{"buffer": 0, "byteOffset": o, "byteLength": n_bytes} for o, n_bytes in ((0, 36), (36, 12), (48, 8), (56, 24))]
+    accessors = [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+                 {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"},
+                 {"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1]},
+                 {"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}]
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(n))}],
+           "nodes": [{"mesh": 0, "translation": [float(i), 0.0, 0.0]} for i in range(n)],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+           "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": len(blob)}],
+           "animations": [{"samplers": [{"input": 2, "output": 3}],
+                           "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}]}]}
+    return glb_bytes(doc, blob)
+
+
 def sample_face_glb() -> bytes:
     from retarget.export import export_mesh_gltf
     from retarget.mesh import mesh_from_arrays
@@ -585,6 +604,9 @@ def named_inputs(target: Target) -> None:
     inputs.append(("glTF mesh instanced by 5,000 nodes: animated take (small face)",
                    lambda: send_upload(c(), "take", t(), "instanced.glb",
                                        instanced_glb(seeds["glb"].data, 5000), labelled)))
+    inputs.append(("glTF triangle instanced by 5,000 nodes: animated take (15,000 vertices)",
+                   lambda: send_upload(c(), "take", t(), "triangles.glb", triangles_glb(5000),
+                                       {"labelled_vertices": json.dumps({"a": 0, "b": 14_999})})))
     for label, send in tqdm(inputs, desc="named inputs", file=sys.stderr, leave=False):
         result = target.measured("named", label, send)
         answer = result.answer
