@@ -197,7 +197,7 @@ def _npy_with_header(header: dict, data: bytes = b"\0" * 24) -> bytes:
      r"is not a NumPy .npy array: its header is malformed \(ValueError: fortran_order is not a valid bool"),
     ({"descr": [("x", "<f8"), ("y", "<f8")], "fortran_order": False, "shape": (1, 1, 3)},
      r"has dtype \[\('x', '<f8'\), \('y', '<f8'\)\]; a plain number or string type is read"),
-])
+], ids=["claims-1.48-TiB", "negative-shape", "fortran-order-not-bool", "fields"])
 def test_npy_header_is_checked_before_the_array_is_loaded(header, message):
     with pytest.raises(RetargetError, match=message):
         read_take(_npy_with_header(header), filename="t.npy", layout="ibug68")
@@ -425,7 +425,9 @@ def _frames(data, count: int) -> bytes:
      r"ANALOG:USED is 5 but ANALOG:SCALE \(with SCALE2, ...\) holds 2 values, one per channel"),
     (lambda d: _set(d, 16, b"\x02"),
      r"bytes 16-17 put the data section in block 2, not after the parameter section \(block 2"),
-])
+], ids=["key", "parameter-block-past-eof", "processor", "data-block-past-eof", "name-length",
+        "next-offset-backwards", "next-offset-out", "dims-4e9", "negative-dims", "negative-description",
+        "frames-past-data", "used-over-labels", "analog-used-over-scales", "data-block-in-parameters"])
 def test_c3d_corruptions_are_refused_before_ezc3d_naming_the_byte(tmp_path, corrupt, message):
     data = corrupt(_c3d_points_and_analogs(tmp_path))
     with pytest.raises(RetargetError, match=message):
@@ -937,11 +939,11 @@ def _small_obj_zip() -> bytes:
 
 _MUTATED = [  # (file name, its valid bytes, read_take options, mutants)
     ("m.csv", _small_csv, {}, 80),
-    ("m.json", _small_json, {}, 80),
-    ("m.npy", _small_npy, {"layout": "ibug68"}, 60),
-    ("m.trc", lambda: _trc(["A", "B", "C"], np.ones((3, 3, 3)) * 1.5).encode(), {}, 80),
-    ("m.glb", lambda: _small_gltf_builder().glb(), {"labelled_vertices": {"a": 0, "b": 2}}, 80),
-    ("m.gltf", lambda: _small_gltf_builder().gltf(), {"labelled_vertices": {"a": 0, "b": 2}}, 60),
+    ("m.json", _small_json, {}, 60),
+    ("m.npy", _small_npy, {"layout": "ibug68"}, 200),
+    ("m.trc", lambda: _trc(["A", "B", "C"], np.ones((3, 3, 3)) * 1.5).encode(), {}, 60),
+    ("m.glb", lambda: _small_gltf_builder().glb(), {"labelled_vertices": {"a": 0, "b": 2}}, 120),
+    ("m.gltf", lambda: _small_gltf_builder().gltf(), {"labelled_vertices": {"a": 0, "b": 2}}, 40),
     ("m.zip", _small_obj_zip, {"labelled_vertices": {"a": 0, "b": 2}}, 60),
 ]
 
@@ -952,7 +954,7 @@ _MUTATED = [  # (file name, its valid bytes, read_take options, mutants)
     (MemoryError(), "it would take more memory than there is"),
     (RecursionError("maximum recursion depth exceeded"), "it is nested too deeply"),
     (UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte"), "it holds text that cannot be decoded"),
-])
+], ids=["IndexError", "MemoryError", "RecursionError", "UnicodeDecodeError"])
 def test_unexpected_errors_of_a_reader_become_retarget_errors_naming_the_file(monkeypatch, error, words):
     def broken(*args):
         raise error

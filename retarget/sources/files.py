@@ -2,17 +2,38 @@
 
 `read_take` dispatches on the file name's extension; every reader returns a `Take` and
 refuses bad input with a `RetargetError` that names the file and, where it applies, the
-row, column, frame, label or member file. Size limits on the upload are the caller's;
-this module bounds what a file can make it allocate beyond its own size
-(`MAX_ARCHIVE_BYTES` unpacked from a zip, `retarget.gltf_document.MAX_ACCESSOR_ELEMENTS`,
-`retarget.sources.gltf_take.MAX_SAMPLED_FRAMES`, ``MAX_INSTANCED_VERTICES``,
-``MAX_KEYFRAME_VALUES`` and ``MAX_SAMPLED_VALUES``, counted from the glTF JSON,
-table cells no longer than a number) and reads no file a glTF names outside its own
-folder. C3D files are parsed by ezc3d, in-process, and only after
-`retarget.sources.c3d_header.c3d_layout` has walked their header and parameter section
-as ezc3d will and checked every offset, length, dimension and count ezc3d trusts against
-the file (and its budgets, `MAX_C3D_POINT_SAMPLES` ...): ezc3d crashes the process on
-some malformed files.
+row, column, byte offset, frame, label or member file. Nothing else leaves `read_take`:
+an unexpected exception from a reader or a library on a malformed file becomes
+``<file> could not be read as <kind>: <what, in words>``.
+
+Limits
+------
+Size limits on the upload are the caller's. This module bounds what a file can make it
+allocate or compute beyond its own size, and checks each bound on what the file
+declares, before the work:
+
+* every take: at most `retarget.sources.take.MAX_TAKE_VALUES` coordinates (frames x
+  points x 2|3); CSV and TRC tables are converted a block of cells at a time and
+  refused at the row that passes it; table cells no longer than a number.
+* JSON: nested at most 64 levels (a cheap scan of the brackets before parsing).
+* NPY and NPZ: the .npy header is read first (`retarget.sources.take.npy_array`): no
+  Python objects or fields, shape x itemsize equal to the bytes present; an .npz's
+  members are checked from the zip directory (encryption, compression, sizes) and their
+  headers before they are unpacked.
+* C3D: parsed by ezc3d, in-process, which trusts the file and crashes the process on
+  some malformed ones, so only after `retarget.sources.c3d_header.c3d_layout` has
+  walked the header and parameter section as ezc3d will and checked every offset,
+  length, dimension, type and count ezc3d trusts against the file, and the frames,
+  points and analog samples against ``MAX_C3D_POINT_SAMPLES``, ``MAX_C3D_ANALOG_SAMPLES``
+  and ``MAX_C3D_SUBFRAMES`` of that module.
+* glTF / GLB: `retarget.gltf_document.MAX_ACCESSOR_ELEMENTS` per accessor made of
+  nothing; from the JSON's counts, ``MAX_INSTANCED_VERTICES``, ``MAX_KEYFRAME_VALUES``,
+  ``MAX_SAMPLED_FRAMES`` and ``MAX_SAMPLED_VALUES`` of `retarget.sources.gltf_take`; no
+  file a glTF names outside its own folder is read.
+* OBJ-sequence zip: `MAX_ARCHIVE_BYTES` unpacked in all, and the entry count, the
+  per-frame size, the compression ratio and frames x vertices of
+  `retarget.sources.obj_sequence`, all from the zip directory and the first frame
+  before the other frames are unpacked; every read is bounded too.
 
 Accepted files
 --------------
