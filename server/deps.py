@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import Depends, Header, HTTPException, Path, status
-from pydantic import BaseModel, ConfigDict
+from pydantic import StrictFloat, StrictInt
 from starlette.requests import HTTPConnection
 
 from retarget.mesh import Mesh
@@ -21,14 +21,14 @@ from server.limits import Limits
 from server.store import ProjectStore
 
 __all__ = ["HubDep", "IsolationDep", "JobsDep", "Limits", "LimitsDep", "MeshDep", "ProjectDep", "ProjectIdDep", "StoreDep", "UploadKeyDep",
-           "JsonBody", "get_hub", "get_jobs", "get_limits", "get_store"]
+           "Integer", "Number", "get_hub", "get_jobs", "get_limits", "get_store"]
 
 
-class JsonBody(BaseModel):
-    """A JSON request body, validated strictly: `false` is not 0, "3" is not 3 (what the
-    schema says a field is, it must be)."""
-
-    model_config = ConfigDict(strict=True)
+Integer = StrictInt
+"""A JSON body's integer field: `false` is not 0 and "3" is not 3 (what the schema says a
+field is, it must be)."""
+Number = StrictFloat | StrictInt
+"""A JSON body's number field, likewise strict."""
 
 
 # The getters take an HTTPConnection so HTTP and WebSocket routes share them (and tests'

@@ -92,6 +92,11 @@ def install(app: FastAPI) -> None:
         detail = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
         return JSONResponse({"detail": detail}, exc.status_code, headers=headers)
 
+    async def too_deep(request: Request, exc: RecursionError) -> JSONResponse:
+        # only input nests this deep: a JSON body or field read in the server process
+        return JSONResponse({"detail": "the request is nested too deeply to read"}, 422)
+
+    app.add_exception_handler(RecursionError, too_deep)
     app.add_exception_handler(RequestValidationError, invalid)
     app.add_exception_handler(StarletteHTTPException, http_error)
 

@@ -11,6 +11,7 @@ a scratch path). No FastAPI here: the forkserver imports this module once.
 from __future__ import annotations
 
 import inspect
+import json
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,13 +55,15 @@ def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
     return mesh.n_vertices, mesh.n_faces
 
 
-def take_from_upload(data: bytes, filename: str, shown: str, options: dict,
+def take_from_upload(data: bytes, filename: str, shown: str, options: dict, forms: dict,
                      project_layout: str | None) -> Take:
-    """The take in an uploaded file (`read_take` with `options`), checked to name some of
-    the project's layout points when it has landmarks (a take naming none could never
-    drive it: refused now rather than when it is played)."""
+    """The take in an uploaded file (`read_take` with `options`, and the JSON `forms`
+    fields parsed here: mapping, labelled_vertices), checked to name some of the
+    project's layout points when it has landmarks (a take naming none could never drive
+    it: refused now rather than when it is played)."""
     try:
-        take = read_take(data, filename=filename, **options)
+        parsed = {name: _json_form(value, name) for name, value in forms.items()}
+        take = read_take(data, filename=filename, **options, **parsed)
         if project_layout is not None:
             take.to_layout(project_layout, partial=True)
     except RetargetError as exc:
@@ -76,6 +79,18 @@ def rig(mesh: Mesh, points: SurfacePoints, method: str, options: dict, progress)
         options = {**options, "progress": progress}
     layout = get_layout(points.layout) if points.layout else None
     return compute_weights(method, mesh.vertices, mesh.faces, points, layout, **options)
+
+
+def _json_form(value: str | None, what: str):
+    if value is None or value == "":
+        return None
+    try:
+        return json.loads(value)
+    except json.JSONDecodeError as exc:
+        raise RetargetError(f"form field {what!r} is not JSON: {exc}") from None
+    except RecursionError:
+        raise RetargetError(f"form field {what!r} is JSON nested too deeply to be a "
+                            f"{what.replace('_', ' ')}") from None
 
 
 @dataclass(frozen=True)

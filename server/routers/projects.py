@@ -16,10 +16,10 @@ import json
 from typing import Any
 
 from fastapi import APIRouter, Response, status
-from pydantic import Field
+from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
-from server.deps import JsonBody, LimitsDep, ProjectDep, StoreDep
+from server.deps import LimitsDep, ProjectDep, StoreDep
 from server.errors import responses
 
 router = APIRouter(prefix="/api/projects", tags=["projects"], responses=responses())
@@ -27,12 +27,12 @@ router = APIRouter(prefix="/api/projects", tags=["projects"], responses=response
 _NAME = {"min_length": 1, "max_length": 200, "pattern": r"\S"}
 
 
-class ProjectCreate(JsonBody):
+class ProjectCreate(BaseModel):
     name: str = Field(**_NAME)
     settings: dict[str, Any] = Field(default_factory=dict)
 
 
-class ProjectPatch(JsonBody):
+class ProjectPatch(BaseModel):
     name: str | None = Field(default=None, **_NAME)
     settings: dict[str, Any] | None = Field(
         default=None, description="merged into the stored settings; a key set to null is removed")

@@ -46,14 +46,15 @@ import numpy as np
 from fastapi import APIRouter, HTTPException, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
-from pydantic import Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError
 
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS
 from retarget.weights.painting import painted_rig, painted_rows, reset_joints, weight_edit
-from server.deps import IsolationDep, JobsDep, JsonBody, LimitsDep, MeshDep, ProjectDep, StoreDep
+from server.deps import (Integer, IsolationDep, JobsDep, LimitsDep, MeshDep, Number, ProjectDep,
+                         StoreDep)
 from server.errors import responses
 from server.jobs import JobBusy
 from server.limits import body_limit
@@ -70,9 +71,9 @@ EDIT_VERSION = 1
 EDIT_HEADER = struct.Struct("<4sIIIII")
 
 
-class RigRequest(JsonBody):
+class RigRequest(BaseModel):
     method: str = Field(default=DEFAULT_METHOD, description=f"one of {', '.join(METHODS)}")
-    k: int | None = Field(default=None, ge=1, le=256,
+    k: Integer | None = Field(default=None, ge=1, le=256,
                           description="influences kept per vertex (default: the method's own)")
 
 
@@ -159,18 +160,18 @@ def get_rig_weights(project: ProjectDep, store: StoreDep) -> Response:
     return Response(weights_binary(_rig(project, store)), media_type="application/octet-stream")
 
 
-class ResetRequest(JsonBody):
-    joints: list[int] | None = Field(description="joints to paint back to the automatic rig; "
+class ResetRequest(BaseModel):
+    joints: list[Integer] | None = Field(description="joints to paint back to the automatic rig; "
                                      "null: the whole rig")
-    version: int | None = Field(default=None, description="refuse (409) unless the rig is at "
+    version: Integer | None = Field(default=None, description="refuse (409) unless the rig is at "
                                 "this version")
 
 
-class WeightEditJSON(JsonBody):
-    version: int = Field(description="the rig version the edit was made on (GET rig)")
-    vertices: list[int] = Field(description="R vertex indices")
-    indices: list[list[int]] = Field(description="(R, K) joint indices")
-    weights: list[list[float]] = Field(description="(R, K) weights")
+class WeightEditJSON(BaseModel):
+    version: Integer = Field(description="the rig version the edit was made on (GET rig)")
+    vertices: list[Integer] = Field(description="R vertex indices")
+    indices: list[list[Integer]] = Field(description="(R, K) joint indices")
+    weights: list[list[Number]] = Field(description="(R, K) weights")
 
 
 def _rigs(project: dict, store) -> tuple[SkinWeights, SkinWeights, int]:

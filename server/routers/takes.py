@@ -42,13 +42,13 @@ from pathlib import Path
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Response, UploadFile, status
-from pydantic import Field
+from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sources.stereo import StereoCalibration, pattern_points
 from retarget.sources.take import Take
-from server.deps import IsolationDep, JobsDep, JsonBody, LimitsDep, ProjectDep, StoreDep, UploadKeyDep
+from server.deps import IsolationDep, JobsDep, LimitsDep, Number, ProjectDep, StoreDep, UploadKeyDep
 from server.errors import responses
 from server.jobs import JobBusy
 from server.limits import body_limit
@@ -68,15 +68,6 @@ which uploads its result as a take file."""
 CALIBRATION_EXTENSIONS = ("npz",)
 """A stereo calibration as `StereoCalibration.save` writes it."""
 STEREO_FIELDS = ("right", "calibration", "calibration_left", "calibration_right")
-
-
-def _json_form(value: str | None, what: str):
-    if value is None or value == "":
-        return None
-    try:
-        return json.loads(value)
-    except json.JSONDecodeError as exc:
-        raise RetargetError(f"form field {what!r} is not JSON: {exc}") from exc
 
 
 def _default_name(filename: str | None, fallback: str) -> str:
@@ -117,15 +108,12 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolati
     data = read_capped(file, limits.max_upload_bytes)
     if not data:
         raise RetargetError(f"the uploaded file {file.filename!r} is empty")
-    try:
-        options = {"layout": layout or None, "mapping": _json_form(mapping, "mapping"), "fps": fps,
-                   "labelled_vertices": _json_form(labelled_vertices, "labelled_vertices")}
-    except RetargetError as exc:
-        raise RetargetError(f"take file {file.filename!r} refused: {exc}") from exc
+    options = {"layout": layout or None, "fps": fps}
+    forms = {"mapping": mapping, "labelled_vertices": labelled_vertices}  # JSON, parsed there
     project_layout = (project["landmarks"]["layout"] or "ibug68") if project["landmarks"] else None
     take = isolation.call(
         take_from_upload, data, f"{_default_name(file.filename, 'take')}.{ext}", file.filename,
-        options, project_layout,
+        options, forms, project_layout,
         what=f"take file {file.filename!r} refused: not a readable {ext.upper()} file")
     return store.put_take(project["id"], take, name=name or _default_name(file.filename, "take"),
                           key=key)
@@ -337,9 +325,9 @@ def get_take_calibration(project: ProjectDep, store: StoreDep, take_id: str) -> 
                              f'attachment; filename="calibration-{take_id}.npz"'})
 
 
-class TakePatch(JsonBody):
+class TakePatch(BaseModel):
     name: str | None = Field(default=None, min_length=1, max_length=200, pattern=r"\S")
-    trim: tuple[float, float | None] | None = Field(
+    trim: tuple[Number, Number | None] | None = Field(
         default=None, description="[start, stop] in seconds from the first frame; stop null = end")
 
 

@@ -46,7 +46,7 @@ def _run(server: Server, config: Path, *extra: str) -> str:
         [str(SCHEMATHESIS), "--config-file", str(config), "run", f"{server.url}/openapi.json",
          "--checks", "all", "--exclude-checks", EXCLUDED, "--phases", "examples,coverage,fuzzing",
          "--max-examples", "8", "--seed", "11", "--generation-deterministic", "--workers", "2",
-         "--request-timeout", "60", "--generation-database", "none", "--no-color", *extra],
+         "--request-timeout", "60", "--no-color", *extra],
         capture_output=True, text=True, timeout=600)
     out = result.stdout + result.stderr
     assert result.returncode == 0, out[-6000:]
