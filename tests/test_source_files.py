@@ -440,6 +440,24 @@ def test_c3d_budget_is_checked_before_ezc3d_reads(tmp_path, monkeypatch):
         read_take(_c3d_points_and_analogs(tmp_path), filename="big.c3d")
 
 
+def test_c3d_header_decodes_dec_and_mips_numbers_and_refuses_mips(tmp_path):
+    import struct
+
+    data = _c3d_points_and_analogs(tmp_path)
+    # DEC (VAX F) floats: the IEEE bytes with the words swapped and the exponent one higher
+    dec = _set(_set(_set(data, 515, b"\x55"), 12, b"\x80\xc0\x00\x00"), 20, b"\xc8\x43\x00\x00")
+    header = c3d_header.c3d_header(dec, "'d.c3d'")
+    assert (header.processor, header.scale, header.frame_rate) == ("DEC", -1.0, 100.0)
+    mips = _set(_set(data, 515, b"\x56"), 20, struct.pack(">f", 100.0))
+    mips = _set(_set(mips, 2, (3).to_bytes(2, "big")), 16, (4).to_bytes(2, "big"))
+    header = c3d_header.c3d_header(mips, "'m.c3d'")
+    assert (header.processor, header.points, header.frame_rate) == ("MIPS", 3, 100.0)
+    with pytest.raises(RetargetError, match=r"processor type is 86 \(MIPS, big-endian\), which ezc3d does not read"):
+        read_take(mips, filename="m.c3d")
+    with pytest.raises(RetargetError, match=r"byte 0, the block number of the parameter section, is 0"):
+        read_take(_set(data, 0, b"\x00"), filename="z.c3d")
+
+
 def _mutants(data: bytes, count: int, seed: int):
     """`count` copies of `data` with 1 to 4 random bytes changed (seeded)."""
     rng = np.random.default_rng(seed)

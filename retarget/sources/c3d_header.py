@@ -69,10 +69,10 @@ _BLOCK = 512
 _PROCESSORS = {84: "Intel", 85: "DEC", 86: "MIPS"}
 _TYPES = {-1: "CHAR", 1: "BYTE", 2: "INT", 4: "FLOAT"}
 _MAX_RECORD = 0xFFFF  # a next-record offset is 16 bits: no record is longer
-_POINT_DEFAULTS = {"USED": ("int", [0]), "SCALE": ("float", [-1.0]), "RATE": ("float", [0.0]),
-                   "FRAMES": ("int", [0])}
-_ANALOG_DEFAULTS = {"USED": ("int", [0]), "RATE": ("float", [0.0]), "GEN_SCALE": ("float", [1.0]),
-                    "SCALE": ("float", []), "OFFSET": ("int", [])}
+_DEFAULTS = {  # what ezc3d's setMandatoryParameters gives a group that lacks them
+    "POINT": {"USED": [0], "SCALE": [-1.0], "RATE": [0.0], "FRAMES": [0]},
+    "ANALOG": {"USED": [0], "RATE": [0.0], "GEN_SCALE": [1.0], "SCALE": [], "OFFSET": []},
+}
 
 
 @dataclass(frozen=True)
@@ -206,12 +206,12 @@ def c3d_header(data: bytes, label: str) -> C3dHeader:
 
 
 def c3d_parameters(data: bytes, header: C3dHeader, label: str) -> dict:
-    """{group name: {parameter name: C3dParameter}}: the parameter section walked record by record as ezc3d does, every length, offset
-    and dimension checked against the record and the section (which ends where the
-    header puts the data section). Parameters of a group id
-    without a group record keep their group under the name ""; a repeated group name
-    keeps its first group (as ezc3d's lookup by name), a repeated parameter its last
-    record (ezc3d replaces it)."""
+    """{group name: {parameter name: C3dParameter}}: the parameter section walked record
+    by record as ezc3d does, every length, offset and dimension checked against the
+    record and the section (which ends where the header puts the data section).
+    Parameters of a group id without a group record keep their group under the name
+    ""; a repeated group name keeps its first group (as ezc3d's lookup by name), a
+    repeated parameter its last record (ezc3d replaces it)."""
     refuse = _refuser(label)
     size = header.data_offset  # the parameter section ends where the data section starts
     section = f"the parameter section (bytes {header.parameter_offset}-{size - 1})"
@@ -238,9 +238,9 @@ def c3d_parameters(data: bytes, header: C3dHeader, label: str) -> dict:
         raw_name = data[pos + 2:name_end].rstrip(b"\0")
         odd = next((i for i, b in enumerate(raw_name) if b < 0x20 or b == 0x7F), None)
         if odd is not None:
-            refuse(f"the name of the record at byte {pos} ({abs(name_length)} bytes by its length "
-                   f"byte) holds the control byte 0x{raw_name[odd]:02X} at byte {pos + 2 + odd}: "
-                   "its name length is wrong or the record is damaged")
+            refuse(f"the name of the record at byte {pos} ({abs(name_length)} bytes by its "
+                   f"length byte) holds the control byte 0x{raw_name[odd]:02X} at byte "
+                   f"{pos + 2 + odd}: its name length is wrong or the record is damaged")
         name = _c_string(raw_name)
         offset_next = int.from_bytes(data[name_end:name_end + 2],
                                      "big" if processor == "MIPS" else "little")
@@ -272,9 +272,9 @@ def c3d_parameters(data: bytes, header: C3dHeader, label: str) -> dict:
             values_at = at + 2 + ndim
             length = count * abs(size_code)
             if values_at + length - pos > _MAX_RECORD:
-                refuse(f"the {what} record at byte {pos} has dimensions {'x'.join(map(str, dims))}, "
-                       f"{count} values of {abs(size_code)} byte(s), more than a parameter "
-                       f"record can hold ({_MAX_RECORD} bytes)")
+                refuse(f"the {what} record at byte {pos} has dimensions {_dims(dims)}, {count} "
+                       f"values of {abs(size_code)} byte(s), more than a parameter record can "
+                       f"hold ({_MAX_RECORD} bytes)")
             need(values_at + length + 1, f"values ({length} bytes) of the {what} record", pos)
             description = _int8(data[values_at + length])
             if description < 0:
@@ -283,7 +283,8 @@ def c3d_parameters(data: bytes, header: C3dHeader, label: str) -> dict:
             end = values_at + length + 1 + description
             need(end, f"description of the {what} record", pos)
             values = _values(data[values_at:values_at + length], size_code, dims, processor)
-            params.setdefault(ident, {})[name] = C3dParameter("", name, pos, size_code, dims, values)
+            params.setdefault(ident, {})[name] = C3dParameter(
+                "", name, pos, size_code, dims, values)
         if offset_next == 0:  # the last record
             break
         target = name_end + offset_next
@@ -299,7 +300,8 @@ def c3d_parameters(data: bytes, header: C3dHeader, label: str) -> dict:
         group = names.get(ident, "")
         if group in groups:
             continue  # ezc3d finds the first group of a name
-        groups[group] = {name: replace(p, group=group) for name, p in params.get(ident, {}).items()}
+        groups[group] = {name: replace(p, group=group)
+                         for name, p in params.get(ident, {}).items()}
     return groups
 
 
@@ -316,31 +318,34 @@ def c3d_layout(data: bytes, label: str) -> C3dLayout:
                "export it for Intel (PC) processors")
     groups = c3d_parameters(data, header, label)
     point = groups.get("POINT", {})
-    analog = groups.get("ANALOG", {})
 
     def values(group: str, name: str, kind: str):
-        """The parameter's values as ezc3d's valuesAsInt / valuesAsDouble return them."""
-        table = point if group == "POINT" else analog if group == "ANALOG" else groups.get(group, {})
-        param = table.get(name)
+        """The parameter's values as ezc3d's valuesAsInt ("int"), valuesAsDouble
+        ("float") or valuesConvertedAsInt ("number") give them; None when it is absent
+        and ezc3d gives the group no default."""
+        param = groups.get(group, {}).get(name)
         if param is None:
-            defaults = _POINT_DEFAULTS if group == "POINT" else _ANALOG_DEFAULTS
-            return defaults[name][1] if group in ("POINT", "ANALOG") and name in defaults else None
-        wanted = (1, 2) if kind == "int" else (4,) if kind == "float" else (1, 2, 4)
+            return _DEFAULTS.get(group, {}).get(name)
+        wanted = {"int": (1, 2), "float": (4,), "number": (1, 2, 4)}[kind]
         if param.type not in wanted:
-            if kind == "number" or not param.is_empty:
+            if kind == "number" or not param.is_empty:  # ezc3d throws; an empty one reads []
                 refuse(f"{param.where} is {_TYPES[param.type]}; ezc3d reads it as "
-                       f"{'an integer' if kind == 'int' else 'a float' if kind == 'float' else 'a number'}")
+                       + {"int": "an integer", "float": "a float", "number": "a number"}[kind])
             return []
         return list(param.values)
 
     def first(group: str, name: str, kind: str):
+        """The parameter's first value, which ezc3d reads without checking there is one."""
         found = values(group, name, kind)
-        if found is not None and not found:
-            param = (point if group == "POINT" else analog if group == "ANALOG" else groups[group])[name]
-            refuse(f"{param.where} holds no value (dimensions {_dims(param.dims)}); ezc3d reads its first")
-        if kind != "int" and found is not None and not math.isfinite(found[0]):
+        if found is None:
+            return None
+        if not found:
+            param = groups[group][name]
+            refuse(f"{param.where} holds no value (dimensions {_dims(param.dims)}); ezc3d reads "
+                   "its first")
+        if kind != "int" and not math.isfinite(found[0]):
             refuse(f"{group}:{name} is {found[0]}")
-        return None if found is None else found[0]
+        return found[0]
 
     def rate(group: str, name: str, value) -> float:
         if not 0 <= value <= MAX_C3D_RATE:
@@ -380,7 +385,8 @@ def c3d_layout(data: bytes, label: str) -> C3dLayout:
     if frames_declared != 0 and frames_declared != frames_before:
         last = frames_declared + header.first_frame - 1
     frame_rate = header.frame_rate
-    if _int(point_rate * 1e4) != _int(header.frame_rate * 1e4) and not (point_rate == 0 and point_used):
+    if _int(point_rate * 1e4) != _int(header.frame_rate * 1e4) \
+            and not (point_rate == 0 and point_used):
         frame_rate = point_rate
     if int(point_rate) != 0 and int(analog_rate / point_rate) != per_frame \
             and not (per_frame == 1 and "SHADOW" in groups):
@@ -440,7 +446,7 @@ def c3d_layout(data: bytes, label: str) -> C3dLayout:
             refuse, f"{frames} frames x {per_frame} samples x {analog_channels} channels")
     ratio = 0
     if rotation:
-        ratio = _rotations(groups, header, frames, frame_rate, len(data), values, first, rate, refuse)
+        ratio = _rotations(groups, frames, frame_rate, len(data), first, rate, refuse)
     _within("frames and sub-frames", frames * (1 + per_frame + ratio), MAX_C3D_SUBFRAMES,
             refuse, f"{frames} frames x (1 + {per_frame} analog + {ratio} rotation sub-frames)")
     return C3dLayout(header=header, groups=groups, frames=frames, points=points,
@@ -448,7 +454,7 @@ def c3d_layout(data: bytes, label: str) -> C3dLayout:
                      frame_bytes=frame_bytes, labels=tuple(labels))
 
 
-def _rotations(groups, header, frames, frame_rate, size, values, first, rate, refuse) -> int:
+def _rotations(groups, frames, frame_rate, size, first, rate, refuse) -> int:
     """The rotation ratio (sub-frames per frame) of ezc3d's ROTATION group (which ezc3d
     writes into every file), its data checked to fit the file."""
     group = groups["ROTATION"]
@@ -514,9 +520,8 @@ def _values(raw: bytes, size_code: int, dims: tuple, processor: str) -> tuple:
         # dims[0] of them per string; one string, or none when dims[0] is 0, for 1 dimension
         width = dims[0]
         if len(dims) == 1:
-            return (raw.replace(b"\0", b"").decode("latin-1").rstrip(" "),) if width else ()
-        return tuple(raw[i * width:(i + 1) * width].replace(b"\0", b"").decode("latin-1").rstrip(" ")
-                     for i in range(math.prod(dims[1:])))
+            return (_chars(raw),) if width else ()
+        return tuple(_chars(raw[i * width:(i + 1) * width]) for i in range(math.prod(dims[1:])))
     if size_code == 1:
         return tuple(_int8(b) for b in raw)
     if size_code == 2:
@@ -527,6 +532,12 @@ def _values(raw: bytes, size_code: int, dims: tuple, processor: str) -> tuple:
 
 def _dims(dims: tuple) -> str:
     return "x".join(map(str, dims)) if dims else "none"
+
+
+def _chars(raw: bytes) -> str:
+    """A string of a character parameter: ezc3d reads each byte as a C string (a NUL
+    reads as nothing) and drops trailing spaces."""
+    return raw.replace(b"\0", b"").decode("latin-1").rstrip(" ")
 
 
 def _c_string(raw: bytes) -> str:
