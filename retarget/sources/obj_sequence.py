@@ -62,7 +62,8 @@ def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: in
     at most `max_bytes` are unpacked (see the module docstring for the other bounds)."""
     entries = data.count(b"PK\x01\x02")  # central directory entries, at most
     if entries > MAX_ARCHIVE_MEMBERS:
-        raise RetargetError(f"{label} holds {entries} zip entries; at most {MAX_ARCHIVE_MEMBERS} are read")
+        raise RetargetError(
+            f"{label} holds {entries} zip entries; at most {MAX_ARCHIVE_MEMBERS} are read")
     try:
         archive = zipfile.ZipFile(io.BytesIO(data))
     except _ZIP_ERRORS as exc:
@@ -108,7 +109,8 @@ def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: in
             del raw
             topology = faces
         else:
-            vertices, faces = _read_frame(archive, info, label, budget, mesh.n_vertices, first.filename)
+            vertices, faces = _read_frame(archive, info, label, budget, mesh.n_vertices,
+                                          first.filename)
             if faces != topology:
                 raise RetargetError(
                     f"{where} has other faces than {first.filename!r}; every frame needs the "

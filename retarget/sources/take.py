@@ -302,7 +302,8 @@ class Take:
                     f"{label}: its arrays unpack to {total} bytes "
                     f"({', '.join(f'{i.filename} {i.file_size}' for i in members)}); at most "
                     f"{_MAX_NPZ_BYTES} are read")
-            arrays = {key: _npz_member(archive, info, label) for key, info in zip(_MEMBERS, members)}
+            arrays = {key: _npz_member(archive, info, label)
+                      for key, info in zip(_MEMBERS, members)}
         try:
             info = json.loads(str(arrays["info"]))
         except json.JSONDecodeError as exc:
