@@ -20,6 +20,10 @@ starts in milliseconds and never inherits the server's threads or sockets) under
 Rigs are computed here too, though their input is a validated mesh: a dense rig of a
 large mesh needs gigabytes, which would otherwise be the server's own growth.
 
+Children are made by `multiprocessing`, so a script that creates the app itself (rather
+than `retarget serve`, uvicorn or pytest) must guard its entry point with
+``if __name__ == "__main__":``, as multiprocessing requires of every non-fork start.
+
 This module is also the one place where a failure to read untrusted input becomes a
 refusal: whatever the child raises or however it dies, the caller gets a `RetargetError`
 (HTTP 422) that says what went wrong, or `IsolationBusy` (HTTP 503). A `RetargetError`
