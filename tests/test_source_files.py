@@ -468,41 +468,44 @@ def _mutants(data: bytes, count: int, seed: int):
         yield bytes(mutant)
 
 
-def _read_in_child(data: bytes, filename: str, outcome) -> None:
-    """read_take in a forked child: outcome 0 read, 1 RetargetError, 2 anything else."""
+def _read_in_child(data: bytes, filename: str, result) -> None:
+    """read_take in a forked child; result[0]: 0 read, 1 RetargetError, 2 anything else;
+    result[1]: how far the child's peak RSS grew (KiB)."""
+    import resource
     import signal
 
     signal.alarm(60)  # a hang ends the child with SIGALRM
+    start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # the parent's, inherited
     try:
         read_take(data, filename=filename)
-        outcome.value = 0
+        result[0] = 0
     except RetargetError:
-        outcome.value = 1
+        result[0] = 1
     except BaseException:
-        outcome.value = 2
+        result[0] = 2
+    result[1] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - start
 
 
 def test_c3d_random_mutants_read_or_are_refused_and_never_crash(tmp_path):
     """300 mutants of a valid file, each read in its own forked child. Given to ezc3d
     without the check, 6 of them segfault and 1 hangs."""
     import multiprocessing
-    import resource
 
     context = multiprocessing.get_context("fork")
     data = _c3d_points_and_analogs(tmp_path)
     results = []
     for i, mutant in enumerate(_mutants(data, 300, seed=0)):
-        outcome = context.Value("i", -1)
-        child = context.Process(target=_read_in_child, args=(mutant, "m.c3d", outcome))
+        result = context.Array("q", [-1, 0])
+        child = context.Process(target=_read_in_child, args=(mutant, "m.c3d", result))
         child.start()
         child.join()
-        results.append((i, child.exitcode, outcome.value))
-    crashed = [(i, code) for i, code, _ in results if code != 0]
+        results.append((i, child.exitcode, result[0], result[1]))
+    crashed = [(i, code) for i, code, _, _ in results if code != 0]
     assert not crashed, f"mutants that killed their child (index, -signal): {crashed}"
-    assert not [i for i, _, value in results if value == 2], "mutants raised other than RetargetError"
-    counts = np.bincount([value for _, _, value in results], minlength=2)
+    assert not [i for i, _, value, _ in results if value == 2], "mutants raised other than RetargetError"
+    counts = np.bincount([value for _, _, value, _ in results], minlength=2)
     assert counts[0] > 100 and counts[1] > 30  # both outcomes occur
-    assert resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss < 1 << 20  # KiB: < 1 GiB
+    assert max(grown for *_, grown in results) < 256 << 10  # KiB: no mutant made ezc3d allocate
 
 
 # --- animated meshes ---------------------------------------------------------------------
