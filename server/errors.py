@@ -90,6 +90,11 @@ def install(app: FastAPI) -> None:
         if exc.status_code == 405:
             headers["Allow"] = ", ".join(_allowed(request))
         detail = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
+        cause = exc.__cause__
+        if exc.status_code == 400 and cause is not None:  # FastAPI's "error parsing the body"
+            detail = ("the request body is nested too deeply to read"
+                      if isinstance(cause, RecursionError) else
+                      f"the request body could not be read: {type(cause).__name__}: {cause}"[:300])
         return JSONResponse({"detail": detail}, exc.status_code, headers=headers)
 
     async def too_deep(request: Request, exc: RecursionError) -> JSONResponse:

@@ -89,8 +89,7 @@ def _json_form(value: str | None, what: str):
     except json.JSONDecodeError as exc:
         raise RetargetError(f"form field {what!r} is not JSON: {exc}") from None
     except RecursionError:
-        raise RetargetError(f"form field {what!r} is JSON nested too deeply to be a "
-                            f"{what.replace('_', ' ')}") from None
+        raise RetargetError(f"form field {what!r} is JSON nested too deeply to read") from None
 
 
 @dataclass(frozen=True)

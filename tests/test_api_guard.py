@@ -230,6 +230,12 @@ def test_request_validation_errors_are_one_sentence(client):
     assert r.status_code == 404 and isinstance(r.json()["detail"], str)
 
 
+def test_a_body_too_deep_to_parse_says_so(client):
+    r = client.post("/api/projects", content=b"[" * 200_000 + b"]" * 200_000,
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 400 and r.json()["detail"] == "the request body is nested too deeply to read"
+
+
 def test_a_wrong_method_names_every_method_of_the_path(client, sample_id):
     r = client.put("/api/projects")
     assert r.status_code == 405 and r.headers["allow"] == "GET, HEAD, POST"

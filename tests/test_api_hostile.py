@@ -79,7 +79,8 @@ TAKES = {
     "zip member with a bad CRC":
         ("crc.zip", _zip(_bad_crc), {"labelled_vertices": '{"a": 0}'}, "CRC"),
     "mapping nested 200k deep":
-        ("t.csv", b"frame,a_x,a_y\n0,1,2\n", {"mapping": "[" * 200_000 + "]" * 200_000}, "nested too deeply"),
+        ("t.csv", b"frame,a_x,a_y\n0,1,2\n", {"mapping": "[" * 200_000 + "]" * 200_000},
+         "form field 'mapping' is JSON nested too deeply to read"),
 }
 
 
