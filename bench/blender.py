@@ -27,7 +27,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from retarget.export import clip_at_rate, export_gltf  # noqa: E402
+from retarget.clips import clip_at_rate  # noqa: E402
+
+from retarget.gltf import export_gltf  # noqa: E402
 from retarget.landmarks import from_vertex_indices  # noqa: E402
 from retarget.layouts import get_layout  # noqa: E402
 from retarget.mesh import mesh_from_arrays  # noqa: E402

@@ -10,8 +10,8 @@ as feature displacements (no retargeting is timed). For each rig (ellipsoid: a g
 rbf: dense with negative weights, so morph targets), after computing the weights (timed
 apart):
 
-    export   retarget.export.export_gltf, to bytes in memory: wall and CPU seconds
-    read     retarget.export.read_gltf of those bytes: wall and CPU seconds
+    export   retarget.gltf.export_gltf, to bytes in memory: wall and CPU seconds
+    read     retarget.gltf.read_gltf of those bytes: wall and CPU seconds
     size     the .glb in MiB, split into mesh (positions, uv, triangles), rig (JOINTS /
              WEIGHTS and inverse bind matrices, or morph targets) and animation (key
              times, joint translations, morph weights)
@@ -32,8 +32,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.stream import machine  # noqa: E402
-from retarget.export import clip_at_rate, export_gltf, read_gltf  # noqa: E402
-from retarget.gltf_document import GltfDocument  # noqa: E402
+from retarget.clips import clip_at_rate  # noqa: E402
+from retarget.gltf import export_gltf, read_gltf  # noqa: E402
+from retarget.gltf.document import GltfDocument  # noqa: E402
 from retarget.landmarks import from_vertex_indices  # noqa: E402
 from retarget.layouts import get_layout  # noqa: E402
 from retarget.mesh import mesh_from_arrays  # noqa: E402

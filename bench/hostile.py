@@ -468,7 +468,7 @@ def triangles_glb(n: int) -> bytes:
 
 
 def sample_face_glb() -> bytes:
-    from retarget.export import export_mesh_gltf
+    from retarget.gltf import export_mesh_gltf
     from retarget.mesh import mesh_from_arrays
     from retarget.sample_face import sample_face
 

@@ -45,7 +45,7 @@ from retarget.sources.markers import (  # noqa: E402
     ring_blobs,
     track_marker_video,
 )
-from retarget.synthetic.marker_video import GroundTruth, render_marker_video  # noqa: E402
+from retarget.testing.marker_video import GroundTruth, render_marker_video  # noqa: E402
 
 VIDEOS = (("mjpg.avi", 1), ("mp4v.mp4", 2))   # file name, seed
 

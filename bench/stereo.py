@@ -2,7 +2,7 @@
 
     python bench/stereo.py [--views 16] [--frames 90] [--still 60] [--repeats 3]
 
-The synthetic rig (`retarget.synthetic.stereo_rig`): two 640 x 480 cameras 1 m from the
+The synthetic rig (`retarget.testing.stereo_rig`): two 640 x 480 cameras 1 m from the
 built-in face (scaled to mm), 150 mm apart, verged; 8 mm coloured stickers on the
 ``dutreve21`` points; sensor noise 2 grey levels; lossless video. Prints, as medians over
 `--repeats` seeds:
@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from retarget.sources.filters import temporal_mean  # noqa: E402
 from retarget.sources.stereo import calibrate_stereo, track_stereo_frames, track_stereo_videos  # noqa: E402
-from retarget.synthetic.stereo_rig import (  # noqa: E402
+from retarget.testing.stereo_rig import (  # noqa: E402
     checkerboard_views,
     render_stereo_video,
     rig_calibration,

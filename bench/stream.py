@@ -6,7 +6,7 @@
 (a) In process, no sockets: the demo source's work for one frame, each part timed
     separately over --frames frames (median and p99):
       displacements  `DemoSource.displacements` (the library's Retargeter, 68 points)
-      encode         `stream_codec.encode_frame`
+      encode         `server.wire.encode_frame`
       publish        `StreamHub.publish` to one viewer's Mailbox, and to 50
       total          the three together (publish to one viewer)
 (b) A real server: `retarget serve` in a subprocess (a fresh temp data dir, so the
@@ -48,7 +48,7 @@ sys.path.insert(0, str(ROOT))
 
 from tqdm import tqdm  # noqa: E402
 
-HEADER = struct.Struct("<4sHHIIdd")  # the stream frame header (server/stream_codec.py)
+HEADER = struct.Struct("<4sHHIIdd")  # the stream frame header (server/wire.py)
 STARTUP_S = 120.0
 
 
@@ -196,7 +196,7 @@ def in_process(frames: int, fps: float) -> None:
     from retarget.sample_face import sample_face
     from server.hub import StreamHub
     from server.sources import DemoSource
-    from server.stream_codec import encode_frame
+    from server.wire import encode_frame
 
     face = sample_face(1)  # the sample project's face and landmarks
     setup = []

@@ -28,7 +28,7 @@ Subcommands (``retarget <command> --help`` for the details):
 ``export-gltf``
     The target mesh rigged (feature points as joints of a glTF skin, or morph targets
     for rigs with negative weights) and, given a source, the retargeted take animated,
-    as one glTF 2.0 binary (`retarget.export`).
+    as one glTF 2.0 binary (`retarget.gltf`).
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
 a missing or unreadable file, arrays that do not agree) is one line
@@ -52,8 +52,9 @@ from tqdm import tqdm
 
 from retarget import __version__
 from retarget.errors import RetargetError
-from retarget.export import clip_at_rate, write_gltf
-from retarget.export.influences import is_joint_based
+from retarget.clips import clip_at_rate
+from retarget.gltf import write_gltf
+from retarget.gltf.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
 from retarget.mesh import Mesh, load_mesh, mesh_from_arrays, save_mesh
@@ -312,7 +313,7 @@ class ExportResult:
     n_vertices, n_points : V and N of the exported face.
     n_frames : F frames of the animation (0 without a source).
     fps : the animation's frame rate.
-    deformation : "skin" or "morph" (see `retarget.export.gltf_writer`).
+    deformation : "skin" or "morph" (see `retarget.gltf.writer`).
     method : the rig's method.
     seconds : wall time, weights and retargeting included.
     n_bytes : size of the file written.
@@ -359,8 +360,8 @@ def export_gltf_files(
     """Write a target mesh, rigged and optionally animated, as a glTF 2.0 binary (.glb).
 
     mesh_path, landmarks : the target mesh file and its landmarks JSON (N points); the
-        joints are named after the layout's points (`retarget.export.joint_names`).
-    out : the .glb written (`retarget.export.export_gltf`; mesh units kept).
+        joints are named after the layout's points (`retarget.gltf.joint_names`).
+    out : the .glb written (`retarget.gltf.export_gltf`; mesh units kept).
     rig : ``.npz`` from `SkinWeights.save`; else weights of `deformer` are computed.
     source_neutral, source_frames : ``.npy`` S0 (N, 2|3) and S (F, N, 2|3), as for
         `transfer_files`; both or neither. Given, the take is retargeted (Dutreve §4)

@@ -8,7 +8,7 @@ per-vertex uv and normals, every array read-only.
 
 `load_mesh` refuses bad input at the door: before trimesh parses a file, the counts its
 header or JSON declares are checked against the caps and the bytes that follow (a glTF's
-buffers, bufferViews, accessors and node tree, see `retarget.gltf_document.scene_size`),
+buffers, bufferViews, accessors and node tree, see `retarget.gltf.document.scene_size`),
 and text that is not UTF-8 is decoded here. Whatever else goes wrong while reading
 leaves as a `RetargetError`.
 
@@ -33,7 +33,7 @@ import trimesh
 from trimesh.visual.material import SimpleMaterial
 
 from retarget.errors import RetargetError
-from retarget.gltf_document import scene_size
+from retarget.gltf.document import scene_size
 from retarget.material import Material, material_from_trimesh
 
 __all__ = [
@@ -185,11 +185,11 @@ def load_mesh(
       elements need at least against the bytes after it; the header decoded as for OBJ.
       A header that does not parse is left to trimesh.
     * OFF: decoded as for OBJ; the counts line against the caps.
-    * glTF, GLB: `retarget.gltf_document.scene_size` checks every buffer, bufferView
+    * glTF, GLB: `retarget.gltf.document.scene_size` checks every buffer, bufferView
       and accessor against the bytes it refers to, the meshes' primitives, and the
       default scene's node tree (no cycles or shared nodes, at most
-      `~retarget.gltf_document.MAX_NODE_DEPTH` levels and
-      `~retarget.gltf_document.MAX_SCENE_NODES` nodes, finite transforms), and counts
+      `~retarget.gltf.document.MAX_NODE_DEPTH` levels and
+      `~retarget.gltf.document.MAX_SCENE_NODES` nodes, finite transforms), and counts
       the vertices and triangles the scene instances, refused over the caps; and
       the arrays trimesh would make from the bufferViews and accessors may be at most
       4 times the buffers plus 64 MiB. Buffers must be embedded (GLB binary chunk or

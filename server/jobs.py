@@ -1,7 +1,9 @@
 """Background jobs: one thread per job, at most one running job per project.
 
 Jobs live in memory only (a restart forgets them; what a finished job produced is in the
-store). A job's `progress` is fed by the library's ``progress(fraction)`` callback.
+store). A job's `progress` is fed by the library's ``progress(fraction)`` callback; a
+finished job has a `detail` sentence for people and a `result` object for programs (a
+failed one: the reason in `detail`, no result).
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ class JobBusy(RuntimeError):
 @dataclass
 class Job:
     """One background task. `state` is "running", "done" or "failed"; `progress` in [0, 1];
-    `detail` says what failed (or what was made)."""
+    `detail` says what failed (or what was made); `result` is what a done job made, as
+    JSON (e.g. ``{"take": id, "frames": n}``), else None."""
 
     id: str
     project_id: str
@@ -30,6 +33,7 @@ class Job:
     state: str = "running"
     progress: float = 0.0
     detail: str = ""
+    result: dict | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _thread: threading.Thread | None = field(default=None, repr=False)
 
@@ -41,7 +45,8 @@ class Job:
     def as_json(self) -> dict:
         with self._lock:
             return {"id": self.id, "project_id": self.project_id, "kind": self.kind,
-                    "state": self.state, "progress": self.progress, "detail": self.detail}
+                    "state": self.state, "progress": self.progress, "detail": self.detail,
+                    "result": self.result}
 
 
 class JobRegistry:
@@ -53,7 +58,8 @@ class JobRegistry:
         self._lock = threading.Lock()
 
     def start(self, project_id: str, kind: str, work) -> Job:
-        """Run ``work(job)`` in a thread; it returns a detail string on success.
+        """Run ``work(job)`` in a thread; on success it returns (detail sentence, result
+        object).
 
         A `RetargetError` (or `ValueError`) fails the job with its message; any other
         exception fails it as an internal error. Raises `JobBusy` when the project has a
@@ -74,15 +80,16 @@ class JobRegistry:
         return job
 
     def _run(self, job: Job, work) -> None:
+        result = None
         try:
-            detail = work(job)
+            detail, result = work(job)
             state = "done"
         except (RetargetError, ValueError, LookupError, RuntimeError) as exc:
             state, detail = "failed", str(exc)
         except Exception as exc:  # noqa: BLE001 - a job must always end in a state
             state, detail = "failed", f"internal error: {type(exc).__name__}: {exc}"
         with job._lock:
-            job.state, job.detail = state, detail or ""
+            job.state, job.detail, job.result = state, detail or "", result
             if state == "done":
                 job.progress = 1.0
         with self._lock:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from retarget.errors import RetargetError
-from retarget.export import export_mesh_gltf, read_gltf
+from retarget.gltf import export_mesh_gltf, read_gltf
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
 from retarget.mesh import Mesh, load_mesh
@@ -109,7 +109,7 @@ class ImportedProject:
 
 
 def imported_project(data: bytes, shown: str, max_vertices: int) -> ImportedProject:
-    """The project in an uploaded .glb this app exported (`retarget.export.read_gltf`)."""
+    """The project in an uploaded .glb this app exported (`retarget.gltf.read_gltf`)."""
     try:
         face = read_gltf(data)
     except RetargetError as exc:

@@ -2,7 +2,7 @@
 
 Every source ends in the same library calls: source points in the project's layout order
 -> `retarget.sources.conditioning` (neutral, head pose, jitter filter, gain) ->
-`retarget.pipeline.Retargeter` -> displacements, encoded by `server.stream_codec`. The
+`retarget.pipeline.Retargeter` -> displacements, encoded by `server.wire`. The
 server only schedules them:
 
 - `DemoSource`: the built-in performance, a second procedural identity
@@ -34,7 +34,7 @@ from retarget.sample_face import demo_weights, sample_face
 from retarget.sources.conditioning import ConditionSettings, SourceConditioner, condition_take
 from retarget.sources.take import Take
 from server.hub import StreamHub
-from server.stream_codec import FLAG_LAST, FLAG_LOST_POINTS, encode_frame
+from server.wire import FLAG_LAST, FLAG_LOST_POINTS, encode_frame
 
 # The performer differs from the built-in target face so the demo really retargets.
 _PERFORMER_IDENTITY = np.array([1.2, -0.8, 0.9, 0.6, -0.7])

@@ -200,11 +200,12 @@ def c3d_seed() -> Seed:
 
 
 def import_seed(method: str = "geodesic") -> Seed:
-    """A .glb as the app exports a project (`retarget.export.export_gltf`): the small
+    """A .glb as the app exports a project (`retarget.gltf.export_gltf`): the small
     face, its 68 landmarks, a rig of `method` (a joint rig is a glTF skin, ~30 kB; an
     interpolating one, e.g. biharmonic, morph targets, ~800 kB) and one 10-frame
     animation."""
-    from retarget.export import export_gltf, take_clip
+    from retarget.clips import take_clip
+    from retarget.gltf import export_gltf
     from retarget.landmarks import from_vertex_indices
     from retarget.layouts import get_layout
     from retarget.mesh import mesh_from_arrays

@@ -13,7 +13,7 @@ import pytest
 import trimesh
 from fastapi.testclient import TestClient
 
-from retarget.export import read_gltf
+from retarget.gltf import read_gltf
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.sample_face import demo_weights, sample_face

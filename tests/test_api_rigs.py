@@ -192,14 +192,15 @@ def test_rig_needs_landmarks_and_unknown_jobs_are_404(client, face_project):
 
 def test_one_running_job_per_project():
     jobs, release = JobRegistry(), threading.Event()
-    first = jobs.start("p", "rig", lambda job: release.wait(5) and "ok")
+    first = jobs.start("p", "rig", lambda job: release.wait(5) and ("ok", None))
     with pytest.raises(JobBusy, match="already has a running job"):
-        jobs.start("p", "rig", lambda job: "never")
-    other = jobs.start("q", "rig", lambda job: "fine")  # other projects are not blocked
+        jobs.start("p", "rig", lambda job: ("never", None))
+    other = jobs.start("q", "rig", lambda job: ("fine", {"n": 1}))  # other projects are not blocked
     release.set()
     jobs.wait(first.id, 5)
     jobs.wait(other.id, 5)
     assert first.as_json()["state"] == "done" and other.as_json()["detail"] == "fine"
+    assert other.as_json()["result"] == {"n": 1}
     again = jobs.start("p", "rig", lambda job: (_ for _ in ()).throw(ValueError("bad input")))
     jobs.wait(again.id, 5)
     assert again.as_json()["state"] == "failed" and again.as_json()["detail"] == "bad input"
@@ -207,7 +208,7 @@ def test_one_running_job_per_project():
 
 def test_weights_binary_pads_odd_counts_to_align_the_floats():
     from retarget.skin import SkinWeights
-    from server.routers.rigs import weights_binary
+    from server.wire import weights_binary
     rig = SkinWeights(np.array([[0], [2], [1]], np.int32), np.array([[1.0], [0.5], [0.25]], np.float32), 3)
     data = weights_binary(rig)
     assert len(data) == 20 + 6 + 2 + 12 and data[26:28] == b"\0\0"

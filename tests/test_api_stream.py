@@ -12,7 +12,7 @@ from starlette.websockets import WebSocketDisconnect
 from retarget.layouts import get_layout
 from server.app import create_app
 from server.hub import StreamHub
-from server.stream_codec import FLAG_NEUTRAL, decode_frame
+from server.wire import FLAG_NEUTRAL, decode_frame
 from tests.ws_messages import binary_frames, replies
 
 
@@ -281,7 +281,7 @@ def assert_frames_in_order(recorded: np.ndarray, played: np.ndarray) -> None:
 
 def test_a_take_played_once_marks_its_last_frame(app, sample_id):
     from server.sources import _performance68
-    from server.stream_codec import FLAG_LAST
+    from server.wire import FLAG_LAST
 
     _, frames68 = _performance68(30.0)
     buffer = io.BytesIO()

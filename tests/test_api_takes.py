@@ -5,7 +5,6 @@ calibration file or checkerboard videos) against the rendered truth, and bad inp
 leaves everything intact."""
 
 import io
-import json
 import time
 
 import cv2
@@ -17,8 +16,8 @@ from retarget.layouts import get_layout
 from retarget.pipeline import Retargeter
 from retarget.sample_face import demo_weights, sample_face
 from retarget.sources.stereo import StereoCalibration
-from retarget.synthetic.marker_video import render_marker_video
-from retarget.synthetic.stereo_rig import (
+from retarget.testing.marker_video import render_marker_video
+from retarget.testing.stereo_rig import (
     checkerboard_views,
     render_stereo_video,
     rig_calibration,
@@ -26,7 +25,7 @@ from retarget.synthetic.stereo_rig import (
 )
 from server.app import create_app
 from server.readers import _view_pairs
-from server.stream_codec import FLAG_HEAD_ROTATION, encode_points
+from server.wire import FLAG_HEAD_ROTATION, encode_points
 from tests.ws_messages import binary_frames, replies
 
 FPS = 30.0
@@ -119,7 +118,7 @@ def tracked_points(client, pid, answer):
     """The finished job's take: its info and (F, N, 3) points."""
     job = finished_job(client, answer["id"])
     assert job["state"] == "done", job["detail"]
-    take_id = json.loads(job["detail"])["take"]
+    take_id = job["result"]["take"]
     info = client.get(f"/api/projects/{pid}/takes/{take_id}").json()
     points = np.load(io.BytesIO(client.get(f"/api/projects/{pid}/takes/{take_id}/points").content))
     return info, points
@@ -226,13 +225,13 @@ def test_a_ring_marker_video_is_tracked_in_a_job(client, sample_id, tmp_path):
     assert r.status_code == 202, r.text
     info, points = tracked_points(client, sample_id, r.json())
     assert (info["name"], info["source"], info["dims"]) == ("rings", "markers", 2)
-    detail = json.loads(client.get(f"/api/jobs/{r.json()['id']}").json()["detail"])
+    detail = client.get(f"/api/jobs/{r.json()['id']}").json()["result"]
     assert (detail["frames"], detail["frames_claimed"], detail["truncated"]) == (4, 4, False)
     # a cut-off file gives its frames up to the cut, and the job says so
     whole = (tmp_path / "rings.mkv").read_bytes()
     r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
                     files={"file": ("cut.mkv", whole[:int(0.6 * len(whole))])})
-    detail = json.loads(finished_job(client, r.json()["id"])["detail"])
+    detail = finished_job(client, r.json()["id"])["result"]
     assert (detail["frames"], detail["frames_claimed"], detail["truncated"]) == (2, 4, True)
     expected = truth.points2d[:, 0] * [1, -1] + [0, 480]  # pixels, y up
     assert np.nanmedian(np.linalg.norm(points - expected, axis=2)) < 0.5

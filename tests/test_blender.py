@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from retarget.export import clip_at_rate, export_gltf, joint_names
+from retarget.clips import clip_at_rate
+
+from retarget.gltf import export_gltf, joint_names
 from retarget.landmarks import from_vertex_indices
 from retarget.layouts import get_layout
 from retarget.material import Material

@@ -328,7 +328,7 @@ def _export_args(files, out, *extra, source=True):
 
 def test_export_gltf_animates_what_transfer_computes(files, tmp_path, capsys):
     """The .glb's clip, skinned with its own weights, is the transfer's result."""
-    from retarget.export import read_gltf
+    from retarget.gltf import read_gltf
     from retarget.skin import skin_displacements
     from tests.gltf_check import assert_valid_gltf
 
@@ -351,7 +351,7 @@ def test_export_gltf_animates_what_transfer_computes(files, tmp_path, capsys):
 
 def test_export_gltf_partial_morph_targets(files, tmp_path):
     """A dense rig exports as morph targets; --mask brows moves only the brows' joints."""
-    from retarget.export import read_gltf
+    from retarget.gltf import read_gltf
 
     out = tmp_path / "brows.glb"
     assert main(_export_args(files, out, "--deformer", "rbf", "--mask", "brows")) == 0
@@ -363,7 +363,7 @@ def test_export_gltf_partial_morph_targets(files, tmp_path):
 
 
 def test_export_gltf_of_a_rig_without_animation(files, tmp_path, capsys):
-    from retarget.export import read_gltf
+    from retarget.gltf import read_gltf
 
     rig = tmp_path / "rig.npz"
     assert main(["rig", str(files["mesh"]), "--landmarks", str(files["t0"]), "--out", str(rig),

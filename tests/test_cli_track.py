@@ -4,8 +4,8 @@ error against the rendered truth, and their refusals."""
 import numpy as np
 
 from retarget.cli import main
-from retarget.synthetic.marker_video import render_marker_video
-from retarget.synthetic.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
+from retarget.testing.marker_video import render_marker_video
+from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
 
 
 def test_track_markers_writes_frames_close_to_the_truth(tmp_path, capsys):

@@ -1,8 +1,8 @@
-"""glTF export (retarget.export): structure, the Khronos validator, glTF's own skinning and
+"""glTF export (retarget.gltf): structure, the Khronos validator, glTF's own skinning and
 morphing evaluated from the file against `skin_displacements`, and the round trip.
 
 What a glTF viewer computes from the file (node hierarchy, animation sampling, inverse
-bind matrices, JOINTS/WEIGHTS, morph targets) is evaluated by `retarget.gltf_animation`,
+bind matrices, JOINTS/WEIGHTS, morph targets) is evaluated by `retarget.gltf.animation`,
 which shares no code with the exporter, and must be Dutreve's ``v0 + W d``.
 """
 
@@ -17,12 +17,12 @@ import pytest
 import trimesh
 
 from retarget.errors import RetargetError
-from retarget.export import (Clip, clip_at_rate, export_gltf, export_mesh_gltf, joint_names,
-                             read_gltf, take_clip)
-from retarget.export.influences import is_joint_based, joint_influences
-from retarget.gltf_animation import (animated_weights, animation_channels, mesh_instances,
+from retarget.clips import Clip, clip_at_rate, take_clip
+from retarget.gltf import export_gltf, export_mesh_gltf, joint_names, read_gltf
+from retarget.gltf.influences import is_joint_based, joint_influences
+from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
                                        node_transforms, posed_vertices)
-from retarget.gltf_document import GltfDocument
+from retarget.gltf.document import GltfDocument
 from retarget.landmarks import from_vertex_indices
 from retarget.layouts import get_layout
 from retarget.mesh import mesh_from_arrays
@@ -65,7 +65,7 @@ def exported(face, tmp_path_factory):
 
 
 # ---------------------------------------------------------------------------------------
-# what a glTF viewer draws: retarget.gltf_animation, the glTF 2.0 specification's morphing
+# what a glTF viewer draws: retarget.gltf.animation, the glTF 2.0 specification's morphing
 # and skinning (§3.7) and animation sampling (§3.11), written to read animated takes. It
 # shares no code with the exporter (GltfDocument parses, GlbBuilder writes), so it checks
 # the file, not the exporter's own idea of it; three.js (tests/e2e/test_export_threejs.py)
@@ -285,7 +285,7 @@ def test_joint_based_rigs(face):
 
 
 def test_morph_targets_of_another_kind_are_refused():
-    from retarget.export.morph import weights_from_targets
+    from retarget.gltf.morph import weights_from_targets
 
     unit = [np.eye(3)[a] * np.array([[0.5], [0.0]]) for a in range(3)]
     assert weights_from_targets(unit, 1).dense().tolist() == [[0.5], [0.0]]

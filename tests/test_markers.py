@@ -16,8 +16,8 @@ from retarget.sources.markers import (
     track_marker_video,
 )
 from retarget.sources.video import VideoReader
-from retarget.synthetic.marker_video import default_camera, marker_vertices, render_marker_video
-from retarget.synthetic.render import render_face
+from retarget.testing.marker_video import default_camera, marker_vertices, render_marker_video
+from retarget.testing.render import render_face
 
 N_FRAMES = 20
 

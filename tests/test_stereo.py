@@ -1,4 +1,4 @@
-"""Tests for retarget.sources.stereo and retarget.synthetic.stereo_rig: calibration from
+"""Tests for retarget.sources.stereo and retarget.testing.stereo_rig: calibration from
 rendered checkerboard and circle-grid views against the rig's true cameras, save/load,
 epipolar matching, triangulation, and colour-marker stereo tracking of rendered videos
 against their ground truth (3D error, head motion removal, lost markers, bad input)."""
@@ -24,7 +24,7 @@ from retarget.sources.stereo import (
     track_stereo_videos,
 )
 from retarget.sources.take import Take
-from retarget.synthetic.stereo_rig import (
+from retarget.testing.stereo_rig import (
     checkerboard_views,
     render_stereo_video,
     rig_calibration,

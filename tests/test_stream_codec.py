@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.stream_codec import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES, decode_frame,
+from server.wire import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES, decode_frame,
                                  decode_points, encode_frame, encode_points)
 
 ROOT = Path(__file__).resolve().parents[1]

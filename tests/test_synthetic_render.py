@@ -8,14 +8,14 @@ import pytest
 
 from retarget.errors import RetargetError
 from retarget.sample_face import sample_face
-from retarget.synthetic.camera import Camera, look_at
-from retarget.synthetic.marker_video import (
+from retarget.testing.camera import Camera, look_at
+from retarget.testing.marker_video import (
     GroundTruth,
     default_camera,
     marker_vertices,
     render_marker_video,
 )
-from retarget.synthetic.render import render_checkerboard, render_face
+from retarget.testing.render import render_checkerboard, render_face
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 
 import json
 
-from server.stream_codec import decode_frame
+from server.wire import decode_frame
 
 
 def binary_frames(ws, n: int) -> list:

@@ -26,7 +26,7 @@ declares, before the work:
   length, dimension, type and count ezc3d trusts against the file, and the frames,
   points and analog samples against ``MAX_C3D_POINT_SAMPLES``, ``MAX_C3D_ANALOG_SAMPLES``
   and ``MAX_C3D_SUBFRAMES`` of that module.
-* glTF / GLB: `retarget.gltf_document.MAX_ACCESSOR_ELEMENTS` per accessor made of
+* glTF / GLB: `retarget.gltf.document.MAX_ACCESSOR_ELEMENTS` per accessor made of
   nothing; from the JSON's counts, ``MAX_INSTANCED_VERTICES``, ``MAX_KEYFRAME_VALUES``,
   ``MAX_SAMPLED_FRAMES`` and ``MAX_SAMPLED_VALUES`` of `retarget.sources.gltf_take`; no
   file a glTF names outside its own folder is read.

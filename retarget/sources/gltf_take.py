@@ -10,9 +10,9 @@ import math
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.gltf_animation import (animated_weights, animation_channels, mesh_instances,
+from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
                                      node_transforms, posed_vertices, transformed)
-from retarget.gltf_document import GltfDocument
+from retarget.gltf.document import GltfDocument
 from retarget.sources.labelled_points import labelled_positions, labelled_surface_points
 from retarget.sources.take import DEFAULT_FPS
 

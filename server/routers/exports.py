@@ -3,18 +3,18 @@
     GET  /api/projects/{id}/export.glb[?takes=<id>,<id>|all][&settings=<JSON>][&regions=<a>,<b>]
     POST /api/projects/import          multipart: file (.glb), name (optional)
 
-The export (`retarget.export.export_gltf`) holds the project's mesh, landmarks and the rig
+The export (`retarget.gltf.export_gltf`) holds the project's mesh, landmarks and the rig
 in use (painted weights included): a glTF skin for a joint-based rig (ellipsoid,
 geodesic), morph targets for the interpolating ones (biharmonic, rbf, region_rbf,
 laplacian). Each take named in ``takes`` becomes one animation named after the take, its
-frames retargeted as the take player plays them (`retarget.export.take_clip`: conditioned
+frames retargeted as the take player plays them (`retarget.clips.take_clip`: conditioned
 by ``settings``, the Performance panel's ConditionSettings JSON, defaults when absent;
 ``regions`` moves only those regions, groups or points). It answers as an attachment
 named after the project. A plain request: the sample face with a 30 s take at 30 fps
 exports in well under a second.
 
-The import reads a .glb this app exported (`retarget.export.read_gltf`) into a new
-project: its mesh (stored as a mesh-only .glb, `retarget.export.export_mesh_gltf`), its
+The import reads a .glb this app exported (`retarget.gltf.read_gltf`) into a new
+project: its mesh (stored as a mesh-only .glb, `retarget.gltf.export_mesh_gltf`), its
 landmarks and its rig, which becomes the new project's automatic rig (a painted rig
 comes in as painted, with nothing to reset to). Animations are not imported: they hold
 the target's feature displacements, not a performer's points, so they cannot be takes;
@@ -31,7 +31,8 @@ import re
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile, status
 
 from retarget.errors import RetargetError
-from retarget.export import export_gltf, take_clip
+from retarget.clips import take_clip
+from retarget.gltf import export_gltf
 from retarget.landmarks import landmarks_from_json
 from server.deps import IsolationDep, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses

@@ -1,26 +1,10 @@
-"""The project's mesh: upload, download the original, and compact arrays for the browser.
-
-``GET /api/projects/{id}/mesh/arrays`` answers ``application/octet-stream``, little-endian::
-
-    offset  size    field
-    0       4       magic b"RTMA"
-    4       4       uint32 format version (1)
-    8       4       uint32 V, vertex count
-    12      4       uint32 F, triangle count
-    16      12 V    float32 vertices, (V, 3) row-major, in the mesh's own units
-    16+12V  12 F    uint32 faces, (F, 3) row-major, indices into the vertices
-
-Both arrays start at multiples of 4 bytes, so a browser reads them in place with
-``new Float32Array(buf, 16, 3 * V)`` and ``new Uint32Array(buf, 16 + 12 * V, 3 * F)``.
-Vertex order is exactly `retarget.mesh.load_mesh`'s, which landmark indices refer to.
-"""
+"""The project's mesh: upload, download the original, and compact arrays for the browser
+(``GET .../mesh/arrays``: `server.wire`'s RTMA format)."""
 
 from __future__ import annotations
 
 import os
-import struct
 
-import numpy as np
 from fastapi import APIRouter, File, HTTPException, Response, UploadFile, status
 from fastapi.responses import FileResponse
 
@@ -30,13 +14,11 @@ from server.errors import responses
 from server.limits import body_limit
 from server.readers import mesh_counts
 from server.store import MESH_EXTENSIONS
+from server.wire import mesh_arrays
 
 router = APIRouter(prefix="/api/projects/{project_id}/mesh", tags=["meshes"],
                    responses=responses(404))
 
-ARRAYS_MAGIC = b"RTMA"
-ARRAYS_VERSION = 1
-ARRAYS_HEADER = struct.Struct("<4sIII")
 
 MEDIA_TYPES = {
     "obj": "model/obj",
@@ -108,15 +90,8 @@ def get_mesh_file(project: ProjectDep, store: StoreDep):
     return FileResponse(path, media_type=MEDIA_TYPES[ext], filename=f"mesh.{ext}")
 
 
-def mesh_arrays(vertices: np.ndarray, faces: np.ndarray) -> bytes:
-    """The binary form of the module docstring."""
-    v = np.ascontiguousarray(vertices, dtype="<f4")
-    f = np.ascontiguousarray(faces, dtype="<u4")
-    return ARRAYS_HEADER.pack(ARRAYS_MAGIC, ARRAYS_VERSION, len(v), len(f)) + v.tobytes() + f.tobytes()
-
-
 @router.get("/arrays", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}}}, **responses(404, 409)})
 def get_mesh_arrays(mesh: MeshDep) -> Response:
-    """Vertices and faces as little-endian binary (format in the module docstring)."""
+    """Vertices and faces as `server.wire`'s RTMA bytes."""
     return Response(mesh_arrays(mesh.vertices, mesh.faces), media_type="application/octet-stream")

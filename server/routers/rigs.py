@@ -1,37 +1,12 @@
-"""The project's rig (skin weights): compute it in the background, read it back.
+"""The project's rig (skin weights): compute it in the background, read it back, paint it.
 
-``GET /api/projects/{id}/rig/weights`` answers ``application/octet-stream``,
-little-endian::
-
-    offset      size    field
-    0           4       magic b"RTSW"
-    4           4       uint32 format version (1)
-    8           4       uint32 V, vertex count
-    12          4       uint32 K, influences per vertex
-    16          4       uint32 N, joint (feature point) count
-    20          2 V K   uint16 joint indices, (V, K) row-major, each in [0, N)
-    20+2VK      0 or 2  zero padding, so the weights start at a multiple of 4
-    ...         4 V K   float32 weights, (V, K) row-major
-
-Weights are `retarget.skin.SkinWeights`: unused slots have weight 0; the rest of a row's
-1 belongs to the static root joint.
+``GET /api/projects/{id}/rig/weights`` answers ``application/octet-stream``: `server.wire`'s
+RTSW format (joint indices and weights per vertex).
 
 Painting. ``PATCH /api/projects/{id}/rig/weights`` replaces the rows of some vertices
 (`retarget.weights.painting` validates and normalises them against the automatic rig)
 and answers the rig's info. The body is JSON ``{version, vertices, indices, weights}``
-or ``application/octet-stream``, little-endian::
-
-    offset      size    field
-    0           4       magic b"RTSE"
-    4           4       uint32 format version (1)
-    8           4       uint32 R, rows (edited vertices)
-    12          4       uint32 K, influences per row
-    16          4       uint32 N, joint count (the rig's)
-    20          4       uint32 rig version the edit was made on (``version`` of GET rig)
-    24          4 R     uint32 vertex indices
-    24+4R       2 R K   uint16 joint indices, (R, K) row-major
-    ...         0 or 2  zero padding, so the weights start at a multiple of 4
-    ...         4 R K   float32 weights, (R, K) row-major
+or ``application/octet-stream`` in `server.wire`'s RTSE format.
 
 An edit made on an older rig version is refused with 409. ``POST .../rig/reset``
 ``{"joints": [j, ...] | null}`` paints joints back to the automatic rig (null: all).
@@ -40,9 +15,7 @@ The painted rows are stored beside the automatic rig, so both survive a restart.
 
 from __future__ import annotations
 
-import struct
 
-import numpy as np
 from fastapi import APIRouter, HTTPException, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
@@ -60,15 +33,10 @@ from server.jobs import JobBusy
 from server.limits import body_limit
 from server.readers import rig
 from server.store import StaleRig
+from server.wire import edit_arrays, weights_binary
 
 router = APIRouter(tags=["rigs"], responses=responses(404))
 
-WEIGHTS_MAGIC = b"RTSW"
-WEIGHTS_VERSION = 1
-WEIGHTS_HEADER = struct.Struct("<4sIIII")
-EDIT_MAGIC = b"RTSE"
-EDIT_VERSION = 1
-EDIT_HEADER = struct.Struct("<4sIIIII")
 
 
 class RigRequest(BaseModel):
@@ -96,12 +64,14 @@ def start_rig(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep
     options = {} if body.k is None else {"k": body.k}
     revision = project["revision"]
 
-    def work(job) -> str:
+    def work(job) -> tuple[str, dict]:
         weights = isolation.call(rig, mesh, points, body.method, options, job=True,
                                  progress=job.report, what=f"the {body.method} rig")
         store.put_rig(project["id"], weights, revision=revision)
         return (f"rig {weights.method}: {weights.n_joints} joints, "
-                f"{weights.n_influences} influences per vertex")
+                f"{weights.n_influences} influences per vertex",
+                {"method": weights.method, "n_joints": weights.n_joints,
+                 "n_influences": weights.n_influences})
 
     try:
         job = jobs.start(project["id"], "rig", work)
@@ -112,7 +82,9 @@ def start_rig(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep
 
 @router.get("/api/jobs/{job_id}")
 def get_job(job_id: str, jobs: JobsDep) -> dict:
-    """``{id, project_id, kind, state: running|done|failed, progress: 0..1, detail}``."""
+    """``{id, project_id, kind, state: running|done|failed, progress: 0..1, detail, result}``:
+    detail a sentence, result what a done job made (a rig ``{method, n_joints,
+    n_influences}``, a tracked take ``{take, frames[, truncated, frames_claimed]}``)."""
     job = jobs.get(job_id)
     if job is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no job with id {job_id!r}")
@@ -141,22 +113,10 @@ def get_rig(project: ProjectDep, store: StoreDep) -> dict:
     return rig_info(rig, store.rig_status(project["id"]))
 
 
-def weights_binary(rig: SkinWeights) -> bytes:
-    """The binary form of the module docstring."""
-    if rig.n_joints > 0xFFFF:
-        raise RetargetError(f"rig has {rig.n_joints} joints; the binary form holds 65535")
-    v, k = rig.indices.shape
-    indices = np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
-    padding = b"\0" * (-len(indices) % 4)
-    weights = np.ascontiguousarray(rig.weights, dtype="<f4").tobytes()
-    header = WEIGHTS_HEADER.pack(WEIGHTS_MAGIC, WEIGHTS_VERSION, v, k, rig.n_joints)
-    return header + indices + padding + weights
-
-
 @router.get("/api/projects/{project_id}/rig/weights", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}}}})
 def get_rig_weights(project: ProjectDep, store: StoreDep) -> Response:
-    """Joint indices and weights as little-endian binary (format in the module docstring)."""
+    """Joint indices and weights as `server.wire`'s RTSW bytes."""
     return Response(weights_binary(_rig(project, store)), media_type="application/octet-stream")
 
 
@@ -185,26 +145,6 @@ def _store_painted(store, project_id: str, rig: SkinWeights, automatic: SkinWeig
                    version: int) -> dict:
     rig_status = store.put_painting(project_id, painted_rows(rig, automatic), version=version)
     return rig_info(rig, rig_status)
-
-
-def edit_arrays(body: bytes) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
-    """(rig version, N, (R,) vertices, (R, K) joints, (R, K) weights) of the binary form."""
-    if len(body) < EDIT_HEADER.size:
-        raise RetargetError(f"weight edit: {len(body)} bytes is shorter than its "
-                            f"{EDIT_HEADER.size}-byte header")
-    magic, fmt, r, k, n, version = EDIT_HEADER.unpack_from(body)
-    if magic != EDIT_MAGIC or fmt != EDIT_VERSION:
-        raise RetargetError(f"weight edit: expected magic {EDIT_MAGIC!r} version {EDIT_VERSION}, "
-                            f"got {magic!r} version {fmt}")
-    index_bytes = 2 * r * k
-    start = EDIT_HEADER.size + 4 * r + index_bytes + (-index_bytes % 4)
-    if len(body) != start + 4 * r * k:
-        raise RetargetError(f"weight edit: {r} rows of {k} influences need {start + 4 * r * k} "
-                            f"bytes; got {len(body)}")
-    vertices = np.frombuffer(body, "<u4", r, EDIT_HEADER.size)
-    joints = np.frombuffer(body, "<u2", r * k, EDIT_HEADER.size + 4 * r).reshape(r, k)
-    weights = np.frombuffer(body, "<f4", r * k, start).reshape(r, k)
-    return version, n, vertices, joints, weights
 
 
 @router.patch("/api/projects/{project_id}/rig/weights", responses=responses(404, 409),

@@ -2,7 +2,7 @@
 
 On connect the server sends a JSON hello ``{"type": "hello", "project", "n_points",
 "layout", "source"}`` (source: the running source's description or null), then binary
-frames (`server.stream_codec`) whenever the project's source publishes. Control messages
+frames (`server.wire`) whenever the project's source publishes. Control messages
 are JSON text:
 
 - ``{"type": "start", "source": "demo", "fps": 60}``: start (or restart) the built-in demo
@@ -11,7 +11,7 @@ are JSON text:
   replay a stored take (`server.sources.TakeSource`); settings are
   `retarget.sources.conditioning.ConditionSettings` (neutral, head pose, filter, gain);
 - ``{"type": "start", "source": "live", "dims": 3, "settings": {...}}``: points tracked by
-  this viewer follow as binary source-points messages (`stream_codec.decode_points`,
+  this viewer follow as binary source-points messages (`server.wire.decode_points`,
   N = the layout's points) and are retargeted as they arrive (`server.sources.LiveSource`);
 - ``{"type": "settings", "settings": {...}}``: change the running take or live source's
   conditioning (a live source keeps its captured neutral unless the neutral mode changes);
@@ -54,7 +54,7 @@ from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
 from retarget.sources.conditioning import ConditionSettings
 from server.sources import DemoSource, LiveSource, TakeSource
-from server.stream_codec import FLAG_NEUTRAL, decode_points, encode_frame
+from server.wire import FLAG_NEUTRAL, decode_points, encode_frame
 from server.store import ProjectNotFound, TakeNotFound
 
 router = APIRouter(tags=["stream"])

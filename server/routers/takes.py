@@ -36,7 +36,6 @@ pattern's units (mm), and it carries its calibration for reuse.
 from __future__ import annotations
 
 import io
-import json
 import math
 from pathlib import Path
 
@@ -151,7 +150,7 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                                             description="square side (circle spacing), mm: the "
                                             "unit of the take's points")) -> dict:
     """Track a marker video, or a stereo pair of colour-marker videos, into a take in the
-    background; answers the job (poll ``GET /api/jobs/{job_id}``; its detail names the
+    background; answers the job (poll ``GET /api/jobs/{job_id}``; its result names the
     take when done). A stereo answer also has the calibration it uses,
     ``calibration: {source, rms, baseline, size, views}`` (rms px, baseline mm)."""
     if method not in TRACK_METHODS:
@@ -176,7 +175,7 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
             run, answer = _marker_tracker(scratch, isolation, file, layout), {}
         take_name = name or _default_name(file.filename, method)
 
-        def work(job) -> str:
+        def work(job) -> tuple[str, dict]:
             try:
                 take = run(lambda done, total: job.report(done / total) if total else None)
             finally:
@@ -184,7 +183,10 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
             info = store.put_take(project["id"], take, name=take_name)
             # a cut-off video still gives the frames up to the cut: the page says so
             cut = {k: take.meta[k] for k in ("truncated", "frames_claimed") if k in take.meta}
-            return json.dumps({"take": info["id"], "frames": info["n_frames"], **cut})
+            cut_note = (f" (the video ends early: {info['n_frames']} of {cut['frames_claimed']} "
+                        "frames)" if "frames_claimed" in cut else "")
+            return (f"tracked {info['n_frames']} frames into take {info['name']!r}{cut_note}",
+                    {"take": info["id"], "frames": info["n_frames"], **cut})
 
         job = jobs.start(project["id"], "track", work)
     except JobBusy as exc:

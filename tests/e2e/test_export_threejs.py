@@ -23,8 +23,8 @@ import httpx
 import numpy as np
 import pytest
 
-from retarget.export import read_gltf
-from retarget.gltf_document import GltfDocument
+from retarget.gltf import read_gltf
+from retarget.gltf.document import GltfDocument
 from retarget.sample_face import demo_weights, sample_face
 from retarget.skin import SkinWeights, skin_displacements
 from tests.e2e.conftest import Server, open_project

@@ -5,7 +5,7 @@ with a message naming the problem while the project and its takes stay as they w
 
 Ground truth: the take is the sample face's 68 landmarks opening the jaw between known
 times, so the frames the stream plays must move the face exactly when the take does; the
-marker video is rendered by `retarget.synthetic.marker_video`. One server and one page
+marker video is rendered by `retarget.testing.marker_video`. One server and one page
 serve the whole module (the sample project's rig loads once).
 """
 
@@ -23,8 +23,8 @@ from retarget.layouts import get_layout
 from retarget.sample_face import EXPRESSION_NAMES, posed_vertices, sample_face
 from retarget.sources.files import write_take_csv
 from retarget.sources.take import Take
-from retarget.synthetic.marker_video import default_camera, render_marker_video
-from retarget.synthetic.render import render_face
+from retarget.testing.marker_video import default_camera, render_marker_video
+from retarget.testing.render import render_face
 from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project
 
 FPS = 30.0

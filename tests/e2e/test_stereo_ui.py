@@ -3,7 +3,7 @@ rendered stereo pair and its rig's exact calibration uploaded through the form, 
 progress bar while the server tracks, the take in the list, and playing it moves the
 face; bad input refused with its message in the page and nothing stored.
 
-Ground truth: `retarget.synthetic.stereo_rig` renders the pair (6 frames of the demo's
+Ground truth: `retarget.testing.stereo_rig` renders the pair (6 frames of the demo's
 expressions under head motion, seen by two cameras at 1 m) and gives the exact
 calibration; the tracked take's points are compared with the rendered markers.
 """
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from retarget.sources.stereo import StereoCalibration
-from retarget.synthetic.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
+from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
 from tests.e2e.conftest import Server, open_project
 
 N_FRAMES = 6

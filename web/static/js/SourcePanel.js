@@ -297,7 +297,7 @@ export class SourcePanel {
 				if ( state.state === 'failed' ) throw new Error( `Marker tracking failed: ${ state.detail }` );
 				if ( state.state === 'done' ) {
 
-					result = JSON.parse( state.detail );
+					result = state.result;
 					this.selectedTake = result.take;
 					break;
 

@@ -179,7 +179,7 @@ export class StereoTrack {
 			if ( state.state === 'failed' ) throw new Error( `Stereo tracking failed: ${ state.detail }` );
 			if ( state.state === 'done' ) {
 
-				detail = JSON.parse( state.detail );
+				detail = state.result;
 				break;
 
 			}

@@ -160,7 +160,7 @@ export const api = {
 	/** @param {{layout: string, triangles: number[][], barycentric: number[][]}} landmarks */
 	putLandmarks: ( id, landmarks ) => request( 'PUT', `/api/projects/${ id }/landmarks`, { json: landmarks } ),
 
-	/** @returns {Promise<object>} the job {id, state, progress, detail} */
+	/** @returns {Promise<object>} the job {id, state, progress, detail, result} */
 	startRig: ( id, method ) => request( 'POST', `/api/projects/${ id }/rig`, { json: { method } } ),
 
 	job: ( jobId ) => request( 'GET', `/api/jobs/${ jobId }` ),

@@ -2,11 +2,11 @@
 
 Woodward et al., §3: two webcams (640 x 480) about 1 m from the performer, calibrated on a
 target of known geometry, filming coloured stickers. Here both cameras are
-`retarget.synthetic.camera.Camera`s in **millimetres** (the built-in face, in cm, is
+`retarget.testing.camera.Camera`s in **millimetres** (the built-in face, in cm, is
 scaled by 10), `distance` from the face along its viewing axis, `baseline` apart side by
 side and verged on the face. The performance and its truth come from
-`retarget.synthetic.marker_video.render_marker_video` (style "color"); the calibration
-views from `retarget.synthetic.render.render_checkerboard`.
+`retarget.testing.marker_video.render_marker_video` (style "color"); the calibration
+views from `retarget.testing.render.render_checkerboard`.
 
 Naming follows stereo practice: the "left" camera is the one on the left as seen from
 behind the cameras, which is on the subject's left (world +x); 3D results of
@@ -24,9 +24,9 @@ from retarget.errors import RetargetError
 from retarget.sample_face import sample_face
 from retarget.sources.color_markers import layout_marker_colors
 from retarget.sources.stereo import StereoCalibration
-from retarget.synthetic.camera import Camera, look_at
-from retarget.synthetic.marker_video import GroundTruth, marker_vertices, render_marker_video
-from retarget.synthetic.render import MARKER_COLORS, render_checkerboard, render_face
+from retarget.testing.camera import Camera, look_at
+from retarget.testing.marker_video import GroundTruth, marker_vertices, render_marker_video
+from retarget.testing.render import MARKER_COLORS, render_checkerboard, render_face
 
 __all__ = [
     "FACE_CENTRE",
@@ -166,7 +166,7 @@ def render_stereo_video(
 ) -> GroundTruth:
     """A colour-marker performance filmed by the rig: two videos and their truth.
 
-    path : video path (suffix in `retarget.synthetic.marker_video.CODECS`; ``.mkv`` is
+    path : video path (suffix in `retarget.testing.marker_video.CODECS`; ``.mkv`` is
         lossless); the videos are ``<stem>_left<suffix>`` and ``<stem>_right<suffix>``,
         the truth ``<stem>.npz``. Truth is in world mm (``points3d``), with the cameras.
     cameras : (left, right); default `stereo_cameras()`.

@@ -10,7 +10,7 @@ remainder ``1 - Σ_i w_i`` of each row goes to joint 0, a static root (the skull
 That is possible exactly when the rig's weights are non-negative and each row sums to at
 most 1: the sparse rigs (ellipsoid, geodesic). The interpolating deformers (dense RBF,
 region RBF, Laplacian, biharmonic) have negative weights and rows above 1, which no glTF
-skin can hold; `retarget.export.morph` exports those as morph targets instead.
+skin can hold; `retarget.gltf.morph` exports those as morph targets instead.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ buffer), each chunk padded to 4 bytes (glTF 2.0 spec, "GLB File Format Specifica
 `GlbBuilder` appends arrays to the BIN chunk as buffer views, each at a 4-byte aligned
 offset so that every accessor is aligned to its component size, and declares accessors
 on them; `glb_bytes` joins the document and the buffer. Reading glTF is
-`retarget.gltf_document.GltfDocument`'s.
+`retarget.gltf.document.GltfDocument`'s.
 """
 
 from __future__ import annotations

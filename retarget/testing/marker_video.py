@@ -20,8 +20,8 @@ import numpy as np
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sample_face import SampleFace, demo_weights, posed_vertices, sample_face
-from retarget.synthetic.camera import Camera, look_at
-from retarget.synthetic.render import render_face
+from retarget.testing.camera import Camera, look_at
+from retarget.testing.render import render_face
 
 __all__ = [
     "CODECS",

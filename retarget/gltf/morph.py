@@ -2,7 +2,7 @@
 
 The interpolating deformers (dense RBF and region RBF, Zhang §2.1 and §4; Laplacian
 editing, Zhang §2.2; biharmonic) are linear vertex deformers with negative weights, so
-they are not joint-based in glTF's sense (`retarget.export.influences`). Their motion is
+they are not joint-based in glTF's sense (`retarget.gltf.influences`). Their motion is
 still exactly linear in the feature displacements, so three morph targets per feature
 hold it: target (i, a), a in x, y, z, moves vertex v by ``s W[v, i]`` along axis a, and
 its animated weight at frame f is ``d_f[i, a] / s``. glTF's morphing

@@ -14,12 +14,12 @@ only with uv), the feature points as joints, the deformation and one animation p
   glTF skin over ``root`` and the features with inverse bind matrices ``T(-p_i)``, and
   per-vertex JOINTS_n / WEIGHTS_n (float weights, each vertex's summing to 1 with the
   root taking the remainder; as many sets of four as the busiest vertex needs: two for
-  the four-influence sparse rigs). See `retarget.export.influences`.
+  the four-influence sparse rigs). See `retarget.gltf.influences`.
 - Other rigs (negative weights: dense RBF, region RBF, Laplacian, biharmonic) are not
   joint-based; the mesh carries 3N morph targets (``<feature>.x``... in
   ``mesh.extras.targetNames``, their scale in ``mesh.extras.targetScale``) animated by
   the displacements over that scale, within [-1, 1], and the joints move as plain nodes
-  beside it. See `retarget.export.morph`. Blender 5.0's importer sets a shape key's
+  beside it. See `retarget.gltf.morph`. Blender 5.0's importer sets a shape key's
   slider range from the first key only and clamps the animation to it, so widen the
   ranges to [-1, 1] after import (tests/blender/evaluate_glb.py does).
 
@@ -30,7 +30,7 @@ them; morph targets carry no NORMAL offsets).
 Units: the mesh's own, unscaled. glTF's convention is metres and +y up; the sample face
 and the ICT data are centimetres with +y up, so they appear 100 times too large in a
 viewer that trusts the convention. Scaling would change every position and displacement
-the round trip (`retarget.export.gltf_reader`) must give back, so it is left to the
+the round trip (`retarget.gltf.reader`) must give back, so it is left to the
 viewer. The scene's ``extras.retarget`` records the landmarks (`SurfacePoints.to_json`),
 the rig's method and the deformation kind for that round trip.
 """
@@ -44,10 +44,10 @@ import trimesh
 
 from retarget import __version__
 from retarget.errors import RetargetError
-from retarget.export.clips import Clip
-from retarget.export.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
-from retarget.export.influences import is_joint_based, joint_influences
-from retarget.export.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
+from retarget.clips import Clip
+from retarget.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
+from retarget.gltf.influences import is_joint_based, joint_influences
+from retarget.gltf.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
                                    morph_scale, target_bounds, target_names)
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
@@ -279,7 +279,7 @@ def _add_skin(out: GlbBuilder, primitive: dict, weights: SkinWeights, neutral: n
 
 def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, names,
                        scale: float, step) -> None:
-    """Three targets per feature, s W[:, i] e_a (see `retarget.export.morph`); sparse
+    """Three targets per feature, s W[:, i] e_a (see `retarget.gltf.morph`); sparse
     where few vertices move, the three axes sharing one index view."""
     columns = feature_columns(weights)
     v = weights.n_vertices

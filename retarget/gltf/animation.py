@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.gltf_document import GltfDocument
+from retarget.gltf.document import GltfDocument
 
 __all__ = ["animated_weights", "animation_channels", "mesh_instances", "node_transforms",
            "posed_vertices", "sampled", "transformed", "trs_matrices"]

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.synthetic.camera import Camera
+from retarget.testing.camera import Camera
 
 __all__ = [
     "MARKER_COLORS",

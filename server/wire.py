@@ -1,8 +1,19 @@
-"""The stream's binary frame: target feature displacements for one frame.
+"""Every binary format between the server and the browser, in one place. Each has one
+JavaScript twin in `web/static/js/net/wire.js`, and tests run the two against each other.
 
-One WebSocket binary message per frame, little-endian; its JavaScript twin is
-`web/static/js/StreamDecoder.js`, and `tests/test_stream_codec.py` checks the two
-against each other. Layout (byte offsets):
+- stream frame ``RTDF`` (server -> page, WebSocket): a frame's feature displacements;
+- source points ``RTSP`` (page -> server, WebSocket): one frame of tracked points;
+- mesh arrays ``RTMA`` (GET .../mesh/arrays): vertices and triangles to draw;
+- rig weights ``RTSW`` (GET .../rig/weights): joint indices and weights per vertex;
+- weight edit ``RTSE`` (PATCH .../rig/weights): painted rows.
+
+All little-endian; every array starts at a multiple of 4 bytes, so the page views it in
+place (``new Float32Array(buffer, offset, n)``) without copying.
+
+Stream frame (RTDF)
+-------------------
+One WebSocket binary message per frame. Layout (byte offsets):
+
 
     0   4 bytes  magic b"RTDF"
     4   uint16   version (1)
@@ -22,6 +33,53 @@ against each other. Layout (byte offsets):
 
 The header is 32 bytes, a multiple of 4, so the decoder views the payload as a
 Float32Array without copying.
+
+Mesh arrays (RTMA)
+------------------
+::
+
+    offset  size    field
+    0       4       magic b"RTMA"
+    4       4       uint32 format version (1)
+    8       4       uint32 V, vertex count
+    12      4       uint32 F, triangle count
+    16      12 V    float32 vertices, (V, 3) row-major, in the mesh's own units
+    16+12V  12 F    uint32 faces, (F, 3) row-major, indices into the vertices
+
+Vertex order is exactly `retarget.mesh.load_mesh`'s, which landmark indices refer to.
+
+Rig weights (RTSW)
+------------------
+::
+
+    offset      size    field
+    0           4       magic b"RTSW"
+    4           4       uint32 format version (1)
+    8           4       uint32 V, vertex count
+    12          4       uint32 K, influences per vertex
+    16          4       uint32 N, joint (feature point) count
+    20          2 V K   uint16 joint indices, (V, K) row-major, each in [0, N)
+    20+2VK      0 or 2  zero padding, so the weights start at a multiple of 4
+    ...         4 V K   float32 weights, (V, K) row-major
+
+Weights are `retarget.skin.SkinWeights`: unused slots have weight 0; the rest of a row's
+1 belongs to the static root joint.
+
+Weight edit (RTSE)
+------------------
+::
+
+    offset      size    field
+    0           4       magic b"RTSE"
+    4           4       uint32 format version (1)
+    8           4       uint32 R, rows (edited vertices)
+    12          4       uint32 K, influences per row
+    16          4       uint32 N, joint count (the rig's)
+    20          4       uint32 rig version the edit was made on (``version`` of GET rig)
+    24          4 R     uint32 vertex indices
+    24+4R       2 R K   uint16 joint indices, (R, K) row-major
+    ...         0 or 2  zero padding, so the weights start at a multiple of 4
+    ...         4 R K   float32 weights, (R, K) row-major
 """
 
 from __future__ import annotations
@@ -31,6 +89,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.skin import SkinWeights
 
 MAGIC = b"RTDF"
 VERSION = 1
@@ -100,10 +161,9 @@ def decode_frame(data: bytes) -> Frame:
     return Frame(d, index, source_time, send_time, flags, q)
 
 
-# -- source points: the browser's tracker -> the server ------------------------------------
+# -- source points (RTSP): the browser's tracker -> the server ----------------------------
 #
-# One WebSocket binary message per tracked frame, little-endian; its JavaScript twin is
-# `web/static/js/PointsEncoder.js`. Layout (byte offsets):
+# One WebSocket binary message per tracked frame. Layout (byte offsets):
 #
 #     0   4 bytes  magic b"RTSP"
 #     4   uint16   version (1)
@@ -162,3 +222,59 @@ def decode_points(data: bytes) -> PointsFrame:
     if np.isinf(p).any():
         raise ValueError("source points must be finite or NaN (lost); got an infinity")
     return PointsFrame(p, index, t)
+
+
+# -- mesh arrays (RTMA) ------------------------------------------------------------------
+
+ARRAYS_MAGIC = b"RTMA"
+ARRAYS_VERSION = 1
+ARRAYS_HEADER = struct.Struct("<4sIII")
+
+
+def mesh_arrays(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """The RTMA bytes of a mesh (module docstring)."""
+    v = np.ascontiguousarray(vertices, dtype="<f4")
+    f = np.ascontiguousarray(faces, dtype="<u4")
+    return ARRAYS_HEADER.pack(ARRAYS_MAGIC, ARRAYS_VERSION, len(v), len(f)) + v.tobytes() + f.tobytes()
+
+
+# -- rig weights (RTSW) and weight edits (RTSE) ------------------------------------------
+
+WEIGHTS_MAGIC = b"RTSW"
+WEIGHTS_VERSION = 1
+WEIGHTS_HEADER = struct.Struct("<4sIIII")
+EDIT_MAGIC = b"RTSE"
+EDIT_VERSION = 1
+EDIT_HEADER = struct.Struct("<4sIIIII")
+
+
+def weights_binary(rig: SkinWeights) -> bytes:
+    """The RTSW bytes of a rig (module docstring)."""
+    if rig.n_joints > 0xFFFF:
+        raise RetargetError(f"rig has {rig.n_joints} joints; the binary form holds 65535")
+    v, k = rig.indices.shape
+    indices = np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
+    padding = b"\0" * (-len(indices) % 4)
+    weights = np.ascontiguousarray(rig.weights, dtype="<f4").tobytes()
+    header = WEIGHTS_HEADER.pack(WEIGHTS_MAGIC, WEIGHTS_VERSION, v, k, rig.n_joints)
+    return header + indices + padding + weights
+
+
+def edit_arrays(body: bytes) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
+    """(rig version, N, (R,) vertices, (R, K) joints, (R, K) weights) of the binary form."""
+    if len(body) < EDIT_HEADER.size:
+        raise RetargetError(f"weight edit: {len(body)} bytes is shorter than its "
+                            f"{EDIT_HEADER.size}-byte header")
+    magic, fmt, r, k, n, version = EDIT_HEADER.unpack_from(body)
+    if magic != EDIT_MAGIC or fmt != EDIT_VERSION:
+        raise RetargetError(f"weight edit: expected magic {EDIT_MAGIC!r} version {EDIT_VERSION}, "
+                            f"got {magic!r} version {fmt}")
+    index_bytes = 2 * r * k
+    start = EDIT_HEADER.size + 4 * r + index_bytes + (-index_bytes % 4)
+    if len(body) != start + 4 * r * k:
+        raise RetargetError(f"weight edit: {r} rows of {k} influences need {start + 4 * r * k} "
+                            f"bytes; got {len(body)}")
+    vertices = np.frombuffer(body, "<u4", r, EDIT_HEADER.size)
+    joints = np.frombuffer(body, "<u2", r * k, EDIT_HEADER.size + 4 * r).reshape(r, k)
+    weights = np.frombuffer(body, "<f4", r * k, start).reshape(r, k)
+    return version, n, vertices, joints, weights

@@ -1,4 +1,4 @@
-"""Read a .glb written by `retarget.export.export_gltf` back: mesh, landmarks, rig, clips.
+"""Read a .glb written by `retarget.gltf.export_gltf` back: mesh, landmarks, rig, clips.
 
 The round trip of the export. What comes back, against what went in:
 
@@ -12,8 +12,8 @@ The round trip of the export. What comes back, against what went in:
 - one `Clip` per animation: the feature joints' translations minus their neutral
   positions, at the animation's key times.
 
-The file is parsed and its accessors read by `retarget.gltf_document.GltfDocument`
-(bounds-checked), its animation channels by `retarget.gltf_animation`. Files of another
+The file is parsed and its accessors read by `retarget.gltf.document.GltfDocument`
+(bounds-checked), its animation channels by `retarget.gltf.animation`. Files of another
 layout (not one skin or morph-target primitive beside a static root of translation-only
 feature joints) are refused with a `RetargetError` saying what is missing, rather than
 read approximately.
@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.export.clips import Clip
-from retarget.export.influences import weights_from_influences
-from retarget.export.morph import weights_from_targets
-from retarget.gltf_animation import animation_channels
-from retarget.gltf_document import GltfDocument
+from retarget.clips import Clip
+from retarget.gltf.influences import weights_from_influences
+from retarget.gltf.morph import weights_from_targets
+from retarget.gltf.animation import animation_channels
+from retarget.gltf.document import GltfDocument
 from retarget.landmarks import SurfacePoints, from_positions, landmarks_from_json
 from retarget.material import Material
 from retarget.mesh import Mesh, mesh_from_arrays

@@ -1,0 +1,30 @@
+"""glTF 2.0: reading any file safely, evaluating its animation, and the rigged export.
+
+Reading: `document` (`GltfDocument`, bounds-checked glTF/GLB parsing, and `scene_size`,
+what a scene would unpack to, counted before anything is read) and `animation` (glTF's
+skinning, morphing and node animation evaluated as the specification defines them).
+
+The export: `export_gltf` (bytes) and `write_gltf` (to a file) write a target mesh, its
+feature points as translation-only joints (Dutreve §3), its rig (a glTF skin, or morph
+targets for rigs with negative weights) and retargeted takes (`retarget.clips.Clip`) as
+animations, as one .glb (`writer` documents the layout and the units); `read_gltf` reads
+such a file back into the mesh, landmarks, skin weights and clips (`reader`);
+`export_mesh_gltf` writes the mesh alone. `glb` is the binary container, `influences`
+the weights as JOINTS_n / WEIGHTS_n, `morph` the weights as morph targets.
+"""
+
+import importlib
+
+__all__ = ["RiggedFace", "export_gltf", "export_mesh_gltf", "joint_names", "read_gltf",
+           "write_gltf"]
+
+_HOMES = {"RiggedFace": "reader", "read_gltf": "reader", "export_gltf": "writer",
+          "export_mesh_gltf": "writer", "joint_names": "writer", "write_gltf": "writer"}
+
+
+def __getattr__(name: str):
+    # the export's names are imported on first use (PEP 562): `retarget.mesh` reads glTF
+    # through `document`, and the export is built on `retarget.mesh`
+    if name in _HOMES:
+        return getattr(importlib.import_module(f"retarget.gltf.{_HOMES[name]}"), name)
+    raise AttributeError(f"module 'retarget.gltf' has no attribute {name!r}")
