@@ -87,10 +87,12 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.sample_face import sample_face
 
 __all__ = [
     "REGIONS",
@@ -329,6 +331,17 @@ class Layout:
                 )
         return mask
 
+    def reference_points(self) -> np.ndarray:
+        """(N, 3) float64, read-only: this layout's points on the built-in sample face
+        (`retarget.sample_face.sample_face`, resolution 1, the default identity), cm, with
+        the face's axes (+y up, +z out of the face, +x toward the subject's left).
+
+        The face a user places points by (the landmark picker shows it) and the shape a
+        marker tracker identifies its markers against. The face is built once per process
+        (about a second), then this is a cached lookup.
+        """
+        return _reference_points(self.ibug68)
+
     def mirrored(self, points: np.ndarray) -> np.ndarray:
         """Mirror a placement of this layout's points about the plane x = 0.
 
@@ -402,6 +415,20 @@ class Layout:
             ibug68=tuple(self.ibug68[i] for i in rows),
             mediapipe468=tuple(self.mediapipe468[i] for i in rows),
         )
+
+
+@lru_cache(maxsize=None)
+def _reference_points(ibug68: tuple[int, ...]) -> np.ndarray:
+    out = _sample_landmarks68()[list(ibug68)]
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=1)
+def _sample_landmarks68() -> np.ndarray:
+    """(68, 3) float64 the built-in face's landmarks, cm (built once: it takes a while)."""
+    face = sample_face(1)
+    return face.vertices[face.landmarks68]
 
 
 def _as_float_array(value, what: str) -> np.ndarray:

@@ -109,7 +109,7 @@ def layout_marker_colors(layout: Layout | str,
     Woodward uses one colour for all 13 stickers; with several, the template and the
     stereo matching only ever weigh markers of one colour against each other, so a marker
     is confused only with distant ones. Colours are dealt greedily down the face (the
-    built-in face's landmarks, `retarget.sample_face`): each point takes the palette
+    built-in face's landmarks, `Layout.reference_points`): each point takes the palette
     colour whose nearest point already holding it is furthest away (for ``dutreve21``,
     5 colours: same-coloured stickers at least 2.9 cm apart, against 1.6 cm when the
     colours are simply cycled). Dealt once per layout and palette, then cached.
@@ -120,11 +120,8 @@ def layout_marker_colors(layout: Layout | str,
 
 @functools.lru_cache(maxsize=16)
 def _dealt_colors(layout: Layout, palette: tuple[str, ...]) -> tuple[str, ...]:
-    from retarget.sample_face import sample_face
-
     _colors(palette)
-    face = sample_face(1)
-    xy = face.vertices[face.landmarks68[list(layout.ibug68)], :2]
+    xy = layout.reference_points()[:, :2]
     order = np.lexsort((xy[:, 0], -xy[:, 1]))
     chosen = np.full(layout.n_points, -1)
     for i in order:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -138,16 +137,9 @@ def detect_ring_markers(gray: np.ndarray) -> np.ndarray:
 
 def reference_points(layout: str) -> np.ndarray:
     """(N, 2) float64 the layout's points on the built-in face seen from the front, in
-    image orientation: x toward the subject's left (the viewer's right), y down; cm."""
-    return _frontal68()[list(get_layout(layout).ibug68)]
-
-
-@lru_cache(maxsize=1)
-def _frontal68() -> np.ndarray:
-    from retarget.sample_face import sample_face
-
-    face = sample_face(1)
-    return face.vertices[face.landmarks68, :2] * [1.0, -1.0]
+    image orientation: x toward the subject's left (the viewer's right), y down; cm
+    (`Layout.reference_points` projected)."""
+    return get_layout(layout).reference_points()[:, :2] * [1.0, -1.0]
 
 
 def assign_markers(detected: np.ndarray, reference: np.ndarray, *, gate: float = 0.75) -> np.ndarray:

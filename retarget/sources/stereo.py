@@ -16,7 +16,6 @@ square (e.g. mm).
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import zipfile
@@ -42,7 +41,6 @@ __all__ = [
     "calibrate_stereo",
     "calibration_from_points",
     "stereo_matches",
-    "reference_points",
     "identified_markers",
     "track_stereo_frames",
     "track_stereo_videos",
@@ -439,27 +437,6 @@ def stereo_matches(calibration: StereoCalibration, left, right, left_labels=None
     return np.stack([rows[keep], cols[keep]], 1).astype(np.int64)
 
 
-def reference_points(layout: Layout | str) -> np.ndarray:
-    """(N, 3) float64 the layout's points on the built-in face (cm, +y up, +z out).
-
-    The shape the first frame's markers are identified against (see
-    `identified_markers`); the same positions `GET /api/layouts` serves as reference.
-    """
-    layout = layout if isinstance(layout, Layout) else get_layout(layout)
-    return _sample_landmarks68()[list(layout.ibug68)]
-
-
-@functools.lru_cache(maxsize=1)
-def _sample_landmarks68() -> np.ndarray:
-    """(68, 3) float64 the built-in face's landmarks, cm (built once: it takes a while)."""
-    from retarget.sample_face import sample_face
-
-    face = sample_face(1)
-    out = face.vertices[face.landmarks68]
-    out.flags.writeable = False
-    return out
-
-
 # The face's frame seen by a camera in front of it: face +x (subject's left) is the
 # image's x, face up is the image's -y, face forward (+z) comes toward the camera (-z).
 _FACING_CAMERA = np.diag([1.0, -1.0, -1.0])
@@ -481,7 +458,7 @@ def identified_markers(calibration: StereoCalibration, left: Blobs, right: Blobs
     """Which candidates of a first stereo frame are which layout point (automatic set-up).
 
     The candidates are matched across the cameras (`stereo_matches`, colours agreeing)
-    and triangulated; the layout's points on the built-in face (`reference_points`),
+    and triangulated; the layout's points on the built-in face (`Layout.reference_points`),
     started upright and facing the cameras at the candidates' centre and spread, are
     fitted to them by a similarity transform alternating with a colour-constrained
     one-to-one assignment (iterative closest points with the Hungarian method).
@@ -502,7 +479,7 @@ def identified_markers(calibration: StereoCalibration, left: Blobs, right: Blobs
         )
     found_xyz = calibration.triangulate(left.centroids[pairs[:, 0]], right.centroids[pairs[:, 1]])
     found_color = l_names[pairs[:, 0]]
-    ref = reference_points(layout)
+    ref = layout.reference_points()
     ref_c = ref - ref.mean(axis=0)
     x_mean = found_xyz.mean(axis=0)
     scale = np.sqrt(((found_xyz - x_mean) ** 2).sum(1).mean() / (ref_c**2).sum(1).mean())

@@ -6,35 +6,26 @@ browser's tracker can read its 468 landmarks into the layout."""
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 from fastapi import APIRouter
 
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, get_layout
-from retarget.sample_face import sample_face
 from server.errors import responses
 
 router = APIRouter(prefix="/api/layouts", tags=["layouts"], responses=responses())
 
 
-@lru_cache(maxsize=1)
-def _reference68() -> list[list[float]]:
-    face = sample_face(1)
-    return face.vertices[face.landmarks68].round(3).tolist()
-
-
 def _layout_json(name: str) -> dict:
     layout = get_layout(name)
-    reference = _reference68()
+    reference = layout.reference_points().round(3).tolist()
     return {
         "name": layout.name,
         "description": layout.description,
         "n_points": layout.n_points,
         "points": [
             {"name": point, "region": region, "side": side, "mirror": mirror,
-             "reference": reference[i68], "mediapipe468": i468}
-            for point, region, side, mirror, i68, i468 in zip(
-                layout.point_names, layout.regions, layout.sides, layout.mirror, layout.ibug68,
+             "reference": xyz, "mediapipe468": i468}
+            for point, region, side, mirror, xyz, i468 in zip(
+                layout.point_names, layout.regions, layout.sides, layout.mirror, reference,
                 layout.mediapipe468)
         ],
         "regions": list(REGIONS),
