@@ -42,7 +42,8 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from retarget.sources.filters import temporal_mean  # noqa: E402
-from retarget.sources.stereo import calibrate_stereo, track_stereo_frames, track_stereo_videos  # noqa: E402
+from retarget.sources.calibration import calibrate_stereo  # noqa: E402
+from retarget.sources.stereo import track_stereo_frames, track_stereo_videos  # noqa: E402
 from retarget.testing.stereo_rig import (  # noqa: E402
     checkerboard_views,
     render_stereo_video,

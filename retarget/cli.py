@@ -589,7 +589,8 @@ def _cmd_track(args) -> int:
             take = track_video_markerless(args.video, layout=layout, progress=progress,
                                           max_frames=args.max_frames)
         else:
-            from retarget.sources.stereo import StereoCalibration, track_stereo_videos
+            from retarget.sources.calibration import StereoCalibration
+            from retarget.sources.stereo import track_stereo_videos
             take = track_stereo_videos(args.video, args.right, StereoCalibration.load(args.calibration),
                                        layout=layout, progress=progress)
     seconds = time.perf_counter() - start
@@ -608,7 +609,7 @@ def _cmd_track(args) -> int:
 
 
 def _cmd_calibrate(args) -> int:
-    from retarget.sources.stereo import calibrate_stereo
+    from retarget.sources.calibration import calibrate_stereo
 
     out = Path(args.out)
     _require_parent(out)

@@ -24,25 +24,15 @@ from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 from retarget.sources.files import read_take
 from retarget.sources.markers import track_marker_video
-from retarget.sources.stereo import (
-    StereoCalibration,
-    calibrate_stereo,
-    track_stereo_frames,
-    track_stereo_videos,
-)
+from retarget.sources.calibration import StereoCalibration
+from retarget.sources.stereo import stereo_pair_calibration, track_stereo_videos
 from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
 from retarget.weights import METHODS, compute_weights
 
-__all__ = ["CALIBRATION_VIEWS", "ImportedProject", "imported_project", "marker_take",
+__all__ = ["ImportedProject", "imported_project", "marker_take",
            "mesh_counts", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
            "video_opens"]
-
-CALIBRATION_VIEWS = 20
-"""Checkerboard frame pairs a server calibration uses at most, spread over the videos:
-the pattern search costs about 0.15 s an image, and 20 well spread views calibrate as well
-as hundreds of neighbouring frames."""
-
 
 def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
                 max_bytes: int) -> tuple[int, int]:
@@ -165,22 +155,11 @@ def stereo_calibration(videos: list[Path], calibration: Path | None, boards: lis
                        pattern: tuple, layout: str,
                        names: dict[Path, str]) -> tuple[StereoCalibration, str]:
     """(calibration, "file" | "checkerboard") of a stereo pair once everything that can be
-    checked before tracking is: both videos readable with equal sizes and frame counts,
-    a real calibration for that size (from the .npz, or computed from the checkerboard
-    videos, which takes a few seconds) and the layout's markers in the first frame pair."""
+    checked before tracking is (`retarget.sources.stereo.stereo_pair_calibration`): from
+    the .npz, or computed from the checkerboard videos, which takes a few seconds."""
     with _naming(names):
-        size = _pair_size(videos, names)
-        if calibration is not None:
-            cal, source = StereoCalibration.load(calibration), "file"
-        else:
-            _pair_size(boards, names)
-            cal, source = _calibration(boards, pattern, names), "checkerboard"
-        if cal.size != size:
-            raise RetargetError(
-                f"the stereo videos are {size[0]}x{size[1]} but the calibration is for "
-                f"{cal.size[0]}x{cal.size[1]}: calibrate the cameras at the size they film")
-        _check_first_markers(videos, cal, layout, names)
-    return cal, source
+        return stereo_pair_calibration(*videos, layout=layout, calibration=calibration,
+                                       boards=boards, pattern=pattern)
 
 
 def stereo_take(videos: list[Path], cal: StereoCalibration, layout: str,
@@ -191,63 +170,3 @@ def stereo_take(videos: list[Path], cal: StereoCalibration, layout: str,
                                    progress=progress)
     take.meta.update(videos=[names[v] for v in videos], calibration=cal.to_dict())
     return take
-
-
-def _pair_size(videos: list[Path], names: dict[Path, str]) -> tuple[int, int]:
-    """(width, height) of two videos of one moment, which must agree in size and in the
-    frame count their headers state (frames are paired by index)."""
-    sizes, counts = [], []
-    for path in videos:
-        with VideoReader(path) as reader:
-            sizes.append(tuple(reader.size))
-            counts.append(reader.n_frames)
-    a, b = (names[v] for v in videos)
-    if sizes[0] != sizes[1]:
-        raise RetargetError(f"{a!r} is {sizes[0][0]}x{sizes[0][1]} but {b!r} is "
-                            f"{sizes[1][0]}x{sizes[1][1]}: the two cameras must film at one size")
-    if all(counts) and counts[0] != counts[1]:
-        raise RetargetError(f"{a!r} has {counts[0]} frames but {b!r} has {counts[1]}: a stereo "
-                            "pair is matched frame by frame, so both videos must start and end "
-                            "on the same moment")
-    return sizes[0]
-
-
-def _calibration(boards: list[Path], pattern: tuple, names: dict[Path, str]) -> StereoCalibration:
-    """The pair's calibration from its checkerboard videos (`CALIBRATION_VIEWS` pairs)."""
-    lefts, rights = _view_pairs(*boards, CALIBRATION_VIEWS)
-    try:
-        return calibrate_stereo(lefts, rights, pattern)
-    except RetargetError as exc:
-        a, b = (names[v] for v in boards)
-        raise RetargetError(f"checkerboard videos {a!r} and {b!r} ({len(lefts)} frame pairs "
-                            f"searched): {exc}") from exc
-
-
-def _view_pairs(left: Path, right: Path, count: int) -> tuple[list, list]:
-    """At most `count` frame pairs spread over two calibration videos, (H, W, 3) uint8 BGR.
-
-    Every `step`-th pair is kept; when more than ``2 count`` are held the step doubles and
-    every other pair goes, so memory stays bounded without trusting the headers' counts.
-    """
-    kept, step = [], 1
-    with VideoReader(left) as a, VideoReader(right) as b:
-        for (index, image_a), (_, image_b) in zip(a, b):
-            if index % step == 0:
-                kept.append((image_a, image_b))
-                if len(kept) > 2 * count:
-                    kept, step = kept[::2], 2 * step
-    kept = kept[::-(-len(kept) // count)]
-    return [a for a, _ in kept], [b for _, b in kept]
-
-
-def _check_first_markers(videos: list[Path], cal: StereoCalibration, layout: str,
-                         names: dict[Path, str]) -> None:
-    """Refuse a pair whose first frames show too few of the layout's colour markers, so
-    it fails in the request rather than in the job (tracking one pair costs ~0.2 s)."""
-    with VideoReader(videos[0]) as a, VideoReader(videos[1]) as b:
-        first = (next(iter(a))[1], next(iter(b))[1])
-    try:
-        track_stereo_frames([first], cal, layout=layout, head_motion="keep")
-    except RetargetError as exc:
-        raise RetargetError(f"the colour markers of {layout!r} in the first frames of "
-                            f"{names[videos[0]]!r} and {names[videos[1]]!r}: {exc}") from exc

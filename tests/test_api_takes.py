@@ -15,7 +15,7 @@ from fastapi.testclient import TestClient
 from retarget.layouts import get_layout
 from retarget.pipeline import Retargeter
 from retarget.sample_face import demo_weights, sample_face
-from retarget.sources.stereo import StereoCalibration
+from retarget.sources.calibration import StereoCalibration, calibration_views
 from retarget.testing.marker_video import render_marker_video
 from retarget.testing.stereo_rig import (
     checkerboard_views,
@@ -24,7 +24,6 @@ from retarget.testing.stereo_rig import (
     stereo_cameras,
 )
 from server.app import create_app
-from server.readers import _view_pairs
 from server.wire import FLAG_HEAD_ROTATION, encode_points
 from tests.ws_messages import binary_frames, replies
 
@@ -250,7 +249,7 @@ def test_calibration_views_are_pairs_spread_over_the_videos(tmp_path):
     """Frame i of both videos is grey level 5 i: the kept pairs show which frames they are."""
     frames = [np.full((48, 64, 3), 5 * i, np.uint8) for i in range(45)]
     a, b = write_video(tmp_path / "a.mkv", frames), write_video(tmp_path / "b.mkv", frames)
-    lefts, rights = _view_pairs(a, b, 8)
+    lefts, rights = calibration_views(a, b, 8)
     index = [int(f[0, 0, 0]) // 5 for f in lefts]
     assert index == [int(f[0, 0, 0]) // 5 for f in rights]
     assert 4 <= len(index) <= 8 and index[0] == 0 and index[-1] >= 30

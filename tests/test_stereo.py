@@ -13,12 +13,9 @@ from scipy.spatial.transform import Rotation
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sources.color_markers import color_blobs, layout_marker_colors
+from retarget.sources.calibration import StereoCalibration, calibrate_stereo, find_pattern, pattern_points
 from retarget.sources.stereo import (
-    StereoCalibration,
-    calibrate_stereo,
-    find_pattern,
     identified_markers,
-    pattern_points,
     stereo_matches,
     track_stereo_frames,
     track_stereo_videos,

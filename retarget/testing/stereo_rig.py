@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from retarget.errors import RetargetError
 from retarget.sample_face import sample_face
 from retarget.sources.color_markers import layout_marker_colors
-from retarget.sources.stereo import StereoCalibration
+from retarget.sources.calibration import StereoCalibration
 from retarget.testing.camera import Camera, look_at
 from retarget.testing.marker_video import GroundTruth, marker_vertices, render_marker_video
 from retarget.testing.render import MARKER_COLORS, render_checkerboard, render_face

@@ -45,7 +45,7 @@ from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
-from retarget.sources.stereo import StereoCalibration, pattern_points
+from retarget.sources.calibration import StereoCalibration, pattern_points
 from retarget.sources.take import Take
 from server.deps import IsolationDep, JobsDep, LimitsDep, Number, ProjectDep, StoreDep, UploadKeyDep
 from server.errors import responses
@@ -241,7 +241,7 @@ def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str
 def _stereo_tracker(scratch: _Scratch, isolation, left: UploadFile, right: UploadFile | None,
                     calibration: UploadFile | None, boards: tuple, pattern: tuple, layout: str):
     """The stereo job's work, ``run(progress) -> Take``, once everything that can be
-    checked before tracking is (see the module docstring, `server.readers.stereo_calibration`);
+    checked before tracking is (see the module docstring, `retarget.sources.stereo.stereo_pair_calibration`);
     and the answer's extras."""
     _require_stereo_fields(right, calibration, boards, pattern)
     videos = [scratch.save(left, VIDEO_EXTENSIONS, "left video"),

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
-from retarget.sources.stereo import StereoCalibration
+from retarget.sources.calibration import StereoCalibration
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
 from tests.e2e.conftest import Server, open_project
 
