@@ -2,9 +2,9 @@
 number in each file name, all of one topology.
 
 A zip can claim anything in its central directory and unpack to far more than its own
-size, so the work is bounded before it is done: the entry count before the directory is
-parsed; the members' declared sizes (in all, `max_bytes`; each, `MAX_FRAME_BYTES`) and
-compression ratios (`MAX_COMPRESSION_RATIO`) before any is unpacked; frames x vertices
+size, so the work is bounded before it is done (`retarget.zips`): the entry count before
+the directory is parsed; the members' declared sizes (in all, `max_bytes`; each,
+`MAX_FRAME_BYTES`) and compression ratios before any is unpacked; frames x vertices
 (`MAX_SEQUENCE_VERTICES`, from the first frame's vertex count) before the other frames
 are parsed. Members are unpacked and parsed a block at a time, so memory stays
 proportional to one block and the labelled points, not to the members; every read is
@@ -17,24 +17,15 @@ from __future__ import annotations
 import hashlib
 import io
 import re
-import zipfile
-import zlib
 
 import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.mesh import load_mesh
 from retarget.sources.labelled_points import labelled_positions, labelled_surface_points
+from retarget.zips import ZIP_ERRORS, check_members, opened_zip, unpacked, zip_problem
 
-__all__ = ["MAX_ARCHIVE_MEMBERS", "MAX_COMPRESSION_RATIO", "MAX_FRAME_BYTES",
-           "MAX_SEQUENCE_VERTICES", "obj_sequence_points"]
-
-MAX_ARCHIVE_MEMBERS = 100_000
-"""Most entries a zip's central directory may hold (zipfile makes an object for each)."""
-
-MAX_COMPRESSION_RATIO = 100
-"""Most a member over 4 KiB may claim to unpack to per packed byte: OBJ text deflates
-3-5:1 (10:1 for coarse coordinates), while a zip bomb's members claim ~1000:1."""
+__all__ = ["MAX_FRAME_BYTES", "MAX_SEQUENCE_VERTICES", "obj_sequence_points"]
 
 MAX_FRAME_BYTES = 16 << 20
 """Most bytes one frame may unpack to: an OBJ of about 230,000 vertices with their faces,
@@ -48,26 +39,13 @@ count): 3,000 frames of a 16,000-vertex face; about a minute of parsing."""
 
 _BLOCK = 1 << 20  # bytes unpacked and parsed at once
 _MAX_LINE = 1 << 20  # no OBJ line is longer
-_RATIO_FLOOR = 4096  # tiny members may pack better than MAX_COMPRESSION_RATIO
-_METHODS = {zipfile.ZIP_STORED: "stored", zipfile.ZIP_DEFLATED: "Deflate"}
-_METHOD_NAMES = {zipfile.ZIP_BZIP2: "bzip2", zipfile.ZIP_LZMA: "LZMA", 9: "Deflate64",
-                 93: "Zstandard", 99: "AES encryption"}
 _V_LINE = re.compile(r"^[ \t]*v[ \t]", re.MULTILINE)
-_ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, OSError, ValueError,
-               NotImplementedError, UnicodeError)
 
 
 def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: int):
     """((F, K, 3) points, K names, meta) of the labelled points of a zip of OBJ frames;
     at most `max_bytes` are unpacked (see the module docstring for the other bounds)."""
-    entries = data.count(b"PK\x01\x02")  # central directory entries, at most
-    if entries > MAX_ARCHIVE_MEMBERS:
-        raise RetargetError(
-            f"{label} holds {entries} zip entries; at most {MAX_ARCHIVE_MEMBERS} are read")
-    try:
-        archive = zipfile.ZipFile(io.BytesIO(data))
-    except _ZIP_ERRORS as exc:
-        raise RetargetError(f"{label} is not a zip archive: {exc}") from None
+    archive = opened_zip(data, label)
     members = []
     for info in archive.infolist():
         base = info.filename.rsplit("/", 1)[-1]
@@ -86,11 +64,12 @@ def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: in
             raise RetargetError(
                 f"{label}: {first.filename!r} and {second.filename!r} have the same frame number {a}")
     infos = [info for _, info in members]
-    _check_declared(infos, label, max_bytes)
+    check_members(infos, label, max_bytes, MAX_FRAME_BYTES, things="frames", thing="frame",
+                  content="OBJ text", advice=" (fewer frames, or a coarser mesh)", total=".obj files")
     budget = [max_bytes]  # bytes still to unpack: the headers may lie, the reads may not
 
     first = infos[0]
-    raw = _unpacked(archive, first, label, budget)
+    raw = unpacked(archive, first, label, budget)
     mesh = load_mesh(raw, "obj")
     if len(infos) * mesh.n_vertices > MAX_SEQUENCE_VERTICES:
         raise RetargetError(
@@ -120,53 +99,6 @@ def obj_sequence_points(data: bytes, label: str, labelled, layout, max_bytes: in
     return points, names, {"n_vertices": mesh.n_vertices}
 
 
-def _check_declared(infos, label: str, max_bytes: int) -> None:
-    """Refuse, from the central directory alone, members that cannot be read or that
-    claim too much: encrypted, compressed other than stored or Deflate (zipfile unpacks
-    bzip2 and LZMA without bounding the output), over `MAX_FRAME_BYTES` or
-    `MAX_COMPRESSION_RATIO`, or over `max_bytes` in all."""
-    for info in infos:
-        where = f"{label}: {info.filename!r}"
-        if info.flag_bits & 0x1:
-            raise RetargetError(f"{where} is encrypted; zip the frames without a password")
-        if info.compress_type not in _METHODS:
-            method = _METHOD_NAMES.get(info.compress_type, "an unknown method")
-            raise RetargetError(
-                f"{where} is compressed with {method} (zip method {info.compress_type}), which is "
-                "not read; zip the frames with Deflate (the usual zip compression)")
-        if info.file_size > MAX_FRAME_BYTES:
-            raise RetargetError(
-                f"{where} unpacks to {info.file_size} bytes; a frame may have at most "
-                f"{MAX_FRAME_BYTES}")
-        if info.file_size > _RATIO_FLOOR \
-                and info.file_size > MAX_COMPRESSION_RATIO * max(info.compress_size, 1):
-            raise RetargetError(
-                f"{where} claims to unpack {info.compress_size} bytes to {info.file_size} "
-                f"({info.file_size / max(info.compress_size, 1):.0f}:1); OBJ text packs at most "
-                f"{MAX_COMPRESSION_RATIO}:1, so the archive is damaged or a zip bomb")
-    total = sum(info.file_size for info in infos)
-    if total > max_bytes:
-        raise RetargetError(
-            f"{label}: its {len(infos)} .obj files unpack to {total} bytes; at most {max_bytes} "
-            "are read (fewer frames, or a coarser mesh)")
-
-
-def _unpacked(archive, info, label: str, budget: list) -> bytes:
-    """The member's bytes, the read bounded by its declared size and the budget left."""
-    where = f"{label}: {info.filename!r}"
-    try:
-        with archive.open(info) as handle:
-            raw = handle.read(min(info.file_size, budget[0]) + 1)
-            if len(raw) <= info.file_size:
-                handle.read(1)  # reach the end, where zipfile checks the CRC
-    except _ZIP_ERRORS as exc:
-        raise RetargetError(f"{where} could not be unpacked: {_zip_problem(exc)}") from None
-    budget[0] -= len(raw)
-    if budget[0] < 0 or len(raw) > info.file_size:
-        raise RetargetError(f"{where} unpacks to more than its declared {info.file_size} bytes")
-    return raw
-
-
 def _read_frame(archive, info, label, budget: list, n_vertices: int, first: str):
     """(vertices, faces digest) of a member, unpacked a block at a time (`_frame`)."""
     where = f"{label}: {info.filename!r}"
@@ -175,8 +107,8 @@ def _read_frame(archive, info, label, budget: list, n_vertices: int, first: str)
             return _frame(_Bounded(handle, info.file_size, budget, where), where, n_vertices, first)
     except RetargetError:
         raise
-    except _ZIP_ERRORS as exc:
-        raise RetargetError(f"{where} could not be unpacked: {_zip_problem(exc)}") from None
+    except ZIP_ERRORS as exc:
+        raise RetargetError(f"{where} could not be unpacked: {zip_problem(exc)}") from None
 
 
 class _Bounded:
@@ -224,12 +156,6 @@ def _frame(stream, where: str, n_vertices: int, first: str) -> tuple[np.ndarray,
             f"{where} has {count} vertices, {first!r} has {n_vertices}; every frame needs "
             "the same topology")
     return np.concatenate(blocks), digest.hexdigest()
-
-
-def _zip_problem(exc: Exception) -> str:
-    if isinstance(exc, zipfile.BadZipFile) and "CRC" in str(exc):
-        return f"its data does not match its checksum ({exc})"
-    return f"{type(exc).__name__}: {exc}"
 
 
 def _obj_vertices(text: str, where: str) -> np.ndarray:
