@@ -1,5 +1,11 @@
-"""The stream's frame encoder (Python) against its decoder (JavaScript, run in node), and the
-browser's source-points encoder (JavaScript) against the server's decoder."""
+"""Every binary format of server/wire.py against its JavaScript twin, web/static/js/net/wire.js,
+run in node (tests/js/wire.mjs): what one side encodes the other decodes to the same values,
+bit for bit, odd counts (padding) included, and both refuse malformed input saying why.
+
+- stream frames (RTDF): Python encodes, JavaScript decodes;
+- source points (RTSP): JavaScript encodes, Python decodes;
+- mesh arrays (RTMA) and rig weights (RTSW): Python encodes, JavaScript decodes;
+- weight edits (RTSE): JavaScript encodes, Python decodes."""
 
 import json
 import shutil
@@ -10,20 +16,43 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.wire import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES, decode_frame,
-                                 decode_points, encode_frame, encode_points)
+from retarget.errors import RetargetError
+from retarget.skin import SkinWeights
+from server.wire import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEADER_BYTES,
+                         decode_frame, decode_points, edit_arrays, encode_frame, encode_points,
+                         mesh_arrays, weights_binary)
 
 ROOT = Path(__file__).resolve().parents[1]
+WIRE_JS = ROOT / "tests" / "js" / "wire.mjs"
 
 
-def decode_in_node(tmp_path, frames: list[bytes]) -> list[dict]:
-    node = shutil.which("node")
-    assert node, "node (Node.js 20) is required: the browser decoder is tested with it"
-    path = tmp_path / "frames.bin"
-    path.write_bytes(b"".join(struct.pack("<I", len(f)) + f for f in frames))
-    out = subprocess.run([node, str(ROOT / "tests" / "js" / "decode_stream.mjs"), str(path)],
+def node() -> str:
+    path = shutil.which("node")
+    assert path, "node (Node.js 20) is required: the browser's codecs are tested with it"
+    return path
+
+
+def decode_in_node(tmp_path, messages: list[bytes], command: str = "decode-frames") -> list[dict]:
+    """What wire.js's decoder makes of each message: a dict of its fields, or {"error": msg}."""
+    path = tmp_path / "messages.bin"
+    path.write_bytes(b"".join(struct.pack("<I", len(m)) + m for m in messages))
+    out = subprocess.run([node(), str(WIRE_JS), command, str(path)],
                          capture_output=True, text=True, timeout=60, check=True)
     return json.loads(out.stdout)
+
+
+def encode_in_node(tmp_path, command: str, spec: dict):
+    """Run one wire.js encoder on `spec` (JSON); the finished process and the output path."""
+    src, out = tmp_path / "spec.json", tmp_path / "encoded.bin"
+    src.write_text(json.dumps(spec))
+    run = subprocess.run([node(), str(WIRE_JS), command, str(src), str(out)],
+                         capture_output=True, text=True, timeout=60)
+    return run, out
+
+
+def bits(values) -> list[int]:
+    """The float32 bit patterns of `values`, flattened (exact comparison, NaN and -0 included)."""
+    return np.ascontiguousarray(values, dtype="<f4").ravel().view(np.uint32).tolist()
 
 
 def test_javascript_decodes_exactly_what_python_encodes(tmp_path):
@@ -104,14 +133,10 @@ def test_python_decoder_refuses_broken_frames():
             decode_frame(bad)
 
 
-def encode_in_node(tmp_path, points, dims, frame_index, capture_time):
+def encode_points_in_node(tmp_path, points, dims, frame_index, capture_time):
     values = [None if np.isnan(v) else float(v) for v in np.asarray(points, np.float32).ravel()]
-    src, out = tmp_path / "points.json", tmp_path / "points.bin"
-    src.write_text(json.dumps({"points": values, "dims": dims, "frameIndex": frame_index,
-                               "captureTime": capture_time}))
-    run = subprocess.run([shutil.which("node"), str(ROOT / "tests" / "js" / "encode_points.mjs"),
-                          str(src), str(out)], capture_output=True, text=True, timeout=60)
-    return run, out
+    return encode_in_node(tmp_path, "encode-points", {"points": values, "dims": dims,
+                                                      "frameIndex": frame_index, "captureTime": capture_time})
 
 
 def test_python_decodes_exactly_what_javascript_encodes_for_live_points(tmp_path):
@@ -119,14 +144,14 @@ def test_python_decodes_exactly_what_javascript_encodes_for_live_points(tmp_path
     for dims in (2, 3):
         p = rng.normal(scale=300, size=(68, dims)).astype(np.float32)
         p[5] = np.nan  # a lost point
-        run, out = encode_in_node(tmp_path, p, dims, 4_000_000_000, 1234.5678)
+        run, out = encode_points_in_node(tmp_path, p, dims, 4_000_000_000, 1234.5678)
         assert run.returncode == 0, run.stdout + run.stderr
         data = out.read_bytes()
         assert data == encode_points(p, frame_index=4_000_000_000, capture_time=1234.5678)
         frame = decode_points(data)
         np.testing.assert_array_equal(frame.points, p)
         assert (frame.frame_index, frame.capture_time) == (4_000_000_000, 1234.5678)
-    run, _ = encode_in_node(tmp_path, np.zeros((4, 3)), 4, 0, 0.0)
+    run, _ = encode_points_in_node(tmp_path, np.zeros((4, 3)), 4, 0, 0.0)
     assert run.returncode == 3 and "dims must be 2 or 3" in run.stdout
 
 
@@ -137,3 +162,121 @@ def test_broken_points_messages_are_refused_with_the_reason():
                          (good[:6] + b"\x04\x00" + good[8:], "of 4 coordinates"), (inf, "infinity")):
         with pytest.raises(ValueError, match=message):
             decode_points(bad)
+
+
+def test_javascript_refuses_points_that_are_not_whole_points(tmp_path):
+    run, _ = encode_in_node(tmp_path, "encode-points", {"points": [1.0] * 7, "dims": 3, "frameIndex": 0,
+                                                        "captureTime": 0.0})
+    assert run.returncode == 3 and run.stdout.startswith("PointsEncoder:") and "7 values" in run.stdout
+
+
+# -- mesh arrays (RTMA): Python encodes, JavaScript decodes ---------------------------------
+
+@pytest.mark.parametrize("n_vertices,n_faces", [(1, 0), (3, 1), (7, 5), (1001, 1999)])
+def test_javascript_decodes_exactly_the_mesh_arrays_python_encodes(tmp_path, n_vertices, n_faces):
+    rng = np.random.default_rng(n_vertices)
+    vertices = rng.normal(scale=10, size=(n_vertices, 3)).astype(np.float32)
+    vertices[0] = [np.float32(1e-45), -0.0, np.float32(3.4e38)]
+    faces = rng.integers(0, n_vertices, size=(n_faces, 3)).astype(np.uint32)
+    data = mesh_arrays(vertices, faces)
+    assert len(data) == 16 + 12 * n_vertices + 12 * n_faces
+    (js,) = decode_in_node(tmp_path, [data], "decode-mesh")
+    assert js["positionBits"] == bits(vertices)
+    assert js["faces"] == faces.ravel().tolist()
+
+
+def test_javascript_refuses_broken_mesh_arrays_with_its_class_name(tmp_path):
+    good = mesh_arrays(np.ones((4, 3)), np.array([[0, 1, 2], [1, 2, 3]]))
+    broken = [b"XXXX" + good[4:], good[:4] + struct.pack("<I", 2) + good[8:], good[:-4], good + b"\0" * 4,
+              good[:10]]
+    messages = [d["error"] for d in decode_in_node(tmp_path, broken, "decode-mesh")]
+    assert all(m.startswith("MeshArraysDecoder:") for m in messages), messages
+    assert '"RTMA"' in messages[0] and "version 2" in messages[1]
+    assert "4 vertices and 2 triangles need 88 bytes, got 84" in messages[2]
+    assert "need 88 bytes, got 92" in messages[3] and "shorter than its 16-byte header" in messages[4]
+
+
+# -- rig weights (RTSW): Python encodes, JavaScript decodes ---------------------------------
+
+def skin(n_vertices: int, k: int, n_joints: int, seed: int) -> SkinWeights:
+    rng = np.random.default_rng(seed)
+    indices = rng.integers(0, n_joints, size=(n_vertices, k)).astype(np.int32)
+    weights = rng.uniform(-0.2, 1.0, size=(n_vertices, k)).astype(np.float32)
+    weights[0, 0] = 0.0  # an unused slot
+    return SkinWeights(indices, weights, n_joints, "test")
+
+
+@pytest.mark.parametrize("n_vertices,k,n_joints",
+                         [(1, 1, 1), (3, 3, 21), (4, 8, 68), (5, 68, 68), (257, 3, 65535)])
+def test_javascript_decodes_exactly_the_rig_weights_python_encodes(tmp_path, n_vertices, k, n_joints):
+    rig = skin(n_vertices, k, n_joints, seed=n_vertices * k)
+    data = weights_binary(rig)
+    padding = 2 if n_vertices * k % 2 else 0  # odd V*K: the weights start 2 bytes later
+    assert len(data) == 20 + 2 * n_vertices * k + padding + 4 * n_vertices * k
+    (js,) = decode_in_node(tmp_path, [data], "decode-weights")
+    assert (js["nJoints"], js["nInfluences"]) == (n_joints, k)
+    assert js["indices"] == rig.indices.ravel().tolist()
+    assert js["weightBits"] == bits(rig.weights)
+
+
+def test_rig_weights_beyond_uint16_joints_are_refused_by_python():
+    with pytest.raises(RetargetError, match="65536 joints"):
+        weights_binary(SkinWeights(np.zeros((2, 1), np.int32), np.ones((2, 1), np.float32), 65536))
+
+
+def test_javascript_refuses_broken_rig_weights_with_its_class_name(tmp_path):
+    good = weights_binary(skin(3, 3, 21, seed=0))  # 9 indices: 2 bytes of padding
+    broken = [b"XXXX" + good[4:], good[:4] + struct.pack("<I", 7) + good[8:], good[:-2],
+              good[:20] + good[22:], good[:12]]
+    messages = [d["error"] for d in decode_in_node(tmp_path, broken, "decode-weights")]
+    assert all(m.startswith("RigWeightsDecoder:") for m in messages), messages
+    assert '"RTSW"' in messages[0] and "version 7" in messages[1]
+    assert "3 rows of 3 influences need 76 bytes, got 74" in messages[2]
+    assert "need 76 bytes, got 74" in messages[3] and "shorter than its 20-byte header" in messages[4]
+
+
+# -- weight edits (RTSE): JavaScript encodes, Python decodes --------------------------------
+
+def rtse(version: int, n_joints: int, vertices, joints, weights) -> bytes:
+    """The RTSE bytes written out from server/wire.py's docstring: the test's own oracle."""
+    r, k = np.shape(joints)
+    index_bytes = np.asarray(joints, "<u2").tobytes()
+    return (struct.pack("<4sIIIII", b"RTSE", 1, r, k, n_joints, version)
+            + np.asarray(vertices, "<u4").tobytes() + index_bytes + b"\0" * (len(index_bytes) % 4)
+            + np.asarray(weights, "<f4").tobytes())
+
+
+@pytest.mark.parametrize("rows,k", [(1, 1), (3, 3), (2, 4), (5, 8), (1, 68), (3001, 3)])
+def test_python_decodes_exactly_the_weight_edits_javascript_encodes(tmp_path, rows, k):
+    rng = np.random.default_rng(rows + k)
+    vertices = np.sort(rng.choice(100_000, size=rows, replace=False)).astype(np.uint32)
+    joints = rng.integers(0, 68, size=(rows, k)).astype(np.uint16)
+    weights = rng.uniform(0, 1, size=(rows, k)).astype(np.float32)
+    run, out = encode_in_node(tmp_path, "encode-edit", {
+        "version": 4_000_000_001, "nJoints": 68, "k": k, "vertices": vertices.tolist(),
+        "indices": joints.ravel().tolist(), "weights": weights.ravel().tolist()})
+    assert run.returncode == 0, run.stdout + run.stderr
+    data = out.read_bytes()
+    assert data == rtse(4_000_000_001, 68, vertices, joints, weights)
+    version, n, got_vertices, got_joints, got_weights = edit_arrays(data)
+    assert (version, n) == (4_000_000_001, 68)
+    np.testing.assert_array_equal(got_vertices, vertices)
+    np.testing.assert_array_equal(got_joints, joints)
+    assert bits(got_weights) == bits(weights)
+
+
+def test_javascript_refuses_rows_that_do_not_fit_their_count(tmp_path):
+    run, _ = encode_in_node(tmp_path, "encode-edit", {"version": 1, "nJoints": 68, "k": 3, "vertices": [1, 2],
+                                                      "indices": [0] * 6, "weights": [0.5] * 5})
+    assert run.returncode == 3 and run.stdout.startswith("WeightEditEncoder:")
+    assert "2 rows of 3 influences need 6 indices and weights, got 6 and 5" in run.stdout
+
+
+def test_python_refuses_broken_weight_edits_with_the_reason():
+    good = rtse(2, 68, [3, 9, 11], np.ones((3, 3)), np.full((3, 3), 0.25))  # 9 indices: padded
+    for bad, message in ((good[:20], "shorter than its 24-byte header"), (b"XXXX" + good[4:], "magic"),
+                         (good[:4] + struct.pack("<I", 2) + good[8:], "version 2"),
+                         (good[:-4], "need 92 bytes; got 88"), (good + b"\0\0", "got 94"),
+                         (good[:54] + good[56:], "got 90")):  # the padding left out
+        with pytest.raises(RetargetError, match=message):
+            edit_arrays(bad)

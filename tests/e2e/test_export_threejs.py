@@ -38,7 +38,7 @@ PAGE = """<!doctype html><meta charset="utf-8"><title>three.js export check</tit
 <script type="module">
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-import { SkinnedFace } from '/static/js/SkinnedFace.js';
+import { SkinnedFace } from '/static/js/scene/SkinnedFace.js';
 
 const encoded = ( array ) => btoa( String.fromCharCode( ...new Uint8Array( array.buffer ) ) );
 const decoded = ( text ) => Uint8Array.from( atob( text ), ( c ) => c.charCodeAt( 0 ) ).buffer;

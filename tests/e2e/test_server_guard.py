@@ -222,7 +222,7 @@ def test_a_take_upload_whose_answer_is_lost_is_retried_and_stored_once(guarded, 
     page.route(f"**/api/projects/{project}/takes", lose_first_answer)
     page.console_errors.clear()
     info = page.evaluate("""async () => {
-        const { api } = await import('/static/js/api.js');
+        const { api } = await import('/static/js/net/api.js');
         const csv = 'frame,time,a_x,a_y\\n0,0,1,2\\n1,0.04,1.5,2\\n';
         return api.uploadTake(window.app.projectId, new File([csv], 'take.csv'), {});
     }""")

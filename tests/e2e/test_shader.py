@@ -30,8 +30,8 @@ PAGE = """<!doctype html><meta charset="utf-8"><title>skin check</title>
 <style>body { margin: 0 } #viewport { width: 640px; height: 480px }</style>
 <div id="viewport"></div>
 <script type="module">
-import { Viewer } from '/static/js/Viewer.js';
-import { SkinnedFace } from '/static/js/SkinnedFace.js';
+import { Viewer } from '/static/js/scene/Viewer.js';
+import { SkinnedFace } from '/static/js/scene/SkinnedFace.js';
 
 const bytes = ( base64 ) => Uint8Array.from( atob( base64 ), ( c ) => c.charCodeAt( 0 ) ).buffer;
 

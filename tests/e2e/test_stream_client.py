@@ -12,7 +12,7 @@ import pytest
 # refuses its WebSocket to 127.0.0.1 (local network access checks).
 PAGE = """<!doctype html><meta charset="utf-8"><title>stream check</title>
 <script type="module">
-import { StreamClient } from '/static/js/StreamClient.js';
+import { StreamClient } from '/static/js/net/StreamClient.js';
 
 window.open_ = ( projectId ) => {
 	const client = new StreamClient( projectId );

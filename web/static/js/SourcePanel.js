@@ -1,6 +1,6 @@
-import { api } from './api.js';
+import { api } from './net/api.js';
 import { ask } from './dialogs.js';
-import { PointsEncoder } from './PointsEncoder.js';
+import { PointsEncoder } from './net/wire.js';
 import { StereoTrack } from './StereoTrack.js';
 import { trackVideo } from './tracking/videoTake.js';
 
@@ -19,7 +19,6 @@ import { trackVideo } from './tracking/videoTake.js';
 
 const $ = ( id ) => document.getElementById( id );
 const TAKE_EXTENSIONS = [ 'csv', 'json', 'npy', 'trc', 'c3d', 'glb', 'gltf', 'zip' ];
-const JOB_POLL_MS = 100;
 const RECORD_TICK_MS = 100;
 
 export class SourcePanel {
@@ -289,23 +288,13 @@ export class SourcePanel {
 		let result; // {take, frames, truncated?, frames_claimed?}
 		try {
 
-			for ( ;; ) {
+			( { result } = await api.waitJob( job.id, ( state ) => {
 
-				const state = await api.job( job.id );
 				bar.value = state.progress;
 				this._note( `Tracking the markers of ${ file.name } on the server: ${ ( 100 * state.progress ).toFixed( 0 ) } %` );
-				if ( state.state === 'failed' ) throw new Error( `Marker tracking failed: ${ state.detail }` );
-				if ( state.state === 'done' ) {
 
-					result = state.result;
-					this.selectedTake = result.take;
-					break;
-
-				}
-
-				await new Promise( ( resolve ) => setTimeout( resolve, JOB_POLL_MS ) );
-
-			}
+			}, { what: 'Marker tracking' } ) );
+			this.selectedTake = result.take;
 
 		} finally {
 

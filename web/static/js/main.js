@@ -1,17 +1,16 @@
-import { ApiError, api } from './api.js';
+import { ApiError, api } from './net/api.js';
 import { ErrorBanner, ask } from './dialogs.js';
 import { ExportPanel } from './ExportPanel.js';
 import { LandmarkPicker } from './LandmarkPicker.js';
 import { LayoutGuide } from './LayoutGuide.js';
 import { PaintPanel } from './PaintPanel.js';
-import { regionColor } from './palette.js';
-import { SkinnedFace } from './SkinnedFace.js';
-import { StreamClient } from './StreamClient.js';
-import { StreamDecoder } from './StreamDecoder.js';
+import { regionColor } from './scene/palette.js';
+import { SkinnedFace } from './scene/SkinnedFace.js';
+import { StreamClient } from './net/StreamClient.js';
+import { StreamDecoder } from './net/wire.js';
 import { SourcePanel } from './SourcePanel.js';
-import { Viewer } from './Viewer.js';
+import { Viewer } from './scene/Viewer.js';
 
-const JOB_POLL_MS = 150;
 const DRAFT_DELAY_MS = 400; // unsaved picks reach the server this long after the last edit
 const STATS_MS = 250;
 const DEFAULT_LAYOUT = 'dutreve21';
@@ -202,6 +201,7 @@ class App {
 	_closeProject() {
 
 		clearTimeout( this._draftTimer );
+		this._rigJob?.abort();
 		this._rigJob = null;
 		if ( this.stream ) {
 
@@ -643,29 +643,31 @@ class App {
 		bar.value = 0;
 		message.textContent = `Starting ${ method }…`;
 		const t0 = performance.now();
+		this._rigJob?.abort(); // a newer rig replaces the one followed so far
+		const follow = this._rigJob = new AbortController();
 		try {
 
-			let job = await api.startRig( id, method );
-			this._rigJob = job.id;
-			while ( job.state === 'running' ) {
+			const started = await api.startRig( id, method );
+			let job;
+			try {
 
-				if ( ticket !== this._open || this._rigJob !== job.id ) return;
-				bar.value = job.progress;
-				message.textContent = `${ Math.round( job.progress * 100 ) }% · ${ job.detail || method }`;
-				await sleep( JOB_POLL_MS );
-				job = await api.job( job.id );
+				job = await api.waitJob( started.id, ( { progress, detail } ) => {
+
+					bar.value = progress;
+					message.textContent = `${ Math.round( progress * 100 ) }% · ${ detail || method }`;
+
+				}, { what: `Rig (${ method })`, signal: follow.signal } );
+
+			} catch ( error ) {
+
+				if ( follow.signal.aborted ) return; // another project or another rig
+				bar.value = 0;
+				message.textContent = 'Failed.';
+				throw error;
 
 			}
 
 			if ( ticket !== this._open ) return;
-			if ( job.state !== 'done' ) {
-
-				bar.value = 0;
-				message.textContent = 'Failed.';
-				throw new ApiError( 0, `Rig (${ method }) failed: ${ job.detail || 'no reason given' }` );
-
-			}
-
 			bar.value = 1;
 			message.textContent = `${ job.detail || 'done' } · ${ ( ( performance.now() - t0 ) / 1000 ).toFixed( 1 ) } s`;
 			this.project = await api.project( id );
@@ -1097,12 +1099,6 @@ function mebibytes( bytes ) {
 function range( n ) {
 
 	return Array.from( { length: n }, ( _, i ) => i );
-
-}
-
-function sleep( ms ) {
-
-	return new Promise( ( resolve ) => setTimeout( resolve, ms ) );
 
 }
 

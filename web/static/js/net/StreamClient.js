@@ -1,4 +1,4 @@
-import { StreamDecoder } from './StreamDecoder.js';
+import { StreamDecoder } from './wire.js';
 
 const BACKOFF_MIN_MS = 250;
 const BACKOFF_MAX_MS = 5000;

@@ -1,9 +1,14 @@
+import { MeshArraysDecoder, RigWeightsDecoder, WeightEditEncoder } from './wire.js';
+
 /**
- * The server's REST API (server/routers/*.py), as promise-returning functions.
+ * The server's REST API (server/routers/*.py), as promise-returning functions; binary
+ * bodies go through wire.js.
  *
  * Every failure rejects with an `ApiError` carrying the HTTP status and the server's
  * human `detail`, so the page can show exactly what the server said.
  */
+
+const JOB_POLL_MS = 150;
 
 export class ApiError extends Error {
 
@@ -98,17 +103,6 @@ async function request( method, url, { json, body, contentType, binary = false, 
 
 }
 
-function header( buffer, magic, what ) {
-
-	const view = new DataView( buffer );
-	const found = String.fromCharCode( ...new Uint8Array( buffer, 0, Math.min( 4, buffer.byteLength ) ) );
-	if ( found !== magic ) throw new ApiError( 0, `${ what }: expected "${ magic }" data, got "${ found }"` );
-	const version = view.getUint32( 4, true );
-	if ( version !== 1 ) throw new ApiError( 0, `${ what }: unsupported format version ${ version }` );
-	return view;
-
-}
-
 export const api = {
 
 	/**
@@ -138,19 +132,13 @@ export const api = {
 	layouts: () => request( 'GET', '/api/layouts' ),
 
 	/**
-	 * The mesh as arrays (the "RTMA" format of server/routers/meshes.py).
+	 * The mesh as arrays (the "RTMA" format of server/wire.py).
 	 * @returns {Promise<{positions: Float32Array, faces: Uint32Array}>} positions (3V) in the
 	 *   mesh's own units; faces (3F) vertex indices.
 	 */
 	async meshArrays( id ) {
 
-		const buffer = await request( 'GET', `/api/projects/${ id }/mesh/arrays`, { binary: true } );
-		const view = header( buffer, 'RTMA', 'mesh arrays' );
-		const v = view.getUint32( 8, true ), f = view.getUint32( 12, true );
-		return {
-			positions: new Float32Array( buffer, 16, 3 * v ),
-			faces: new Uint32Array( buffer, 16 + 12 * v, 3 * f ),
-		};
+		return new MeshArraysDecoder().decode( await request( 'GET', `/api/projects/${ id }/mesh/arrays`, { binary: true } ) );
 
 	},
 
@@ -165,32 +153,51 @@ export const api = {
 
 	job: ( jobId ) => request( 'GET', `/api/jobs/${ jobId }` ),
 
+	/**
+	 * Follow a job (a rig, a tracked video) until it ends.
+	 * @param {string} jobId
+	 * @param {(job: {state: string, progress: number, detail: string}) => void} [onProgress] -
+	 *   called with every answer, the last one included.
+	 * @param {{what?: string, signal?: AbortSignal}} [options] - what: the job's name for the
+	 *   failure's message ("<what> failed: <detail>"); signal: stop following (rejects with
+	 *   the signal's reason).
+	 * @returns {Promise<{state: 'done', progress: number, detail: string, result: object}>}
+	 *   the done job: `detail` a sentence, `result` what it made (a rig: {method, n_joints,
+	 *   n_influences}; a tracked take: {take, frames[, truncated, frames_claimed]}).
+	 */
+	async waitJob( jobId, onProgress, { what = 'The job', signal } = {} ) {
+
+		for ( ;; ) {
+
+			signal?.throwIfAborted();
+			const job = await request( 'GET', `/api/jobs/${ jobId }` );
+			signal?.throwIfAborted();
+			onProgress?.( job );
+			if ( job.state === 'done' ) return job;
+			if ( job.state !== 'running' ) throw new ApiError( 0, `${ what } failed: ${ job.detail || 'no reason given' }` );
+			await new Promise( ( resolve ) => setTimeout( resolve, JOB_POLL_MS ) );
+
+		}
+
+	},
+
 	/** @returns {Promise<{method: string, n_vertices: number, n_joints: number, n_influences: number}>} */
 	rig: ( id ) => request( 'GET', `/api/projects/${ id }/rig` ),
 
 	/**
-	 * The rig's skin weights (the "RTSW" format of server/routers/rigs.py).
+	 * The rig's skin weights (the "RTSW" format of server/wire.py).
 	 * @returns {Promise<{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array}>}
 	 *   indices and weights are (V, k) row-major.
 	 */
 	async rigWeights( id ) {
 
-		const buffer = await request( 'GET', `/api/projects/${ id }/rig/weights`, { binary: true } );
-		const view = header( buffer, 'RTSW', 'rig weights' );
-		const v = view.getUint32( 8, true ), k = view.getUint32( 12, true ), n = view.getUint32( 16, true );
-		const indexBytes = 2 * v * k;
-		return {
-			nJoints: n,
-			nInfluences: k,
-			indices: new Uint16Array( buffer, 20, v * k ),
-			weights: new Float32Array( buffer, 20 + indexBytes + ( indexBytes % 4 ), v * k ),
-		};
+		return new RigWeightsDecoder().decode( await request( 'GET', `/api/projects/${ id }/rig/weights`, { binary: true } ) );
 
 	},
 
 	/**
 	 * Paint rows of the rig's skin weights (PATCH .../rig/weights, the binary "RTSE" edit
-	 * of server/routers/rigs.py); the server refuses rows painted on an older version.
+	 * of server/wire.py); the server refuses rows painted on an older version.
 	 * @param {string} id
 	 * @param {{version: number, nJoints: number, nInfluences: number}} rig - the rig the rows were painted on.
 	 * @param {Int32Array} vertices - (R) the vertices whose rows change.
@@ -199,7 +206,7 @@ export const api = {
 	 * @returns {Promise<object>} the rig's info (GET .../rig), with its new version
 	 */
 	patchRigWeights: ( id, rig, vertices, rows, { keepalive = false } = {} ) => request( 'PATCH', `/api/projects/${ id }/rig/weights`, {
-		body: weightEdit( rig.version, rig.nJoints, rig.nInfluences, vertices, rows ), contentType: 'application/octet-stream', keepalive,
+		body: new WeightEditEncoder().encode( rig.version, rig.nJoints, rig.nInfluences, vertices, rows ), contentType: 'application/octet-stream', keepalive,
 	} ),
 
 	/**
@@ -300,30 +307,6 @@ export const api = {
 	importProject: ( file, onProgress ) => upload( 'POST', '/api/projects/import', file, {}, onProgress ),
 
 };
-
-/**
- * The binary weight edit (server/routers/rigs.py "RTSE").
- * @param {number} version - the rig version the rows were painted on.
- * @param {number} nJoints
- * @param {number} k - influences per row.
- * @param {Int32Array} vertices - (R)
- * @param {{indices: Uint16Array, weights: Float32Array}} rows - (R*k) each.
- * @returns {ArrayBuffer}
- */
-function weightEdit( version, nJoints, k, vertices, rows ) {
-
-	const r = vertices.length, indexBytes = 2 * r * k;
-	const start = 24 + 4 * r + indexBytes + ( indexBytes % 4 );
-	const buffer = new ArrayBuffer( start + 4 * r * k );
-	const view = new DataView( buffer );
-	new Uint8Array( buffer, 0, 4 ).set( [ 82, 84, 83, 69 ] ); // "RTSE"
-	[ 1, r, k, nJoints, version ].forEach( ( value, i ) => view.setUint32( 4 + 4 * i, value, true ) );
-	new Uint32Array( buffer, 24, r ).set( vertices );
-	new Uint16Array( buffer, 24 + 4 * r, r * k ).set( rows.indices );
-	new Float32Array( buffer, start, r * k ).set( rows.weights );
-	return buffer;
-
-}
 
 /**
  * A fresh Idempotency-Key: 128 random bits as hex (crypto.getRandomValues, which pages

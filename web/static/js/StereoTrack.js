@@ -1,4 +1,4 @@
-import { api } from './api.js';
+import { api } from './net/api.js';
 
 /**
  * The stereo colour-marker form (Woodward §5): the two synchronised videos of a face
@@ -12,7 +12,6 @@ import { api } from './api.js';
  */
 
 const VIDEO_ACCEPT = 'video/*,.mp4,.m4v,.mov,.avi,.mkv,.webm';
-const JOB_POLL_MS = 150;
 
 const FORM = `<form method="dialog">
 	<h3>Track a stereo pair</h3>
@@ -170,24 +169,12 @@ export class StereoTrack {
 		const cal = job.calibration;
 		const calibrated = `calibration ${ cal.source === 'file' ? 'file' : `from ${ cal.views } checkerboard views` }: RMS ${ cal.rms.toFixed( 3 ) } px, baseline ${ cal.baseline.toFixed( 1 ) } mm`;
 		bar.value = 0;
-		let detail;
-		for ( ;; ) {
+		const { result: detail } = await api.waitJob( job.id, ( state ) => {
 
-			const state = await api.job( job.id );
 			bar.value = state.progress;
 			note( `Tracking the stereo pair on the server: ${ ( 100 * state.progress ).toFixed( 0 ) } % (${ calibrated }).` );
-			if ( state.state === 'failed' ) throw new Error( `Stereo tracking failed: ${ state.detail }` );
-			if ( state.state === 'done' ) {
 
-				detail = state.result;
-				break;
-
-			}
-
-			await new Promise( ( resolve ) => setTimeout( resolve, JOB_POLL_MS ) );
-
-		}
-
+		}, { what: 'Stereo tracking' } );
 		if ( id !== this.projectId() ) return;
 		await this.onTracked( detail.take );
 		note( `Tracked ${ detail.frames } stereo frames of ${ left.name } and ${ fields.right.name } (${ calibrated }). ` );

@@ -1,4 +1,4 @@
-import { api } from './api.js';
+import { api } from './net/api.js';
 
 const $ = ( id ) => document.getElementById( id );
 

@@ -1,0 +1,268 @@
+/**
+ * Every binary format between the server and the page, in one module: the JavaScript
+ * twin of `server/wire.py`, whose docstring gives each byte layout (tests/test_wire.py
+ * runs the two against each other in node).
+ *
+ * - `StreamDecoder`: stream frames "RTDF" (server -> page, WebSocket), a frame's feature
+ *   displacements;
+ * - `PointsEncoder`: source points "RTSP" (page -> server, WebSocket), one frame of
+ *   tracked points;
+ * - `MeshArraysDecoder`: mesh arrays "RTMA" (GET .../mesh/arrays);
+ * - `RigWeightsDecoder`: rig weights "RTSW" (GET .../rig/weights);
+ * - `WeightEditEncoder`: weight edits "RTSE" (PATCH .../rig/weights), painted rows.
+ *
+ * All little-endian; every array starts at a multiple of 4 bytes, so a decoder views it in
+ * place without copying. Five small codecs in one file, against the one-class-per-file
+ * habit, because they are one thing: the page's half of one wire protocol, each the mirror
+ * of a function in one Python module, sharing its header checks. Errors are prefixed with
+ * the codec's name.
+ */
+
+/** The 4-byte magic `text` read as a little-endian uint32. */
+function magicNumber( text ) {
+
+	return ( text.charCodeAt( 0 ) | text.charCodeAt( 1 ) << 8 | text.charCodeAt( 2 ) << 16 | text.charCodeAt( 3 ) << 24 ) >>> 0;
+
+}
+
+/**
+ * A DataView on a REST format's bytes after checking its 4-byte magic and uint32 version
+ * (1) and that it holds at least its header.
+ * @param {string} who - the codec, for the message.
+ * @param {ArrayBuffer} buffer
+ * @param {string} magic
+ * @param {number} headerBytes
+ * @returns {DataView}
+ */
+function checkedHeader( who, buffer, magic, headerBytes ) {
+
+	if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( `${ who }: expected an ArrayBuffer.` );
+	const found = String.fromCharCode( ...new Uint8Array( buffer, 0, Math.min( 4, buffer.byteLength ) ) );
+	if ( found !== magic ) throw new Error( `${ who }: expected "${ magic }" data, got "${ found }".` );
+	if ( buffer.byteLength < headerBytes ) throw new Error( `${ who }: ${ buffer.byteLength } bytes is shorter than its ${ headerBytes }-byte header.` );
+	const view = new DataView( buffer );
+	const version = view.getUint32( 4, true );
+	if ( version !== 1 ) throw new Error( `${ who }: unsupported format version ${ version }.` );
+	return view;
+
+}
+
+/** Bytes of `n` uint16 values rounded up to a multiple of 4 (the formats' padding). */
+function paddedUint16Bytes( n ) {
+
+	return 2 * n + ( ( 2 * n ) % 4 );
+
+}
+
+/**
+ * Decoder of the stream's frames (target feature displacements): a 32-byte header (magic
+ * "RTDF", uint16 version, uint16 flags, uint32 frame index, uint32 point count, float64
+ * source and send times) followed by N x 3 float32 displacements and, with flag bit 2,
+ * the performer's head rotation as a quaternion (x, y, z, w).
+ */
+export class StreamDecoder {
+
+	static MAGIC = magicNumber( 'RTDF' );
+	static VERSION = 1;
+	static HEADER_BYTES = 32;
+	static FLAG_NEUTRAL = 1;
+	static FLAG_LOST_POINTS = 2;
+	static FLAG_HEAD_ROTATION = 4;
+	static FLAG_LAST = 8;
+
+	/**
+	 * Decode one frame.
+	 * @param {ArrayBuffer} buffer - the WebSocket message's bytes.
+	 * @returns {{version: number, flags: number, frameIndex: number, count: number,
+	 *   sourceTime: number, sendTime: number, displacements: Float32Array,
+	 *   headRotation: Float32Array|null}} displacements is a view on `buffer` (no copy),
+	 *   point-major x, y, z; headRotation a view of 4 floats (x, y, z, w) or null.
+	 */
+	decode( buffer ) {
+
+		if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( 'StreamDecoder: expected an ArrayBuffer.' );
+		if ( buffer.byteLength < StreamDecoder.HEADER_BYTES ) {
+
+			throw new Error( `StreamDecoder: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
+
+		}
+
+		const view = new DataView( buffer );
+		if ( view.getUint32( 0, true ) !== StreamDecoder.MAGIC ) throw new Error( 'StreamDecoder: not a displacement frame (bad magic).' );
+		const version = view.getUint16( 4, true );
+		if ( version !== StreamDecoder.VERSION ) throw new Error( `StreamDecoder: unsupported frame version ${ version }.` );
+		const count = view.getUint32( 12, true );
+		const flags = view.getUint16( 6, true );
+		const rotated = ( flags & StreamDecoder.FLAG_HEAD_ROTATION ) !== 0;
+		const expected = StreamDecoder.HEADER_BYTES + 12 * count + ( rotated ? 16 : 0 );
+		if ( buffer.byteLength !== expected ) {
+
+			throw new Error( `StreamDecoder: frame for ${ count } points must be ${ expected } bytes, got ${ buffer.byteLength }.` );
+
+		}
+
+		return {
+			version,
+			flags,
+			frameIndex: view.getUint32( 8, true ),
+			count,
+			sourceTime: view.getFloat64( 16, true ),
+			sendTime: view.getFloat64( 24, true ),
+			displacements: new Float32Array( buffer, StreamDecoder.HEADER_BYTES, 3 * count ),
+			headRotation: rotated ? new Float32Array( buffer, StreamDecoder.HEADER_BYTES + 12 * count, 4 ) : null,
+		};
+
+	}
+
+}
+
+/**
+ * Encoder of source-points messages, the browser's tracked points for the server: a
+ * 32-byte header (magic "RTSP", uint16 version, uint16 dims, uint32 frame index, uint32
+ * point count, float64 capture time in seconds, 8 reserved bytes) followed by N x D
+ * float32 points, NaN for a lost point.
+ */
+export class PointsEncoder {
+
+	static MAGIC = magicNumber( 'RTSP' );
+	static VERSION = 1;
+	static HEADER_BYTES = 32;
+
+	/**
+	 * @param {Float32Array|number[]} points - N x dims values, point-major; NaN: lost.
+	 * @param {number} dims - 2 or 3.
+	 * @param {number} frameIndex
+	 * @param {number} captureTime - seconds.
+	 * @returns {ArrayBuffer}
+	 */
+	encode( points, dims, frameIndex, captureTime ) {
+
+		if ( dims !== 2 && dims !== 3 ) throw new RangeError( `PointsEncoder: dims must be 2 or 3, got ${ dims }.` );
+		if ( points.length % dims !== 0 ) throw new RangeError( `PointsEncoder: ${ points.length } values are not whole points of ${ dims }.` );
+		const count = points.length / dims;
+		const buffer = new ArrayBuffer( PointsEncoder.HEADER_BYTES + 4 * points.length );
+		const view = new DataView( buffer );
+		view.setUint32( 0, PointsEncoder.MAGIC, true );
+		view.setUint16( 4, PointsEncoder.VERSION, true );
+		view.setUint16( 6, dims, true );
+		view.setUint32( 8, frameIndex >>> 0, true );
+		view.setUint32( 12, count, true );
+		view.setFloat64( 16, captureTime, true );
+		new Float32Array( buffer, PointsEncoder.HEADER_BYTES ).set( points );
+		return buffer;
+
+	}
+
+}
+
+/**
+ * Decoder of a mesh's arrays: a 16-byte header (magic "RTMA", uint32 version, uint32 V,
+ * uint32 F) followed by V x 3 float32 vertices and F x 3 uint32 triangles.
+ */
+export class MeshArraysDecoder {
+
+	static HEADER_BYTES = 16;
+
+	/**
+	 * @param {ArrayBuffer} buffer
+	 * @returns {{positions: Float32Array, faces: Uint32Array}} views on `buffer`:
+	 *   positions (3V) in the mesh's own units, faces (3F) vertex indices.
+	 */
+	decode( buffer ) {
+
+		const view = checkedHeader( 'MeshArraysDecoder', buffer, 'RTMA', MeshArraysDecoder.HEADER_BYTES );
+		const v = view.getUint32( 8, true ), f = view.getUint32( 12, true );
+		const size = MeshArraysDecoder.HEADER_BYTES + 12 * v + 12 * f;
+		if ( buffer.byteLength !== size ) {
+
+			throw new Error( `MeshArraysDecoder: ${ v } vertices and ${ f } triangles need ${ size } bytes, got ${ buffer.byteLength }.` );
+
+		}
+
+		return {
+			positions: new Float32Array( buffer, MeshArraysDecoder.HEADER_BYTES, 3 * v ),
+			faces: new Uint32Array( buffer, MeshArraysDecoder.HEADER_BYTES + 12 * v, 3 * f ),
+		};
+
+	}
+
+}
+
+/**
+ * Decoder of a rig's skin weights: a 20-byte header (magic "RTSW", uint32 version, uint32
+ * V, uint32 K, uint32 N) followed by V x K uint16 joint indices, 0 or 2 bytes of padding
+ * and V x K float32 weights.
+ */
+export class RigWeightsDecoder {
+
+	static HEADER_BYTES = 20;
+
+	/**
+	 * @param {ArrayBuffer} buffer
+	 * @returns {{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array}}
+	 *   indices and weights are (V, k) row-major views on `buffer`; unused slots have weight 0.
+	 */
+	decode( buffer ) {
+
+		const view = checkedHeader( 'RigWeightsDecoder', buffer, 'RTSW', RigWeightsDecoder.HEADER_BYTES );
+		const v = view.getUint32( 8, true ), k = view.getUint32( 12, true ), n = view.getUint32( 16, true );
+		const start = RigWeightsDecoder.HEADER_BYTES + paddedUint16Bytes( v * k );
+		const size = start + 4 * v * k;
+		if ( buffer.byteLength !== size ) {
+
+			throw new Error( `RigWeightsDecoder: ${ v } rows of ${ k } influences need ${ size } bytes, got ${ buffer.byteLength }.` );
+
+		}
+
+		return {
+			nJoints: n,
+			nInfluences: k,
+			indices: new Uint16Array( buffer, RigWeightsDecoder.HEADER_BYTES, v * k ),
+			weights: new Float32Array( buffer, start, v * k ),
+		};
+
+	}
+
+}
+
+/**
+ * Encoder of a weight edit, painted rows of a rig: a 24-byte header (magic "RTSE", uint32
+ * version, uint32 R, uint32 K, uint32 N, uint32 rig version) followed by R uint32 vertex
+ * indices, R x K uint16 joint indices, 0 or 2 bytes of padding and R x K float32 weights.
+ */
+export class WeightEditEncoder {
+
+	static HEADER_BYTES = 24;
+
+	/**
+	 * @param {number} version - the rig version the rows were painted on.
+	 * @param {number} nJoints - the rig's joint count N.
+	 * @param {number} k - influences per row.
+	 * @param {ArrayLike<number>} vertices - (R) the vertices whose rows changed.
+	 * @param {{indices: ArrayLike<number>, weights: ArrayLike<number>}} rows - (R*k) each, row-major.
+	 * @returns {ArrayBuffer}
+	 */
+	encode( version, nJoints, k, vertices, rows ) {
+
+		const r = vertices.length;
+		if ( ! Number.isInteger( k ) || k < 1 ) throw new RangeError( `WeightEditEncoder: k must be a positive integer, got ${ k }.` );
+		if ( rows.indices.length !== r * k || rows.weights.length !== r * k ) {
+
+			throw new RangeError( `WeightEditEncoder: ${ r } rows of ${ k } influences need ${ r * k } indices and weights, got ${ rows.indices.length } and ${ rows.weights.length }.` );
+
+		}
+
+		const header = WeightEditEncoder.HEADER_BYTES;
+		const start = header + 4 * r + paddedUint16Bytes( r * k );
+		const buffer = new ArrayBuffer( start + 4 * r * k );
+		const view = new DataView( buffer );
+		view.setUint32( 0, magicNumber( 'RTSE' ), true );
+		[ 1, r, k, nJoints, version ].forEach( ( value, i ) => view.setUint32( 4 + 4 * i, value, true ) );
+		new Uint32Array( buffer, header, r ).set( vertices );
+		new Uint16Array( buffer, header + 4 * r, r * k ).set( rows.indices );
+		new Float32Array( buffer, start, r * k ).set( rows.weights );
+		return buffer;
+
+	}
+
+}
