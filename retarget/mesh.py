@@ -25,6 +25,7 @@ import codecs
 import io
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,7 +35,8 @@ from trimesh.visual.material import SimpleMaterial
 
 from retarget.errors import RetargetError
 from retarget.gltf.document import scene_size
-from retarget.material import Material, material_from_trimesh
+from retarget.material import Material, material_from_mtl, material_from_trimesh
+from retarget.zips import check_members, opened_zip, unpacked
 
 __all__ = [
     "DEFAULT_MAX_FACES",
@@ -49,7 +51,11 @@ __all__ = [
 
 DEFAULT_MAX_VERTICES = 1_000_000
 DEFAULT_MAX_FACES = 2_000_000
-SUPPORTED_FORMATS = ("obj", "ply", "stl", "off", "gltf", "glb")
+SUPPORTED_FORMATS = ("obj", "ply", "stl", "off", "gltf", "glb", "zip")
+MESH_FILES = ("obj", "ply", "stl", "off", "gltf", "glb")
+"""The mesh formats a zip may hold (one file of them, with the files it refers to)."""
+MAX_ZIP_MEMBERS = 64
+"""Most files a zipped mesh may hold: the mesh, an MTL and its images, glTF buffers."""
 
 MAX_COORDINATE = 1e9
 """Largest |x|, |y| or |z| a vertex may have, in the mesh's own units. A face is about
@@ -135,6 +141,7 @@ def load_mesh(
     source,
     file_type: str | None = None,
     *,
+    files: Mapping[str, bytes] | None = None,
     max_vertices: int = DEFAULT_MAX_VERTICES,
     max_faces: int = DEFAULT_MAX_FACES,
     max_bytes: int | None = None,
@@ -147,13 +154,19 @@ def load_mesh(
         The mesh file, its contents, or an open binary file positioned at its start.
     file_type : str or None
         One of `SUPPORTED_FORMATS` (case and a leading dot ignored). Required for bytes
-        and file objects; for a path it overrides the suffix.
+        and file objects; for a path it overrides the suffix. ``zip``: a zip holding one
+        mesh file and the files it refers to (an OBJ with its MTL and images, say).
+    files : {name: bytes} or None
+        The files the mesh refers to, for bytes and file objects: an OBJ's MTL and its
+        texture images, a glTF's buffers and images. Looked up by base name (folders
+        stripped), in any case. A path's files are read from beside it instead.
     max_vertices, max_faces : int
         Refuse meshes with more vertices or faces than this: before parsing, from what
         the file declares (see Notes), and again after.
     max_bytes : int or None
         Refuse sources longer than this many bytes, before parsing. For a ``.gltf``
-        path it bounds the JSON file, not the buffers it references.
+        path it bounds the JSON file, not the buffers it references; for a zip, the
+        bytes it unpacks to as well.
 
     Returns
     -------
@@ -199,8 +212,10 @@ def load_mesh(
     What trimesh does per format, with ``process=False, maintain_order=True``:
 
     * OBJ: polygons are triangulated, the vertex count unchanged. `usemtl` and `mtllib`
-      lines are skipped (trimesh would split the faces into one geometry per material,
-      each holding every vertex), so materials are not read. Vertices are not split at
+      lines are hidden from trimesh (it would split the faces into one geometry per
+      material, each holding every vertex); the material is read here instead, from the
+      MTL file among `files` or beside the path (`retarget.material.material_from_mtl`:
+      the first material used, its colour and ``map_Kd`` texture). Vertices are not split at
       UV seams: a vertex used with several ``vt`` keeps one of them (the median index
       trimesh sees), so texture is approximate on faces across a seam; ``vn`` likewise.
       When faces carry ``vt`` or ``vn`` indices, trimesh drops vertices after the last
@@ -224,7 +239,11 @@ def load_mesh(
     """
     data, suffix, label, name, resolver = _source_bytes(source, max_bytes)
     kind = _file_type(file_type if file_type is not None else suffix, label)
+    if files is not None:
+        resolver = _Files(files)
     try:
+        if kind == "zip":
+            data, kind, resolver = _zipped(data, label, max_bytes)
         with np.errstate(all="ignore"):  # overflow in a transform: refused below
             return _loaded(data, kind, label, name, resolver, max_vertices, max_faces)
     except RetargetError:
@@ -380,7 +399,7 @@ def _file_type(file_type: str | None, label: str) -> str:
 
 def _loaded(data, kind, label, name, resolver, max_vertices, max_faces) -> Mesh:
     """The body of `load_mesh`: the door checks of its Notes, trimesh, `_validated`."""
-    n_obj_vertices, read_as = None, kind
+    n_obj_vertices, read_as, original = None, kind, data
     if kind == "obj":
         data, n_obj_vertices = _obj_checked(data, label, max_vertices, max_faces)
     elif kind == "stl":
@@ -417,7 +436,11 @@ def _loaded(data, kind, label, name, resolver, max_vertices, max_faces) -> Mesh:
             f"{n_obj_vertices - len(vertices)} unused ones at the end, which would "
             "change the vertex count: remove them from the file"
         )
-    material = material_from_trimesh(parts[0][0].visual) if kind in ("gltf", "glb") else None
+    material = None
+    if kind in ("gltf", "glb"):
+        material = material_from_trimesh(parts[0][0].visual)
+    elif kind == "obj" and resolver is not None:
+        material = material_from_mtl(_text(original), lambda name: _side_file(resolver, name))
     return _validated(
         vertices, faces, uv, normals, name, max_vertices, max_faces, where=label,
         material=material,
@@ -867,3 +890,63 @@ def _read_only(array: np.ndarray) -> np.ndarray:
     """`array` itself, flagged read-only (callers pass a fresh copy)."""
     array.setflags(write=False)
     return array
+
+
+class _Files(trimesh.resolvers.Resolver):
+    """Side files given in memory, looked up by base name in any case (a glTF's
+    ``textures/skin.png`` and an MTL's ``C:\\scans\\skin.png`` both find
+    ``skin.png``)."""
+
+    def __init__(self, files: Mapping[str, bytes]):
+        self._files = {_base(str(k)).lower(): bytes(v) for k, v in files.items()}
+
+    def get(self, name):
+        key = _base(name.decode() if isinstance(name, bytes) else str(name)).lower()
+        if key not in self._files:
+            raise RetargetError(f"the file {name!r} it refers to was not given")
+        return self._files[key]
+
+    def keys(self):
+        return self._files.keys()
+
+    def write(self, name, data):
+        raise RetargetError("side files are read only")
+
+    def namespaced(self, namespace):
+        return self
+
+
+def _base(name: str) -> str:
+    return name.strip().replace("\\", "/").rsplit("/", 1)[-1]
+
+
+def _side_file(resolver, name: str) -> bytes | None:
+    """The side file `name` from a resolver, or None when it has none by that name."""
+    try:
+        return resolver.get(name)
+    except Exception:  # noqa: BLE001 - a missing file is None, however a resolver says it
+        return None
+
+
+def _zipped(data: bytes, label: str, max_bytes: int | None):
+    """(the mesh file's bytes, its kind, a resolver of the other files) of a zipped mesh,
+    read within `retarget.zips`' bounds: at most `MAX_ZIP_MEMBERS` files, unpacking to at
+    most `max_bytes` (or 256 MiB) in all."""
+    budget = max_bytes if max_bytes is not None else 256 << 20
+    archive = opened_zip(data, label)
+    infos = [i for i in archive.infolist() if not i.is_dir() and not i.filename.startswith("__MACOSX/")
+             and not _base(i.filename).startswith(".")]
+    if len(infos) > MAX_ZIP_MEMBERS:
+        raise RetargetError(f"{label} holds {len(infos)} files; a zipped mesh may hold at most "
+                            f"{MAX_ZIP_MEMBERS} (the mesh and the files it refers to)")
+    meshes = [i for i in infos if _base(i.filename).rsplit(".", 1)[-1].lower() in MESH_FILES]
+    if len(meshes) != 1:
+        found = ", ".join(repr(i.filename) for i in meshes[:5]) or "none"
+        raise RetargetError(f"{label} must hold one mesh file ({', '.join(MESH_FILES)}); it holds "
+                            f"{len(meshes)}: {found}")
+    check_members(infos, label, budget, budget, things="files", thing="file",
+                  content="a mesh's files")
+    left = [budget]
+    files = {info.filename: unpacked(archive, info, label, left) for info in infos}
+    mesh = meshes[0].filename
+    return files.pop(mesh), _base(mesh).rsplit(".", 1)[-1].lower(), _Files(files)
