@@ -314,7 +314,7 @@ def save_mesh(mesh: Mesh, path) -> None:
     ----------
     mesh : Mesh
     path : str or os.PathLike
-        Destination; its suffix must be one of `SUPPORTED_FORMATS`.
+        Destination; its suffix must be one of `MESH_FILES`.
 
     Raises
     ------
@@ -323,6 +323,8 @@ def save_mesh(mesh: Mesh, path) -> None:
     """
     path = Path(path)
     kind = _file_type(path.suffix, repr(str(path)))
+    if kind not in MESH_FILES:
+        raise RetargetError(f"save_mesh writes one of {', '.join(MESH_FILES)}; got {path.suffix!r}")
     # a plain material: trimesh's default one is an image, which needs Pillow
     visual = None
     if mesh.uv is not None:
