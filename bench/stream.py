@@ -5,7 +5,7 @@
 
 (a) In process, no sockets: the demo source's work for one frame, each part timed
     separately over --frames frames (median and p99):
-      displacements  `DemoSource.displacements` (the library's Retargeter, 68 points)
+      displacements  `DemoPlayer.displacements` (the library's Retargeter, 68 points)
       encode         `server.wire.encode_frame`
       publish        `StreamHub.publish` to one viewer's Mailbox, and to 50
       total          the three together (publish to one viewer)
@@ -195,14 +195,14 @@ def connect(url: str, compression: str | None = "deflate"):
 def in_process(frames: int, fps: float) -> None:
     from retarget.sample_face import sample_face
     from server.hub import StreamHub
-    from server.sources import DemoSource
+    from server.players import DemoPlayer
     from server.wire import encode_frame
 
     face = sample_face(1)  # the sample project's face and landmarks
     setup = []
     for _ in range(3):
         t0 = time.perf_counter()
-        source = DemoSource(face.vertices[face.landmarks68], "ibug68", fps)
+        source = DemoPlayer(face.vertices[face.landmarks68], "ibug68", fps)
         setup.append(time.perf_counter() - t0)
     hub1, hub50 = StreamHub(), StreamHub()
     box = hub1.subscribe("p")
@@ -232,7 +232,7 @@ def in_process(frames: int, fps: float) -> None:
     for key, label in labels.items():
         print(f"  {label:<28} {fmt(stats(parts[key]))}")
     assert box.backlog <= 1 and all(b.backlog <= 1 for b in boxes)
-    print(f"  DemoSource set-up (on every 'start': performer face, {len(source.frames)} frames, fit): "
+    print(f"  DemoPlayer set-up (on every 'start': performer face, {len(source.frames)} frames, fit): "
           f"median {1e3 * np.median(setup):.0f} ms of 3")
     budget = 1e3 / fps
     print(f"  => {100 * np.median(parts['total']) / budget:.2f} % of the {budget:.1f} ms frame "
@@ -284,7 +284,7 @@ def real_server(seconds: float, fps: float, compression) -> None:
     gaps = int(np.sum(np.diff(index) > 1))
     print(f"  websocket extensions: {', '.join(ext) or 'none'}")
     print(f"  'start' sent -> first frame received: {1e3 * (recv_t[0] - t_start):.1f} ms "
-          "(DemoSource set-up included)")
+          "(DemoPlayer set-up included)")
     print(f"  send -> receive latency: {fmt(stats(latency))}")
     print(f"  frames received {len(index)} in {elapsed:.2f} s; expected {elapsed * fps + 1:.0f} "
           f"at {fps:g} fps; achieved {(len(index) - 1) / elapsed:.2f} fps")

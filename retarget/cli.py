@@ -58,7 +58,8 @@ from retarget.gltf.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
 from retarget.mesh import Mesh, load_mesh, mesh_from_arrays, save_mesh
-from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter, transfer
+from retarget.performance import Performance
+from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, transfer
 from retarget.rbf import KERNELS
 from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
@@ -70,10 +71,6 @@ PROG = "retarget"
 DEMO_FRAMES = 90
 DEMO_DIR = "retarget-demo"
 SERVE_DATA_DIR = "retarget-data"
-# The demo's performer: the sample face's shape parameters (face width, nose length, jaw
-# width, lip thickness, eye spacing, in standard units), far enough from the target's
-# zeros that the transform has a real change of proportions to carry.
-DEMO_SOURCE_IDENTITY = (1.5, -1.2, 1.0, 1.2, -1.0)
 
 
 class _UsageError(Exception):
@@ -180,10 +177,11 @@ def transfer_files(
     weights_seconds = time.perf_counter() - start
 
     start = time.perf_counter()
-    retargeter = Retargeter(kernel, smoothing=smoothing, mask=active)
-    retargeter.fit(s0, points.positions(mesh.vertices))
+    performance = Performance(points.positions(mesh.vertices), the_layout, regions=active,
+                              kernel=kernel, smoothing=smoothing)
+    performance.set_neutral(s0)
     with _bar(len(frames), "transfer", "frame", quiet) as advance:
-        result = transfer(mesh.vertices, weights, retargeter, frames, progress=advance)
+        result = transfer(mesh.vertices, weights, performance, frames, progress=advance)
     transfer_seconds = time.perf_counter() - start
 
     _write_npy(out, result)
@@ -399,13 +397,14 @@ def export_gltf_files(
     else:
         weights = _weights(deformer, mesh, points, the_layout, quiet=quiet)
     if source_frames is not None:
-        retargeter = Retargeter(kernel or DEFAULT_KERNEL, smoothing=smoothing, mask=active)
-        retargeter.fit(s0, points.positions(mesh.vertices))
+        performance = Performance(points.positions(mesh.vertices), the_layout, regions=active,
+                                  kernel=kernel or DEFAULT_KERNEL, smoothing=smoothing)
+        performance.set_neutral(s0)
         d = np.empty((len(frames), n, 3), np.float32)
         chunk = 256
         with _bar(len(frames), "retarget", "frame", quiet) as advance:
             for i in range(0, len(frames), chunk):
-                d[i:i + chunk] = retargeter.displacements(frames[i:i + chunk])
+                d[i:i + chunk] = performance.displacements(frames[i:i + chunk])
                 advance((i + chunk) / len(frames))
         clips.append(clip_at_rate(Path(source_frames).stem, d, fps))
     written = []
@@ -653,7 +652,7 @@ def _views(path: str, side: str) -> list:
 
 
 def _cmd_demo(args) -> int:
-    from retarget.sample_face import demo_weights, posed_vertices, sample_face
+    from retarget.sample_face import demo_performance, demo_weights, posed_vertices, sample_face
 
     out_dir = Path(args.out)
     try:
@@ -661,11 +660,8 @@ def _cmd_demo(args) -> int:
     except OSError as exc:
         raise RetargetError(f"could not create --out directory {str(out_dir)!r}: {exc}") from exc
     target = sample_face()
-    source = sample_face(identity=np.asarray(DEMO_SOURCE_IDENTITY))
     expression = demo_weights(args.frames)
-    landmarks = np.asarray(source.landmarks68)
-    s0 = source.vertices[landmarks]
-    s = posed_vertices(source, expression)[:, landmarks]
+    s0, s = demo_performance(n_frames=args.frames)
 
     paths = {name: out_dir / name for name in (
         "target.obj", "target_landmarks.json", "source_neutral.npy",
@@ -691,7 +687,7 @@ def _cmd_demo(args) -> int:
     rate = f / result.transfer_seconds if result.transfer_seconds > 0 else float("inf")
     print(
         f"retarget demo: the sample face ({v} vertices, in cm) animated by a performer of "
-        f"another identity through {len(landmarks)} iBUG landmarks, {f} frames\n"
+        f"another identity through {len(s0)} iBUG landmarks, {f} frames\n"
         f"  wrote {out_dir}/: target.obj, target_landmarks.json, "
         f"source_neutral.npy {s0.shape}, source_frames.npy {s.shape}\n"
         f"  retargeted with {result.method} in "

@@ -1,7 +1,7 @@
 """`Clip`: one take retargeted, the feature displacements per frame with their timing.
 
-`take_clip` makes one from a recorded take the way the app plays it (conditioning, then
-Dutreve §4's retargeting onto the target's feature points).
+`retarget.performance.take_clip` (or `Performance.play`) makes one from a recorded take the
+way the app plays it; `clip_at_rate` from displacements at a constant rate.
 """
 
 from __future__ import annotations
@@ -11,10 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.layouts import get_layout
-from retarget.pipeline import Retargeter
-from retarget.sources.conditioning import ConditionSettings, condition_take
-from retarget.sources.take import Take
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,30 +66,3 @@ def clip_at_rate(name: str, displacements, fps: float) -> Clip:
         raise RetargetError(f"fps must be a positive number; got {fps!r}")
     n = len(np.asarray(displacements))
     return Clip(name, displacements, np.arange(n) / float(fps))
-
-
-def take_clip(name: str, take: Take, target_points, layout: str, settings=None, *,
-              regions=None) -> Clip:
-    """A `Clip` of `take` retargeted onto the target, as the app's take player
-    (``server.sources.TakeSource``) plays it: the take's points matched to `layout` by
-    name (a subset drives the rest by interpolation), conditioned by
-    `retarget.sources.conditioning.condition_take` (the neutral-capture frames are left
-    out), then `retarget.pipeline.Retargeter` trained on the conditioned neutral and the
-    target's points.
-
-    target_points : (N, 3) the target's feature points, mesh units, in `layout`'s order.
-    layout : the target's layout name ("" is iBUG 68, as the player takes it).
-    settings : `ConditionSettings`, its dict form, or None for the defaults.
-    regions : region, group or point names that move (partial retargeting), None for all.
-
-    The clip's times are the kept frames' own, from 0 s at the first kept frame. The
-    head's rotation is not part of the clip (feature displacements carry no rigid head
-    motion).
-    """
-    target = get_layout(layout or "ibug68")
-    if not isinstance(settings, ConditionSettings):
-        settings = ConditionSettings.from_dict(settings)
-    conditioned, neutral = condition_take(take.to_layout(target.name, partial=True), settings)
-    mask = target.region_mask(regions) if regions else None
-    retargeter = Retargeter(mask=mask).fit(neutral, target_points)
-    return Clip(name, retargeter.displacements(conditioned.points), conditioned.frame_times())

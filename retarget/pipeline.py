@@ -7,8 +7,10 @@ target feature points, and skin weights W for the target mesh. Every frame:
 
 ``F(S0)`` rather than T0 is subtracted so a smoothed (non-interpolating) transform still
 gives zero displacement at the neutral pose. The mask is Dutreve's partial retargeting
-(§4, Fig. 3): disabled feature points keep their neutral position. A source point that is
-lost (NaN, a tracker dropout) also keeps its neutral position for that frame.
+(§4, Fig. 3): disabled feature points keep their neutral position. It is given with the
+frames, not fitted, so changing it (a viewer ticking regions during a performance)
+refits nothing. A source point that is lost (NaN, a tracker dropout) also keeps its
+neutral position for that frame.
 
 A source may have fewer points than the target rig (21 face markers driving a 68-joint
 rig): the target points it lacks are NaN rows of the neutral S0. The transform is trained
@@ -42,15 +44,16 @@ class Retargeter:
     ----------
     kernel, degree, smoothing : the RBF space transform's (see `retarget.rbf`); smoothing
         None takes `DEFAULT_SMOOTHING` for the source's dimension.
-    mask : (N,) bool of active feature points, or None for all (partial retargeting).
+
+    `fit` is the costly step, once per neutral; `displacements` is per frame, with the
+    partial-retargeting mask of that frame.
     """
 
     def __init__(self, kernel: str = DEFAULT_KERNEL, *, degree: int | None = None,
-                 smoothing: float | None = None, mask=None):
+                 smoothing: float | None = None):
         self.kernel = kernel
         self.degree = degree
         self.smoothing = smoothing
-        self.mask = mask
 
     def fit(self, source_neutral, target_neutral) -> "Retargeter":
         """Train on (N, 2|3) neutral source points S0 and (N, 3) neutral target points T0.
@@ -78,16 +81,20 @@ class Retargeter:
         # (U, D) operator: driven joints' displacements -> the undriven joints'
         self.fill_ = (RBFInterpolant("linear").fit(t0[driven]).operator(t0[~driven])
                       if not driven.all() else None)
-        self.mask_ = _as_mask(self.mask, len(s))
         return self
 
-    def displacements(self, source_frames) -> np.ndarray:
+    def displacements(self, source_frames, mask=None) -> np.ndarray:
         """(N, D) or (F, N, D) source points -> (N, 3) or (F, N, 3) float32 target feature
-        displacements d_f (zero for masked-out and lost points)."""
+        displacements d_f (zero for masked-out and lost points).
+
+        mask : (N,) bool of the active feature points, or None for all (partial
+            retargeting, Dutreve §4).
+        """
         if not hasattr(self, "transform_"):
             raise RetargetError("Retargeter is not fitted; call fit() first")
         s = np.asarray(source_frames, dtype=np.float64)
-        n = len(self.mask_)
+        n = len(self.driven_)
+        mask = _checked_mask(mask, n)
         if s.ndim not in (2, 3) or s.shape[-2:] != (n, self.source_dims_):
             raise RetargetError(
                 f"source frames must have shape (F, {n}, {self.source_dims_}) like the source "
@@ -96,7 +103,8 @@ class Retargeter:
         d = np.nan_to_num(d, nan=0.0)
         if self.fill_ is not None:
             d[..., ~self.driven_, :] = np.einsum("ud,...dk->...uk", self.fill_, d[..., self.driven_, :])
-        d[..., ~self.mask_, :] = 0.0
+        if mask is not None:
+            d[..., ~mask, :] = 0.0
         return d.astype(np.float32)
 
 
@@ -104,6 +112,9 @@ def transfer(vertices, weights: SkinWeights, retargeter: Retargeter, source_fram
              progress=None, chunk: int = 64) -> np.ndarray:
     """(F, V, 3) float32 deformed target vertices for (F, N, D) source frames.
 
+    retargeter : a fitted `Retargeter`, or anything with its ``displacements(frames)``,
+        such as a `retarget.performance.Performance` with its neutral set (whose regions
+        then apply).
     progress : optional callable taking the fraction done in [0, 1].
     """
     v0 = np.asarray(vertices, dtype=np.float64)
@@ -124,10 +135,11 @@ def transfer(vertices, weights: SkinWeights, retargeter: Retargeter, source_fram
     return out
 
 
-def _as_mask(mask, n: int) -> np.ndarray:
+def _checked_mask(mask, n: int) -> np.ndarray | None:
+    """`mask` as an (N,) bool array (not copied), or None for all points."""
     if mask is None:
-        return np.ones(n, dtype=bool)
+        return None
     m = np.asarray(mask)
     if m.shape != (n,) or m.dtype != bool:
         raise RetargetError(f"mask must be a boolean array of shape ({n},); got {m.dtype} {m.shape}")
-    return m.copy()
+    return m

@@ -17,6 +17,10 @@ sheet turns and upper-lip sheet stays, which opens the slit. They are computed p
 so a blink closes the lids of every face exactly, and the same weights mean the same motion
 on every identity (ground truth for cross-identity retargeting).
 
+The built-in performance (`demo_performance`): another identity, `DEMO_PERFORMER`, performing
+a looping `demo_weights`, seen through its 68 landmarks, the source that drives the sample face
+in the web app's demo and in ``retarget demo``.
+
 Units and axes follow the ICT face model in `shared/data/ict_face`: centimetres, +y up, +z out
 of the face (it looks toward +z), +x the subject's left (the `_L` shapes act on +x). Landmarks
 follow the iBUG / Multi-PIE 68-point order.
@@ -25,6 +29,7 @@ follow the iBUG / Multi-PIE 68-point order.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -52,6 +57,10 @@ _T_KNOTS = (-10.5, -7.5, _T_MOUTH, _T_EYE, 7.0, 11.0)
 _T_STEPS = (0.35, 0.25, 0.25, 0.25, 0.4)
 _JAW_PIVOT, _JAW_ANGLE = np.array([0.0, 1.0, -0.5]), np.radians(15.0)
 _LOOP_S = 10.0                       # seconds; the demo performance repeats with this period
+
+DEMO_PERFORMER = (1.2, -0.8, 0.9, 0.6, -0.7)
+"""The built-in performance's performer, shape parameters in `IDENTITY_PARAMETERS` order: far
+enough from the sample face's zeros that the demo has a real change of proportions to carry."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -407,3 +416,27 @@ def posed_vertices(face: SampleFace, weights: np.ndarray) -> np.ndarray:
     if w.ndim not in (1, 2) or w.shape[-1] != n_expr or not np.all(np.isfinite(w)):
         raise RetargetError(f"weights must be finite with shape ({n_expr},) or (F, {n_expr}), got {w.shape}")
     return face.vertices + np.tensordot(w, face.expressions, axes=(-1, 0))
+
+
+def demo_performance(fps: float = 30.0, n_frames: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The built-in performance: `DEMO_PERFORMER`'s 68 landmarks (iBUG order) at rest,
+    (68, 3) float64 cm, read-only, and performing `demo_weights` at `fps`, (F, 68, 3) float64
+    cm; F = `n_frames`, by default one loop (10 s, after which the performance repeats).
+
+    The performer is built once per process (about a second); the frames are cheap.
+    """
+    if not np.isfinite(fps) or fps <= 0:
+        raise RetargetError(f"fps must be a positive number, got {fps!r}")
+    neutral, expressions = _demo_performer68()
+    weights = demo_weights(int(round(_LOOP_S * fps)) if n_frames is None else n_frames, fps)
+    return neutral, neutral + np.tensordot(weights, expressions, axes=1)
+
+
+@lru_cache(maxsize=1)
+def _demo_performer68() -> tuple[np.ndarray, np.ndarray]:
+    """`DEMO_PERFORMER`'s landmarks: neutral (68, 3) and expressions (E, 68, 3), read-only."""
+    performer = sample_face(identity=np.asarray(DEMO_PERFORMER))
+    lm = np.asarray(performer.landmarks68)
+    neutral, expressions = performer.vertices[lm], performer.expressions[:, lm]
+    neutral.flags.writeable = expressions.flags.writeable = False
+    return neutral, expressions

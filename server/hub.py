@@ -55,8 +55,9 @@ class Mailbox:
 class StreamHub:
     """Per project id: the viewers' mailboxes, the running source and its regions.
 
-    A source is any object with ``fps``, ``set_regions(regions)`` and
-    ``async run(hub, project_id)`` that publishes encoded frames (`server.sources`).
+    A source is any object with ``fps``, ``set_regions(regions)``, ``recording`` (frames
+    recorded, None when not recording) and ``async run(hub, project_id)`` that publishes
+    encoded frames (`server.players`).
     """
 
     def __init__(self):

@@ -204,11 +204,11 @@ def import_seed(method: str = "geodesic") -> Seed:
     face, its 68 landmarks, a rig of `method` (a joint rig is a glTF skin, ~30 kB; an
     interpolating one, e.g. biharmonic, morph targets, ~800 kB) and one 10-frame
     animation."""
-    from retarget.clips import take_clip
     from retarget.gltf import export_gltf
     from retarget.landmarks import from_vertex_indices
     from retarget.layouts import get_layout
     from retarget.mesh import mesh_from_arrays
+    from retarget.performance import take_clip
     from retarget.sources.take import Take
     from retarget.weights import compute_weights
 

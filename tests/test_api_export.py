@@ -19,7 +19,7 @@ from retarget.layouts import get_layout
 from retarget.sample_face import demo_weights, sample_face
 from retarget.sources.conditioning import ConditionSettings
 from server.app import create_app
-from server.sources import TakeSource
+from server.players import TakePlayer
 from tests.gltf_check import assert_valid_gltf
 
 FPS = 30.0
@@ -76,9 +76,9 @@ def played(app, pid, take_id, settings=None):
     store = app.state.store
     mesh = store.mesh(pid)
     points = landmarks_from_json(store.landmarks(pid), mesh.vertices, mesh.faces)
-    source = TakeSource(points.positions(mesh.vertices), "ibug68", store.take(pid, take_id),
+    player = TakePlayer(points.positions(mesh.vertices), "ibug68", store.take(pid, take_id),
                         ConditionSettings.from_dict(settings))
-    return source.retargeter.displacements(source.points), source.times
+    return player.performance.displacements(player.cue.points), player.cue.times
 
 
 @pytest.fixture(scope="module")

@@ -203,10 +203,10 @@ def test_stop_sends_a_neutral_frame(app, sample_id):
 
 def test_after_a_stall_the_demo_skips_to_the_due_frame_instead_of_a_stale_burst():
     from retarget.sample_face import sample_face
-    from server.sources import DemoSource
+    from server.players import DemoPlayer
 
     face = sample_face(1)
-    source = DemoSource(face.vertices[face.landmarks68], "ibug68", fps=100.0)
+    source = DemoPlayer(face.vertices[face.landmarks68], "ibug68", fps=100.0)
 
     class Recorder(StreamHub):
         published: list[int] = []
@@ -235,10 +235,10 @@ def test_any_source_records_its_raw_points_into_a_take(app, sample_id):
     """Record the demo, then record a replay of that recording: each take holds the raw
     source points played, in order (a loaded server may skip frames that came due while
     it was busy, so the frames need not be consecutive)."""
-    from server.sources import _performance68
+    from retarget.sample_face import demo_performance
 
     fps = 60.0
-    neutral68, frames68 = _performance68(fps)
+    neutral68, frames68 = demo_performance(fps)
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
         ws.receive_json()
         ws.send_json({"type": "record"})
@@ -280,10 +280,10 @@ def assert_frames_in_order(recorded: np.ndarray, played: np.ndarray) -> None:
 
 
 def test_a_take_played_once_marks_its_last_frame(app, sample_id):
-    from server.sources import _performance68
+    from retarget.sample_face import demo_performance
     from server.wire import FLAG_LAST
 
-    _, frames68 = _performance68(30.0)
+    _, frames68 = demo_performance(30.0)
     buffer = io.BytesIO()
     np.save(buffer, frames68[:45].astype(np.float32))
     with TestClient(app) as client:

@@ -17,7 +17,8 @@ import pytest
 import trimesh
 
 from retarget.errors import RetargetError
-from retarget.clips import Clip, clip_at_rate, take_clip
+from retarget.clips import Clip, clip_at_rate
+from retarget.performance import take_clip
 from retarget.gltf import export_gltf, export_mesh_gltf, joint_names, read_gltf
 from retarget.gltf.influences import is_joint_based, joint_influences
 from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,

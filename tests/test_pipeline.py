@@ -38,7 +38,7 @@ def test_partial_retargeting_holds_masked_points_at_neutral(points):
     s0, t0, frames = points
     mask = np.zeros(20, dtype=bool)
     mask[:5] = True
-    d = Retargeter(mask=mask).fit(s0, t0).displacements(frames)
+    d = Retargeter().fit(s0, t0).displacements(frames, mask=mask)
     assert np.all(d[:, 5:] == 0.0) and np.abs(d[:, :5]).max() > 0.01
 
 
@@ -77,7 +77,7 @@ def test_transfer_deforms_the_mesh_by_skinning(points):
 @pytest.mark.parametrize("call,message", [
     (lambda s0, t0, f: Retargeter().displacements(f), "not fitted"),
     (lambda s0, t0, f: Retargeter().fit(s0[:19], t0), "same number of feature points; got 19 and 20"),
-    (lambda s0, t0, f: Retargeter(mask=np.ones(3, bool)).fit(s0, t0), r"mask must be a boolean array of shape \(20,\)"),
+    (lambda s0, t0, f: Retargeter().fit(s0, t0).displacements(f, mask=np.ones(3, bool)), r"mask must be a boolean array of shape \(20,\)"),
     (lambda s0, t0, f: Retargeter().fit(s0, t0[:, :2]), "target neutral"),
     (lambda s0, t0, f: transfer(np.zeros((7, 3)), SkinWeights.from_dense(np.ones((5, 20)) / 20),
                                 Retargeter().fit(s0, t0), f), "the rig has 20 joints for 5 vertices; the mesh has 7"),

@@ -7,7 +7,7 @@ The export (`retarget.gltf.export_gltf`) holds the project's mesh, landmarks and
 in use (painted weights included): a glTF skin for a joint-based rig (ellipsoid,
 geodesic), morph targets for the interpolating ones (biharmonic, rbf, region_rbf,
 laplacian). Each take named in ``takes`` becomes one animation named after the take, its
-frames retargeted as the take player plays them (`retarget.clips.take_clip`: conditioned
+frames retargeted as the take player plays them (`retarget.performance.take_clip`: conditioned
 by ``settings``, the Performance panel's ConditionSettings JSON, defaults when absent;
 ``regions`` moves only those regions, groups or points). It answers as an attachment
 named after the project. A plain request: the sample face with a 30 s take at 30 fps
@@ -31,9 +31,9 @@ import re
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile, status
 
 from retarget.errors import RetargetError
-from retarget.clips import take_clip
 from retarget.gltf import export_gltf
 from retarget.landmarks import landmarks_from_json
+from retarget.performance import take_clip
 from server.deps import IsolationDep, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.limits import body_limit

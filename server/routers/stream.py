@@ -6,13 +6,13 @@ frames (`server.wire`) whenever the project's source publishes. Control messages
 are JSON text:
 
 - ``{"type": "start", "source": "demo", "fps": 60}``: start (or restart) the built-in demo
-  performance for the project (`server.sources.DemoSource`);
+  performance for the project (`server.players.DemoPlayer`);
 - ``{"type": "start", "source": "take", "take": <take id>, "loop": true, "settings": {...}}``:
-  replay a stored take (`server.sources.TakeSource`); settings are
+  replay a stored take (`server.players.TakePlayer`); settings are
   `retarget.sources.conditioning.ConditionSettings` (neutral, head pose, filter, gain);
 - ``{"type": "start", "source": "live", "dims": 3, "settings": {...}}``: points tracked by
   this viewer follow as binary source-points messages (`server.wire.decode_points`,
-  N = the layout's points) and are retargeted as they arrive (`server.sources.LiveSource`);
+  N = the layout's points) and are retargeted as they arrive (`server.players.LivePlayer`);
 - ``{"type": "settings", "settings": {...}}``: change the running take or live source's
   conditioning (a live source keeps its captured neutral unless the neutral mode changes);
 - ``{"type": "neutral"}``: a live source captures its neutral again from the next frames;
@@ -53,7 +53,7 @@ from retarget.layouts import get_layout
 from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
 from retarget.sources.conditioning import ConditionSettings
-from server.sources import DemoSource, LiveSource, TakeSource
+from server.players import DemoPlayer, LivePlayer, TakePlayer
 from server.wire import FLAG_NEUTRAL, decode_points, encode_frame
 from server.store import ProjectNotFound, TakeNotFound
 
@@ -146,7 +146,7 @@ async def _receive_controls(websocket, sending, hub, store, project_id, target_p
 def _points(data: bytes, hub: StreamHub, project_id) -> dict | None:
     """A tracked frame for the project's live source."""
     source = hub.source(project_id)
-    if not isinstance(source, LiveSource):
+    if not isinstance(source, LivePlayer):
         raise ValueError('binary messages are tracked points for a live source; send '
                          '{"type": "start", "source": "live"} first')
     frame = decode_points(data)
@@ -171,7 +171,7 @@ def _fps(msg: dict, default: float) -> float:
 async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
     kind = msg.get("source", "demo")
     if kind == "demo":
-        return await asyncio.to_thread(DemoSource, target_points, layout, _fps(msg, DEFAULT_FPS))
+        return await asyncio.to_thread(DemoPlayer, target_points, layout, _fps(msg, DEFAULT_FPS))
     if kind == "take":
         take_id = msg.get("take")
         if not isinstance(take_id, str):
@@ -180,12 +180,12 @@ async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, la
 
         def load():
             take = store.take(project_id, take_id)
-            return TakeSource(target_points, layout, take, settings, loop=msg.get("loop", True) is not False,
+            return TakePlayer(target_points, layout, take, settings, loop=msg.get("loop", True) is not False,
                               take_id=take_id)
         return await asyncio.to_thread(load)
     if kind == "live":
         dims = msg.get("dims", 3)
-        return LiveSource(target_points, layout, _settings(msg), dims=dims, fps=_fps(msg, 30.0))
+        return LivePlayer(target_points, layout, _settings(msg), dims=dims, fps=_fps(msg, 30.0))
     raise ValueError(f"unknown source {kind!r}; available: 'demo', 'take', 'live'")
 
 
@@ -210,7 +210,7 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
     source = hub.source(project_id)
     if kind == "record_stop" and getattr(source, "recording", None) is None:
         source = hub.unsaved_recording(project_id) or source  # it stopped or ended while recording
-    wanted = {"settings": ((LiveSource, TakeSource), "take or live"), "neutral": (LiveSource, "live"),
+    wanted = {"settings": ((LivePlayer, TakePlayer), "take or live"), "neutral": (LivePlayer, "live"),
               "record": (object, "demo, take or live"), "record_stop": (object, "demo, take or live")}
     if kind in wanted and (source is None or not isinstance(source, wanted[kind][0])):
         raise ValueError(f'"{kind}" applies to a running {wanted[kind][1]} source; none is running')

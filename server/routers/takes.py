@@ -15,7 +15,7 @@
 
 A take's info is ``{id, name, created, source, layout, fps, n_frames, n_points, dims,
 duration, trim: [start, stop]}``. Takes keep the source's own point names; playing one
-maps them to the project's layout by name (`server.sources`). Files are parsed by
+maps them to the project's layout by name (`retarget.performance`). Files are parsed by
 `retarget.sources.files.read_take`, videos tracked by `retarget.sources.markers` and
 `retarget.sources.stereo`, all in child processes (`server.readers` through
 `server.isolation`: no file can crash the server); the server only moves bytes and

@@ -10,7 +10,7 @@ import json
 import numpy as np
 
 from retarget.layouts import get_layout
-from server.sources import _performance68
+from retarget.sample_face import demo_performance
 from tests.e2e.conftest import open_project
 
 _RECORD = """() => {
@@ -119,7 +119,7 @@ def test_recording_the_demo_gives_a_take_that_plays_once_to_its_end(server, page
     # raw demo frames: each one exactly the performer's landmarks at one of the demo's
     # 60 fps steps (so no faster than 60 fps), and the performer moves
     layout = get_layout(take["layout"])
-    performance = _performance68(60.0)[1][:, list(layout.ibug68)].astype(np.float32)
+    performance = demo_performance(60.0)[1][:, list(layout.ibug68)].astype(np.float32)
     points = np.load(io.BytesIO(server.read(f"/api/projects/{sample['id']}/takes/{take['id']}/points")))
     assert points.shape == (take["n_frames"], 68, 3) and take["fps"] <= 60 + 1e-6
     assert all((performance == frame).all(axis=(1, 2)).any() for frame in points)
