@@ -39,6 +39,7 @@ from bench.stream import ServerProcess, machine  # noqa: E402
 from retarget.layouts import get_layout  # noqa: E402
 from retarget.sources.markerless import track_video_markerless  # noqa: E402
 from retarget.sources.video import VideoReader  # noqa: E402
+from server.web import WEB_DIR  # noqa: E402
 
 VIDEO = ROOT.parent / "shared" / "data" / "video" / "face_expressions_480.mp4"
 CHROMIUM = "/usr/bin/chromium"
@@ -93,7 +94,8 @@ def command_run(video: Path, layout: str, frames: int | None) -> dict:
             bar.total = total
             bar.update(done - bar.n)
 
-        take = track_video_markerless(video, layout=layout, max_frames=frames, progress=progress)
+        take = track_video_markerless(video, layout=layout, web_root=WEB_DIR, max_frames=frames,
+                                      progress=progress)
     return {"frames": take.n_frames, **take.meta}
 
 

@@ -90,7 +90,7 @@ def free_port() -> int:
 def serve_command(port: int, data_dir: Path) -> list[str]:
     """`retarget serve` of this checkout's environment (the console script when present)."""
     script = Path(sys.executable).with_name("retarget")
-    head = [str(script)] if script.exists() else [sys.executable, "-m", "retarget.cli"]
+    head = [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
     return head + ["serve", "--port", str(port), "--data-dir", str(data_dir)]
 
 

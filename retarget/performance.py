@@ -162,9 +162,12 @@ class Performance:
         new settings choose the neutral another way than the old ones."""
         settings = _settings(settings)
         old = self._conditioner
-        if old is not None and old.neutral_ is not None and self.settings.neutral == settings.neutral:
-            given = ConditionSettings.from_dict({**settings.to_dict(), "neutral": {"mode": "given"}})
-            self._conditioner = SourceConditioner(self.layout, self.dims, given, neutral=old.neutral_)
+        captured = old is not None and old.neutral_ is not None
+        if captured and self.settings.neutral == settings.neutral:
+            given = ConditionSettings.from_dict({**settings.to_dict(),
+                                                 "neutral": {"mode": "given"}})
+            self._conditioner = SourceConditioner(self.layout, self.dims, given,
+                                                  neutral=old.neutral_)
         else:
             self._forget_neutral()
         self.settings = settings
@@ -314,4 +317,6 @@ def take_clip(name: str, take: Take, target_points, layout: str, settings=None, 
 
 
 def _settings(settings) -> ConditionSettings:
-    return settings if isinstance(settings, ConditionSettings) else ConditionSettings.from_dict(settings)
+    if isinstance(settings, ConditionSettings):
+        return settings
+    return ConditionSettings.from_dict(settings)

@@ -284,7 +284,7 @@ def test_docs_are_served(client):
 
 
 def test_serve_command_is_wired_and_the_library_imports_without_web_code():
-    from retarget.cli import build_parser
+    from server.cli import build_parser
     args = build_parser().parse_args(["serve", "--port", "8123", "--data-dir", "d"])
     assert (args.host, args.port, args.data_dir) == ("127.0.0.1", 8123, "d")
     code = ("import sys, retarget, retarget.cli, retarget.weights, retarget.pipeline; "

@@ -20,6 +20,7 @@ import pytest
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sources.markerless import track_video_markerless
+from server.web import WEB_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -39,7 +40,7 @@ def clip():
     if not SHARED.is_dir():
         pytest.skip("../shared is absent")
     calls = []
-    take = track_video_markerless(VIDEO, layout="ibug68", max_frames=CLIP,
+    take = track_video_markerless(VIDEO, layout="ibug68", web_root=WEB_DIR, max_frames=CLIP,
                                   progress=lambda done, total: calls.append((done, total)))
     return take, calls
 
@@ -123,7 +124,7 @@ def test_open_mouth_frames_have_a_larger_lip_gap(clip):
 
 def test_a_video_without_a_face_gives_nan_frames_and_a_warning(noise_video):
     with pytest.warns(RuntimeWarning, match="no face found in any of the 8 frames"):
-        take = track_video_markerless(noise_video, layout="dutreve21")
+        take = track_video_markerless(noise_video, layout="dutreve21", web_root=WEB_DIR)
     assert take.points.shape == (8, 21, 3) and np.isnan(take.points).all()
     assert take.meta["face_share"] == 0.0 and take.meta["frames_with_face"] == 0
     assert (take.meta["width"], take.meta["height"]) == (96, 96)
@@ -133,21 +134,22 @@ def test_broken_missing_and_bad_arguments_are_refused(tmp_path):
     broken = tmp_path / "broken.mp4"
     broken.write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(range(256)) * 40)
     with pytest.raises(RetargetError, match="broken.mp4"):
-        track_video_markerless(broken, layout="ibug68")
+        track_video_markerless(broken, layout="ibug68", web_root=WEB_DIR)
     with pytest.raises(RetargetError, match="does not exist"):
-        track_video_markerless(tmp_path / "missing.mp4", layout="ibug68")
+        track_video_markerless(tmp_path / "missing.mp4", layout="ibug68", web_root=WEB_DIR)
     with pytest.raises(RetargetError, match="max_frames"):
-        track_video_markerless(broken, layout="ibug68", max_frames=0)
+        track_video_markerless(broken, layout="ibug68", web_root=WEB_DIR, max_frames=0)
     with pytest.raises(RetargetError, match="unknown layout"):
-        track_video_markerless(broken, layout="nope")
+        track_video_markerless(broken, layout="nope", web_root=WEB_DIR)
 
 
 def test_missing_playwright_or_chromium_says_how_to_get_them(tmp_path, monkeypatch, noise_video):
     with pytest.raises(RetargetError, match=r"Chromium not found at .*apt-get install chromium"):
-        track_video_markerless(noise_video, layout="ibug68", chromium=str(tmp_path / "no-chromium"))
+        track_video_markerless(noise_video, layout="ibug68", web_root=WEB_DIR,
+                               chromium=str(tmp_path / "no-chromium"))
     monkeypatch.setitem(sys.modules, "playwright.sync_api", None)  # import fails as if absent
     with pytest.raises(RetargetError, match=r"pip install 'retarget\[markerless\]'"):
-        track_video_markerless(noise_video, layout="ibug68")
+        track_video_markerless(noise_video, layout="ibug68", web_root=WEB_DIR)
 
 
 # -- the web app's video path: the page decodes and steps the <video> itself -------------

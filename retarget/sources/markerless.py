@@ -1,5 +1,5 @@
 """Markerless face tracking of a video file: MediaPipe's 468-point face mesh, run by the
-browser client's own tracker (``web/static/js/tracking/``) in a headless Chromium.
+browser client's own tracker (the web app's ``static/js/tracking/``) in a headless Chromium.
 
 One tracker serves the web app's webcam and video files and this module, so the command
 line and the browser find the same landmarks; and the Python environment needs no
@@ -8,11 +8,13 @@ MediaPipe wheel (the PyPI one pins numpy < 2 and brings a second OpenCV).
 How a video is tracked
 ----------------------
 Python decodes the video (`retarget.sources.video.VideoReader`, OpenCV) and hands the
-page one frame at a time as a JPEG (quality 95); the page (``web/static/track.html``)
+page one frame at a time as a JPEG (quality 95); the page (the web app's ``static/track.html``)
 tracks it while it fetches the next one, and posts back the layout's points about once a
 second (``track.html`` describes the exchange). Nothing
 listens on a port: the page, its modules, the face-mesh package and the frames are all
-answered through Playwright's request interception (``page.route``) on a made-up origin.
+answered through Playwright's request interception (``page.route``) on a made-up origin,
+from the web app's folder, which the caller names (`web_root`: the library does not know
+where the web app is installed; the server's ``retarget`` command gives its own).
 
 Decoding here rather than in the page, for robustness first: OpenCV reads any codec its
 FFmpeg reads (Chromium plays neither OpenCV's own mp4v MP4 nor MJPG AVI, and a build
@@ -23,7 +25,7 @@ frame: 54 ms a frame over the first 150 frames of a 480 x 480 H.264 file with a 
 every 250 frames; pausing playback on each frame waits about a frame period, 28 ms at
 30 fps), while OpenCV decodes a frame in under 1 ms and the JPEG hand-over costs about
 10 ms (``bench/markerless.py``). The web app's own video path
-(``web/static/js/tracking/videoTake.js``) decodes in the page, on the user's file.
+(``static/js/tracking/videoTake.js``) decodes in the page, on the user's file.
 
 Points are in pixels, **x right, y up, z toward the camera**, origin at the image's
 bottom-left corner, z in the same pixel scale as x (MediaPipe's normalised landmarks times
@@ -49,9 +51,8 @@ from retarget.sources.take import Take
 __all__ = ["track_video_markerless", "TRACKER"]
 
 TRACKER = "@mediapipe/face_mesh 0.4.1633559619"
-"""The face tracker the page runs (web/package.json pins it)."""
+"""The face tracker the page runs (the web app's package.json pins it)."""
 
-_WEB = Path(__file__).resolve().parents[2] / "web"
 _ORIGIN = "http://retarget.localhost"  # never resolved: every request is intercepted
 _CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
 _JPEG_QUALITY = 95
@@ -66,6 +67,7 @@ def track_video_markerless(
     path,
     *,
     layout: str | Layout,
+    web_root,
     progress=None,
     max_frames: int | None = None,
     chromium: str | None = "/usr/bin/chromium",
@@ -75,6 +77,8 @@ def track_video_markerless(
     path : a video file OpenCV can decode.
     layout : a layout name (`retarget.layouts.LAYOUTS`) or a `Layout`; its `mediapipe468`
         indices pick its points out of the 468 landmarks.
+    web_root : the web app's folder (a path): its ``static/`` pages and modules and its
+        ``node_modules/@mediapipe/face_mesh`` package (``npm ci``) are what the page runs.
     progress : optional ``progress(done, total)`` called after each tracked frame; total is
         the expected frame count (`max_frames` or the header's), None when unknown.
     max_frames : track at most this many frames from the start.
@@ -98,7 +102,8 @@ def track_video_markerless(
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
                                    or max_frames < 1):
         raise RetargetError(f"max_frames must be a positive integer or None, got {max_frames!r}")
-    _check_web_files()
+    web = Path(web_root)
+    _check_web_files(web)
     sync_playwright, playwright_error = _playwright()
     if chromium is not None and not Path(chromium).is_file():
         raise RetargetError(
@@ -115,7 +120,7 @@ def track_video_markerless(
         expected = reader.n_frames or None
         if max_frames is not None:
             expected = min(expected, int(max_frames)) if expected else int(max_frames)
-        feed = _FrameFeed(reader, lay.n_points, int(max_frames) if max_frames else None,
+        feed = _FrameFeed(reader, web, lay.n_points, int(max_frames) if max_frames else None,
                           expected, progress)
         start = time.perf_counter()
         with sync_playwright() as p:
@@ -177,9 +182,10 @@ class _FrameFeed:
     a 500 for this and every later request, which ends its loop, and `raise_failure`
     raises it once the evaluate returns."""
 
-    def __init__(self, reader, n_points: int, max_frames: int | None, expected: int | None,
-                 progress) -> None:
+    def __init__(self, reader, web: Path, n_points: int, max_frames: int | None,
+                 expected: int | None, progress) -> None:
         self.frames = iter(reader)
+        self.web = web
         self.next_index = 0
         self.max_frames = max_frames
         self.expected = expected
@@ -215,7 +221,7 @@ class _FrameFeed:
         elif (m := _POINTS.fullmatch(path)) and request.method == "POST":
             self._report(self._store(int(m.group(1)), request.post_data_buffer or b""))
             route.fulfill(status=204)
-        elif (file := _static_file(path)) is not None:
+        elif (file := _static_file(self.web, path)) is not None:
             kind = _TYPES.get(file.suffix) or mimetypes.guess_type(file.name)[0] or "application/octet-stream"
             route.fulfill(body=file.read_bytes(), content_type=kind)
         else:
@@ -258,10 +264,11 @@ class _FrameFeed:
                 self.progress(done, self.expected)
 
 
-def _static_file(path: str) -> Path | None:
-    """The file behind a page URL path, only inside the folders the page may read."""
-    for prefix, folder in (("/static/", _WEB / "static"),
-                           ("/vendor/@mediapipe/face_mesh/", _WEB / "node_modules" / "@mediapipe" / "face_mesh")):
+def _static_file(web: Path, path: str) -> Path | None:
+    """The file behind a page URL path, only inside the folders of the web app `web` that
+    the page may read."""
+    for prefix, folder in (("/static/", web / "static"),
+                           ("/vendor/@mediapipe/face_mesh/", web / "node_modules" / "@mediapipe" / "face_mesh")):
         if path.startswith(prefix):
             file = (folder / path[len(prefix):]).resolve()
             if file.is_relative_to(folder.resolve()) and file.is_file():
@@ -269,14 +276,14 @@ def _static_file(path: str) -> Path | None:
     return None
 
 
-def _check_web_files() -> None:
-    page = _WEB / "static" / "track.html"
-    package = _WEB / "node_modules" / "@mediapipe" / "face_mesh" / "face_mesh.js"
+def _check_web_files(web: Path) -> None:
+    page = web / "static" / "track.html"
+    package = web / "node_modules" / "@mediapipe" / "face_mesh" / "face_mesh.js"
     if not page.is_file():
         raise RetargetError(f"markerless tracking needs the browser client's files; {page} is missing")
     if not package.is_file():
         raise RetargetError(f"markerless tracking needs the npm package @mediapipe/face_mesh; "
-                            f"{package} is missing: run npm ci --prefix {_WEB}")
+                            f"{package} is missing: run npm ci --prefix {web}")
 
 
 def _playwright():

@@ -1,8 +1,8 @@
 """Painted skin weights: what a painted row may be, merging an edit into a rig, resetting
 joints to the automatic rig.
 
-The browser paints (web/static/js/weightRows.js is this module's JavaScript twin); this
-module is the authority on what a stored painted rig is. A painted rig is a `SkinWeights`
+The browser paints (the web app's static/js/model/weightRows.js is this module's JavaScript
+twin); this module is the authority on what a stored painted rig is. A painted rig is a `SkinWeights`
 with the automatic rig's vertices, joints and influence count k.
 
 Rows and the static root. A row's feature weights plus the root's share ``1 - sum(row)``

@@ -52,7 +52,7 @@ class Server:
         self.log = self.data_dir.parent / f"server-{self.port}-{time.monotonic_ns()}.log"
         with open(self.log, "wb") as out:
             self.process = subprocess.Popen(
-                [sys.executable, "-m", "retarget.cli", "serve", "--port", str(self.port),
+                [sys.executable, "-m", "server.cli", "serve", "--port", str(self.port),
                  "--data-dir", str(self.data_dir), *self.args],
                 stdout=out, stderr=subprocess.STDOUT, cwd=Path(__file__).resolve().parents[2])
         deadline = time.monotonic() + _STARTUP_S
