@@ -129,7 +129,7 @@ def test_off_loopback_every_request_needs_the_token(token_app):
     for path in ("/api/projects", "/docs", "/openapi.json", "/"):
         r = client.get(path)
         assert r.status_code == 401 and "access token" in r.json()["detail"], path
-    assert client.get("/static/js/api.js").status_code == 200  # the client's code holds no data
+    assert client.get("/static/js/net/api.js").status_code == 200  # the client's code holds no data
     assert client.get("/api/projects", headers={"authorization": f"Bearer {token}"}).status_code == 200
     assert client.get("/api/projects", headers={"authorization": "Bearer wrong"}).status_code == 401
     assert client.get("/?token=wrong").status_code == 401
@@ -163,7 +163,7 @@ def test_the_token_is_made_once_and_kept_private(tmp_path):
 # -- headers -----------------------------------------------------------------------------------
 
 def test_answers_carry_the_security_headers_and_the_page_its_policy(client):
-    for path in ("/", "/api/projects", "/static/js/api.js", "/api/projects/nope"):
+    for path in ("/", "/api/projects", "/static/js/net/api.js", "/api/projects/nope"):
         r = client.get(path)
         assert r.headers["x-content-type-options"] == "nosniff", path
         assert r.headers["x-frame-options"] == "DENY", path

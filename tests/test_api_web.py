@@ -19,7 +19,7 @@ def test_index_page_and_vendored_modules_are_served_locally(client):
     assert "cdn" not in page.text.lower() and "https://" not in page.text
     assert client.get("/vendor/three/build/three.module.js").status_code == 200
     assert client.get("/vendor/three-mesh-bvh/src/index.js").status_code == 200
-    assert client.get("/static/js/StreamDecoder.js").status_code == 200
+    assert client.get("/static/js/net/wire.js").status_code == 200
     # the markerless tracker: its script, and the wasm it fetches with a type that
     # lets the browser compile it while it streams in
     assert client.get("/vendor/@mediapipe/face_mesh/face_mesh.js").status_code == 200
