@@ -1,6 +1,6 @@
-import { WeightPainter } from './WeightPainter.js';
+import { WeightPainter } from '../tools/WeightPainter.js';
+import { $, guarded } from './dom.js';
 
-const $ = ( id ) => document.getElementById( id );
 const RADIUS_RANGE = [ 0.005, 0.5 ]; // brush radius slider ends, in bounding-sphere radii
 const RADIUS_STEPS = 1000; // the slider is logarithmic: fine control for small brushes
 const SETTINGS_KEY = 'retarget.paint'; // brush settings kept across reloads (radius in bounding-sphere radii)
@@ -20,6 +20,7 @@ export class PaintPanel {
 
 		this.app = app;
 		this.painter = new WeightPainter( app.viewer, app.picker );
+		this._events = new AbortController();
 		this._bind();
 		this._update();
 
@@ -77,56 +78,52 @@ export class PaintPanel {
 
 	}
 
+	/** Stop listening; free the painter. */
+	dispose() {
+
+		this._events.abort();
+		this.painter.dispose();
+
+	}
+
 	_bind() {
 
-		const painter = this.painter, app = this.app;
-		const guard = ( fn ) => async ( ...args ) => {
-
-			try {
-
-				await fn( ...args );
-
-			} catch ( error ) {
-
-				app.errors.show( error );
-
-			}
-
-		};
+		const painter = this.painter, signal = this._events.signal;
+		const guard = ( fn ) => guarded( this.app.errors, fn );
 
 		$( 'paint-toggle' ).addEventListener( 'click', () => {
 
 			painter.setActive( ! painter.active );
 			if ( painter.active ) this._showHeatmap();
 
-		} );
-		$( 'paint-joint' ).addEventListener( 'change', ( event ) => painter.setJoint( Number( event.target.value ) ) );
+		}, { signal } );
+		$( 'paint-joint' ).addEventListener( 'change', ( event ) => painter.setJoint( Number( event.target.value ) ), { signal } );
 		$( 'heatmap-select' ).addEventListener( 'change', ( event ) => {
 
 			if ( painter.active && event.target.value !== '' ) painter.setJoint( Number( event.target.value ) );
 
-		} );
+		}, { signal } );
 		for ( const input of document.querySelectorAll( 'input[name="paint-brush"]' ) ) {
 
-			input.addEventListener( 'change', () => painter.configure( { brush: input.value } ) );
+			input.addEventListener( 'change', () => painter.configure( { brush: input.value } ), { signal } );
 
 		}
 
-		$( 'paint-radius' ).addEventListener( 'input', ( event ) => painter.configure( { radius: this._radiusOf( Number( event.target.value ) ) } ) );
-		$( 'paint-strength' ).addEventListener( 'input', ( event ) => painter.configure( { strength: Number( event.target.value ) } ) );
-		$( 'paint-value' ).addEventListener( 'input', ( event ) => painter.configure( { value: Number( event.target.value ) } ) );
-		$( 'paint-mirror' ).addEventListener( 'change', ( event ) => painter.configure( { mirror: event.target.checked } ) );
-		$( 'paint-undo' ).addEventListener( 'click', () => painter.undo() );
-		$( 'paint-redo' ).addEventListener( 'click', () => painter.redo() );
-		$( 'paint-retry' ).addEventListener( 'click', guard( () => painter.retry() ) );
-		$( 'paint-reset-joint' ).addEventListener( 'click', guard( () => painter.reset( [ painter.joint ] ) ) );
-		$( 'paint-reset-all' ).addEventListener( 'click', guard( () => painter.reset( null ) ) );
-		painter.addEventListener( 'change', () => this._update() );
+		$( 'paint-radius' ).addEventListener( 'input', ( event ) => painter.configure( { radius: this._radiusOf( Number( event.target.value ) ) } ), { signal } );
+		$( 'paint-strength' ).addEventListener( 'input', ( event ) => painter.configure( { strength: Number( event.target.value ) } ), { signal } );
+		$( 'paint-value' ).addEventListener( 'input', ( event ) => painter.configure( { value: Number( event.target.value ) } ), { signal } );
+		$( 'paint-mirror' ).addEventListener( 'change', ( event ) => painter.configure( { mirror: event.target.checked } ), { signal } );
+		$( 'paint-undo' ).addEventListener( 'click', () => painter.undo(), { signal } );
+		$( 'paint-redo' ).addEventListener( 'click', () => painter.redo(), { signal } );
+		$( 'paint-retry' ).addEventListener( 'click', guard( () => painter.retry() ), { signal } );
+		$( 'paint-reset-joint' ).addEventListener( 'click', guard( () => painter.reset( [ painter.joint ] ) ), { signal } );
+		$( 'paint-reset-all' ).addEventListener( 'click', guard( () => painter.reset( null ) ), { signal } );
+		painter.addEventListener( 'change', () => this._update(), { signal } );
 		window.addEventListener( 'beforeunload', () => {
 
 			if ( painter.saveState === 'unsaved' ) painter.flush( { keepalive: true } );
 
-		} );
+		}, { signal } );
 
 	}
 

@@ -1,12 +1,12 @@
-import { api } from './net/api.js';
-
-const $ = ( id ) => document.getElementById( id );
+import { api } from '../net/api.js';
+import { $ } from './dom.js';
 
 /**
  * The Export panel (index.html #export-panel): download the project as a glTF binary
  * (GET /api/projects/{id}/export.glb: mesh, landmarks and the rig in use, with the chosen
- * takes as animations, retargeted with the Performance panel's conditioning and the Live
- * panel's regions), and import such a file as a new project, which is then opened.
+ * takes as animations, retargeted with the project's conditioning settings and region
+ * mask, the same objects the stream plays with: `app.conditioning`, `app.regions`), and
+ * import such a file as a new project, which is then opened.
  *
  * The panel holds no maths: the server retargets and writes the file. Refusals show the
  * server's reason in the panel's note and the page's error banner.
@@ -14,14 +14,14 @@ const $ = ( id ) => document.getElementById( id );
 export class ExportPanel {
 
 	/**
-	 * @param {object} app - the page's App: {projectId, errors, sources (settings()),
-	 *   _refreshProjects(), openProject(id)}.
+	 * @param {import('../App.js').App} app
 	 */
 	constructor( app ) {
 
 		this.app = app;
 		this.takes = [];
 		this._chosen = new Set(); // take ids ticked, kept across refreshes of the list
+		this._events = new AbortController();
 		this._bind();
 
 	}
@@ -66,7 +66,7 @@ export class ExportPanel {
 		this._note( count ? `Retargeting ${ count } take${ count > 1 ? 's' : '' } and writing the glTF…` : 'Writing the glTF…' );
 		try {
 
-			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.sources.settings(), regions: movingRegions() } );
+			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions() } );
 			const link = document.createElement( 'a' );
 			link.href = URL.createObjectURL( blob );
 			link.download = filename;
@@ -102,7 +102,7 @@ export class ExportPanel {
 		try {
 
 			const answer = await api.importProject( file, ( fraction ) => this._note( `Uploading ${ file.name }… ${ Math.round( 100 * fraction ) } %` ) );
-			await this.app._refreshProjects();
+			await this.app.refreshProjects();
 			await this.app.openProject( answer.project.id );
 			const animations = answer.animations.length;
 			this._note( `Imported "${ answer.project.name }": mesh, landmarks and rig (${ answer.deformation === 'skin' ? 'glTF skin' : 'morph targets' }).` +
@@ -118,10 +118,18 @@ export class ExportPanel {
 
 	}
 
+	/** Stop listening. */
+	dispose() {
+
+		this._events.abort();
+
+	}
+
 	_bind() {
 
-		$( 'export-gltf' ).addEventListener( 'click', () => this.exportGltf() );
-		$( 'export-all' ).addEventListener( 'change', () => this._render() );
+		const signal = this._events.signal;
+		$( 'export-gltf' ).addEventListener( 'click', () => this.exportGltf(), { signal } );
+		$( 'export-all' ).addEventListener( 'change', () => this._render(), { signal } );
 		$( 'export-takes' ).addEventListener( 'change', ( event ) => {
 
 			const id = event.target.dataset.take;
@@ -129,16 +137,16 @@ export class ExportPanel {
 			if ( event.target.checked ) this._chosen.add( id );
 			else this._chosen.delete( id );
 
-		} );
+		}, { signal } );
 		// takes are added and removed in the Performance panel: list them afresh on the way in
-		$( 'export-panel' ).addEventListener( 'pointerenter', () => this.refresh().catch( ( error ) => this._refused( error ) ) );
+		$( 'export-panel' ).addEventListener( 'pointerenter', () => this.refresh().catch( ( error ) => this._refused( error ) ), { signal } );
 		$( 'import-file' ).addEventListener( 'change', async ( event ) => {
 
 			const file = event.target.files[ 0 ];
 			event.target.value = '';
 			if ( file ) await this.importGltf( file );
 
-		} );
+		}, { signal } );
 
 	}
 
@@ -179,14 +187,5 @@ export class ExportPanel {
 		this.app.errors.show( error );
 
 	}
-
-}
-
-/** The Live panel's ticked regions, or null when all (or none) are: the whole face moves. */
-function movingRegions() {
-
-	const boxes = [ ...document.querySelectorAll( '#regions input[data-region]' ) ];
-	const ticked = boxes.filter( ( b ) => b.checked ).map( ( b ) => b.dataset.region );
-	return ticked.length && ticked.length < boxes.length ? ticked : null;
 
 }

@@ -1,4 +1,4 @@
-import { regionColor } from './scene/palette.js';
+import { regionColor } from '../scene/palette.js';
 
 const MARGIN = 14; // CSS px around the drawing
 const HIT_RADIUS = 9; // CSS px: how close a click must be to pick a point

@@ -1,4 +1,4 @@
-import { api } from './net/api.js';
+import { api } from '../net/api.js';
 
 /**
  * The stereo colour-marker form (Woodward §5): the two synchronised videos of a face
@@ -7,8 +7,8 @@ import { api } from './net/api.js';
  * both cameras' videos of a checkerboard with its pattern.
  *
  * The server checks the pair, calibrates when asked and tracks in a job; this form only
- * collects the files, shows the progress in #source-progress and what came out in
- * #source-note, and hands the new take to the Performance panel.
+ * collects the files, shows the progress and what came out in the Performance panel's
+ * status (SourceStatus), and hands the new take to the panel.
  */
 
 const VIDEO_ACCEPT = 'video/*,.mp4,.m4v,.mov,.avi,.mkv,.webm';
@@ -44,19 +44,19 @@ const FORM = `<form method="dialog">
 	</menu>
 </form>`;
 
-export class StereoTrack {
+export class StereoTrackDialog {
 
 	/**
 	 * @param {object} options
 	 * @param {() => string} options.projectId - the project the take goes to
-	 * @param {(work: () => Promise<void>) => Promise<void>} options.run - runs the upload and
-	 *   tracking as the panel runs its tasks (controls wait, a failure is shown)
+	 * @param {import('./SourceStatus.js').SourceStatus} options.status - the panel's note and
+	 *   bar; the upload and tracking run as its task (controls wait, a failure is shown)
 	 * @param {(takeId: string) => Promise<void>} options.onTracked - select the new take
 	 */
-	constructor( { projectId, run, onTracked } ) {
+	constructor( { projectId, status, onTracked } ) {
 
 		this.projectId = projectId;
-		this.run = run;
+		this.status = status;
 		this.onTracked = onTracked;
 		this.dialog = document.createElement( 'dialog' );
 		this.dialog.id = 'stereo-dialog';
@@ -80,6 +80,7 @@ export class StereoTrack {
 
 	}
 
+	/** Remove the form from the page. */
 	dispose() {
 
 		this.dialog.remove();
@@ -140,19 +141,14 @@ export class StereoTrack {
 		}
 
 		this.dialog.close();
-		this.run( () => this._track( request ) );
+		this.status.task( () => this._track( request ) );
 
 	}
 
 	async _track( { left, fields } ) {
 
-		const id = this.projectId();
-		const bar = document.getElementById( 'source-progress' );
-		const note = ( text ) => {
-
-			document.getElementById( 'source-note' ).textContent = text;
-
-		};
+		const id = this.projectId(), bar = this.status.bar;
+		const note = ( text ) => this.status.note( text );
 
 		bar.hidden = false;
 		bar.value = 0;
@@ -185,7 +181,7 @@ export class StereoTrack {
 			link.href = api.takeCalibrationUrl( id, detail.take );
 			link.download = 'stereo-calibration.npz';
 			link.textContent = 'Download the calibration';
-			document.getElementById( 'source-note' ).append( link );
+			this.status.element.append( link );
 
 		}
 

@@ -1,0 +1,341 @@
+import { api } from './net/api.js';
+import { projectFromHash } from './panels/ProjectBar.js';
+import { $ } from './panels/dom.js';
+import { SkinnedFace } from './scene/SkinnedFace.js';
+
+/**
+ * The page's state and its project's life: which project is shown, its face, the layouts
+ * and limits the server knows; opening a project loads its mesh onto a SkinnedFace, its
+ * landmarks, rig, takes and stream into the panels, and closing it takes them out again.
+ * The panels (main.js builds them and hands them over with `setPanels`) draw and edit;
+ * the models they share live here: `landmarks` (LandmarkSet), `conditioning`
+ * (ConditioningSettings) and `regions` (RegionMask), the last two saved with the project
+ * (`projectSettings`).
+ *
+ * One App per page, `window.app` for the end-to-end tests: {viewer, face, stream,
+ * projectId, picker, paint, sources, errors, ready}.
+ */
+export class App {
+
+	/**
+	 * @param {object} parts
+	 * @param {import('./scene/Viewer.js').Viewer} parts.viewer
+	 * @param {import('./panels/dialogs.js').ErrorBanner} parts.errors
+	 * @param {import('./model/LandmarkSet.js').LandmarkSet} parts.landmarks
+	 * @param {import('./tools/LandmarkPicker.js').LandmarkPicker} parts.picker
+	 * @param {import('./model/ConditioningSettings.js').ConditioningSettings} parts.conditioning
+	 * @param {import('./model/RegionMask.js').RegionMask} parts.regions
+	 * @param {import('./net/ProjectSettings.js').ProjectSettings} parts.projectSettings
+	 */
+	constructor( { viewer, errors, landmarks, picker, conditioning, regions, projectSettings } ) {
+
+		this.viewer = viewer;
+		this.errors = errors;
+		this.landmarks = landmarks;
+		this.picker = picker;
+		this.conditioning = conditioning;
+		this.regions = regions;
+		this.projectSettings = projectSettings;
+		/** @type {SkinnedFace|null} */
+		this.face = null;
+		this.projectId = null;
+		this.project = null;
+		this.projects = [];
+		this.layouts = [];
+		this.info = null; // GET /api/info: upload limits, mesh formats, rig methods
+		/** Settles once the page (or the project being opened) is shown. */
+		this.ready = Promise.resolve();
+		this._open = 0; // bumps on every project switch: late answers for an old project are dropped
+
+	}
+
+	/**
+	 * The panels, each a view of part of the page.
+	 * @param {{bar: object, upload: object, marks: object, rig: object, paint: object,
+	 *   sources: object, live: object, exports: object}} panels
+	 */
+	setPanels( panels ) {
+
+		Object.assign( this, panels );
+
+	}
+
+	/** The project's stream (the Live panel's), or null. */
+	get stream() {
+
+		return this.live?.stream ?? null;
+
+	}
+
+	/** Whether a source is playing on the stream. */
+	get streaming() {
+
+		return this.live?.streaming ?? false;
+
+	}
+
+	/** The rig's info (GET .../rig) of the shown project, or null. */
+	get rigInfo() {
+
+		return this.rig?.info ?? null;
+
+	}
+
+	/**
+	 * A check that the project shown now is still the one shown when it was made.
+	 * @returns {() => boolean}
+	 */
+	ticket() {
+
+		const ticket = this._open;
+		return () => ticket === this._open;
+
+	}
+
+	/** Load what the server knows and show the project the address names (or the first). */
+	async start() {
+
+		const done = this._busy();
+		try {
+
+			[ this.info, this.layouts ] = await Promise.all( [ api.info(), api.layouts() ] );
+			this.rig.setMethods( this.info );
+			this.upload.setInfo( this.info );
+			this.landmarks.setLayouts( this.layouts );
+			this.marks.setLayouts( this.layouts );
+			await this.refreshProjects();
+			const wanted = projectFromHash();
+			const id = this.projects.some( ( p ) => p.id === wanted ) ? wanted : this.projects[ 0 ]?.id;
+			if ( wanted && id !== wanted ) this.errors.show( `There is no project with id ${ wanted }; showing ${ this.projects.find( ( p ) => p.id === id )?.name || 'none' } instead.` );
+			if ( id ) await this.openProject( id, { force: true } );
+			else this._showProject( null );
+
+		} catch ( error ) {
+
+			this.errors.show( error );
+
+		} finally {
+
+			done();
+
+		}
+
+	}
+
+	/** List the projects again. */
+	async refreshProjects() {
+
+		this.projects = await api.projects();
+		this.bar.setProjects( this.projects, this.projectId );
+
+	}
+
+	/**
+	 * Show a project: its mesh, landmarks (or the unsaved draft), rig and stream.
+	 * @param {string} id
+	 * @param {{force?: boolean}} [options] - force: reload even if it is the current one.
+	 * @returns {Promise<boolean>} false when the switch was cancelled.
+	 */
+	async openProject( id, { force = false } = {} ) {
+
+		if ( id === this.projectId && ! force ) return true;
+		const done = this._busy();
+		const ticket = ++ this._open, current = () => ticket === this._open;
+		try {
+
+			await this.projectSettings.flush(); // the old project's draft and settings
+			await this.paint.flush();
+			this.closeProject();
+			this.projectId = id;
+			this.bar.select( id );
+			const project = await api.project( id );
+			if ( ! current() ) return false;
+			this.project = project;
+			this._showProject( project );
+			if ( project.mesh ) {
+
+				$( 'hint' ).textContent = 'Loading the mesh…';
+				const arrays = await api.meshArrays( id );
+				const face = await SkinnedFace.create( arrays );
+				if ( ! current() ) {
+
+					face.dispose();
+					return false;
+
+				}
+
+				this.face = face;
+				this.viewer.setObject( face.mesh );
+				this.viewer.setWireframe( $( 'wireframe' ).checked );
+				this.picker.setMesh( face.mesh );
+				$( 'mesh-info' ).textContent = meshInfo( project.mesh, arrays.positions );
+
+			}
+
+			this.regions.load( project.settings?.held_regions ?? null );
+			await this.marks.load( project, current );
+			if ( ! current() ) return false;
+			this._showSavedLandmarks( project );
+			if ( project.rig && this.face ) await this.rig.load( current );
+			if ( ! current() ) return false;
+			this.live.update();
+			if ( project.landmarks ) this.live.connect();
+			await this.sources.setProject( project );
+			await this.exports.setProject( project );
+			return true;
+
+		} catch ( error ) {
+
+			if ( current() ) this.errors.show( error );
+			return false;
+
+		} finally {
+
+			if ( current() ) {
+
+				this.updateHint();
+				this.live.update();
+				done();
+
+			}
+
+		}
+
+	}
+
+	/** Drop everything of the current project from the page (not from the server). */
+	closeProject() {
+
+		this.projectSettings.cancel(); // what was not sent belongs to this project
+		this.rig.clear();
+		this.live.close();
+		this.sources.stopWebcam();
+		this.exports.setProject( null );
+		this.picker.setMesh( null );
+		this.picker.setDisplacements( null );
+		this.paint.setRig( null, null );
+		if ( this.face ) {
+
+			this.viewer.setObject( null );
+			this.face.dispose();
+			this.face = null;
+
+		}
+
+		this.project = null;
+		$( 'mesh-info' ).textContent = '';
+		this.marks.clear();
+
+	}
+
+	/** The shown project was deleted: show the first one left, or none. */
+	async forgetProject() {
+
+		this.landmarks.load( this.landmarks.state.layout || 'dutreve21' ); // nothing left to save
+		this.closeProject();
+		this.projectId = null;
+		await this.refreshProjects();
+		if ( this.projects.length ) {
+
+			await this.openProject( this.projects[ 0 ].id );
+
+		} else {
+
+			this.bar.select( null );
+			this._showProject( null );
+			this.live.update();
+
+		}
+
+	}
+
+	/** New landmarks were saved: the old rig is gone and the stream drives the new points. */
+	landmarksSaved() {
+
+		this.rig.info = null;
+		this.face?.setRig( null );
+		this.face?.setHeatmap( null );
+		this.paint.setRig( null, null );
+		this._showSavedLandmarks( this.project );
+		this.rig.update();
+		this.live.connect();
+		this.live.update();
+
+	}
+
+	/** The landmarks changed (or were saved): their panel, the hint and the Live note show it. */
+	showLandmarks() {
+
+		this.marks.update();
+		this.updateHint();
+		this.live.update();
+
+	}
+
+	/** The viewport's hint: what a click or drag does now. */
+	updateHint( hovered = this.picker.hovered ) {
+
+		let text = '';
+		if ( ! this.project ) text = 'Create a project to start.';
+		else if ( ! this.face ) text = '';
+		else if ( this.paint.active ) text = this.paint.hint();
+		else text = this.marks.hint( hovered );
+		$( 'hint' ).textContent = text;
+
+	}
+
+	/** `ready` pends until the returned function is called. */
+	_busy() {
+
+		let resolve;
+		this.ready = new Promise( ( r ) => ( resolve = r ) );
+		return resolve;
+
+	}
+
+	_showProject( project ) {
+
+		this.bar.show( project );
+		$( 'empty-hint' ).hidden = ! project || !! project.mesh;
+		if ( ! project ) this.viewer.setObject( null );
+		this.rig.update();
+
+	}
+
+	/** The heat-map features and the region toggles follow the saved landmarks (the rig's joints, the stream's points). */
+	_showSavedLandmarks( project ) {
+
+		const layout = this.layouts.find( ( l ) => l.name === project?.landmarks?.layout ) || this.landmarks.layout;
+		this.rig.setJoints( project, layout );
+		this.live.setLayout( layout );
+
+	}
+
+}
+
+/**
+ * "name.obj · 8,430 vertices · 16,416 triangles · 16.2 × 22.0 × 12.4 units": the mesh keeps
+ * its own units, so its size is shown for the user to judge them.
+ * @param {{filename: string, n_vertices: number, n_faces: number}} mesh
+ * @param {Float32Array} positions - (3V)
+ */
+function meshInfo( mesh, positions ) {
+
+	const min = [ Infinity, Infinity, Infinity ], max = [ - Infinity, - Infinity, - Infinity ];
+	for ( let i = 0; i < positions.length; i += 3 ) {
+
+		for ( let k = 0; k < 3; k ++ ) {
+
+			const v = positions[ i + k ];
+			if ( v < min[ k ] ) min[ k ] = v;
+			if ( v > max[ k ] ) max[ k ] = v;
+
+		}
+
+	}
+
+	const size = max.map( ( m, k ) => ( m - min[ k ] ).toPrecision( 3 ) ).join( ' × ' );
+	const n = ( x ) => x.toLocaleString( 'en' );
+	return `${ mesh.filename } · ${ n( mesh.n_vertices ) } vertices · ${ n( mesh.n_faces ) } triangles · ${ size } units`;
+
+}

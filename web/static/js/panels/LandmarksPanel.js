@@ -1,0 +1,308 @@
+import { ApiError, api } from '../net/api.js';
+import { ask } from './dialogs.js';
+import { $, guarded, option } from './dom.js';
+import { LayoutGuide } from './LayoutGuide.js';
+
+const DEFAULT_LAYOUT = 'dutreve21';
+const LAST_LAYOUT_KEY = 'retarget.layout';
+
+/**
+ * The Landmarks panel (index.html #landmarks-panel): the layout, the reference face
+ * (LayoutGuide), the count and the next point, undo, redo, Mirror, delete, clear and
+ * *Save landmarks*, over the page's LandmarkSet (`app.landmarks`) that the picker edits.
+ * Unsaved points are kept with the project as a draft (its settings' `draft` key: layout,
+ * points, the mesh revision they were placed on), restored on the next visit.
+ */
+export class LandmarksPanel {
+
+	/**
+	 * @param {import('../App.js').App} app
+	 */
+	constructor( app ) {
+
+		this.app = app;
+		this.guide = new LayoutGuide( $( 'guide' ) );
+		this._events = new AbortController();
+		this._bind();
+
+	}
+
+	/**
+	 * The layouts the server knows, in the layout chooser.
+	 * @param {object[]} layouts - GET /api/layouts.
+	 */
+	setLayouts( layouts ) {
+
+		$( 'layout-select' ).replaceChildren( ...layouts.map( ( layout ) => option( layout.name, `${ layout.name } · ${ layout.n_points } points`, layout.description ) ) );
+
+	}
+
+	/**
+	 * Show a project's saved landmarks, or its draft, or none in the last layout used.
+	 * @param {object} project - GET /api/projects/{id}.
+	 * @param {() => boolean} current - false once another project is being opened.
+	 */
+	async load( project, current ) {
+
+		const app = this.app, landmarks = app.landmarks;
+		let saved = null;
+		if ( project.landmarks ) saved = await api.landmarks( project.id );
+		if ( ! current() ) return;
+		const known = ( name ) => app.layouts.some( ( l ) => l.name === name );
+		let layout = saved?.layout || project.landmarks?.layout || '';
+		if ( saved && ! known( layout ) ) {
+
+			// landmarks saved without a layout (e.g. through the API): any layout of that size fits
+			const n = saved.triangles ? saved.triangles.length : saved.vertex_indices.length;
+			layout = app.layouts.find( ( l ) => l.n_points === n )?.name || '';
+			if ( ! layout ) {
+
+				app.errors.show( `The project's ${ n } saved landmarks match no layout; pick them again.` );
+				saved = null;
+
+			}
+
+		}
+
+		if ( ! saved ) layout = known( localStorage.getItem( LAST_LAYOUT_KEY ) ) ? localStorage.getItem( LAST_LAYOUT_KEY ) : DEFAULT_LAYOUT;
+		landmarks.load( layout, saved );
+
+		const draft = project.settings?.draft;
+		if ( draft && draft.revision === project.revision && known( draft.layout ) && app.face ) {
+
+			try {
+
+				landmarks.replace( draft.layout, draft.points.map( ( p ) => p && { triangle: p.slice( 0, 3 ), barycentric: p.slice( 3, 6 ) } ) );
+				$( 'landmarks-note' ).textContent = 'Unsaved points restored from your last visit (Undo drops them).';
+
+			} catch ( error ) {
+
+				console.warn( 'retarget: draft ignored:', error.message );
+
+			}
+
+		}
+
+	}
+
+	/** Forget an old project's note. */
+	clear() {
+
+		$( 'landmarks-note' ).textContent = '';
+
+	}
+
+	/**
+	 * Save the landmarks on screen as the project's (which drops its rig).
+	 * @returns {Promise<void>}
+	 */
+	async save() {
+
+		const app = this.app, landmarks = app.landmarks;
+		if ( ! app.project?.mesh ) throw new ApiError( 0, 'Upload a mesh before placing landmarks.' );
+		if ( ! landmarks.dirty && app.project.landmarks ) return;
+		const missing = landmarks.missing();
+		if ( missing.length ) {
+
+			const shown = missing.slice( 0, 8 ).join( ', ' ) + ( missing.length > 8 ? `, … (${ missing.length - 8 } more)` : '' );
+			throw new ApiError( 0, `Cannot save yet: ${ missing.length } of ${ landmarks.points.length } points are not placed (${ shown }). Next: ${ missing[ 0 ] }.` );
+
+		}
+
+		const id = app.projectId, current = app.ticket();
+		app.projectSettings.cancel( 'draft' ); // the save supersedes the draft
+		$( 'save-landmarks' ).disabled = true;
+		try {
+
+			const sent = landmarks.state;
+			await api.putLandmarks( id, landmarks.toJSON() );
+			if ( ! current() ) return;
+			// the points saved are the ones sent, even if the user edited while the request ran
+			landmarks.markSaved( sent );
+			app.project = await api.patchProject( id, { settings: { draft: null } } );
+			if ( ! current() ) return;
+			app.landmarksSaved();
+			$( 'landmarks-note' ).textContent = 'Saved. Compute the rig to animate the face.';
+
+		} finally {
+
+			app.showLandmarks();
+
+		}
+
+	}
+
+	/** Show the landmarks' state: count, next point, what the buttons can do, the guide. */
+	update() {
+
+		const landmarks = this.app.landmarks;
+		const layout = landmarks.layout;
+		const next = landmarks.next;
+		const hasMesh = !! this.app.face;
+		$( 'layout-select' ).value = landmarks.state.layout;
+		$( 'landmark-count' ).textContent = layout ? `${ landmarks.placedCount } / ${ layout.n_points }` : '';
+		$( 'landmark-count' ).className = 'badge' + ( layout && landmarks.placedCount === layout.n_points ? ' good' : '' );
+		$( 'unsaved' ).hidden = ! landmarks.dirty || ! hasMesh;
+		$( 'next-point' ).textContent = ! layout ? '' : next >= 0 ? layout.points[ next ].name : 'all placed ✓';
+		$( 'undo' ).disabled = ! landmarks.canUndo;
+		$( 'redo' ).disabled = ! landmarks.canRedo;
+		$( 'delete-point' ).disabled = landmarks.selected < 0;
+		$( 'mirror' ).disabled = ! hasMesh || ! landmarks.canMirror;
+		$( 'clear-points' ).disabled = landmarks.placedCount === 0;
+		$( 'save-landmarks' ).disabled = ! hasMesh || ! landmarks.dirty; // saving drops the rig: only when something changed
+		this.guide.setLayout( layout );
+		this.guide.update( { placed: landmarks.points.map( Boolean ), next: hasMesh ? next : - 1, selected: landmarks.selected } );
+
+	}
+
+	/**
+	 * The viewport hint while placing points.
+	 * @param {number} hovered - the marker under the pointer, -1 for none.
+	 * @returns {string}
+	 */
+	hint( hovered ) {
+
+		const landmarks = this.app.landmarks, layout = landmarks.layout;
+		if ( hovered >= 0 && layout ) return `${ layout.points[ hovered ].name } · drag to slide it over the surface`;
+		if ( layout && landmarks.next >= 0 ) return `Click the mesh to place ${ layout.points[ landmarks.next ].name } · drag a marker to move it · Shift+click selects`;
+		if ( landmarks.selected >= 0 && layout ) return `${ layout.points[ landmarks.selected ].name } selected · Delete removes it`;
+		return 'Drag to orbit · right-drag pans · wheel zooms · F frames the face';
+
+	}
+
+	/** Keep unsaved picks with the project (its settings' draft) so a reload or crash loses nothing. */
+	scheduleDraft() {
+
+		const app = this.app, project = app.project;
+		if ( ! project || ! app.face ) return;
+		if ( ! app.landmarks.dirty && ! project.settings?.draft ) return;
+		app.projectSettings.schedule( project.id, 'draft', () => this._draft() );
+
+	}
+
+	/**
+	 * Keys of the landmarks: Ctrl+Z undo, Ctrl+Shift+Z or Ctrl+Y redo, Ctrl+S save,
+	 * Delete removes the selected point, M mirrors.
+	 * @param {KeyboardEvent} event
+	 * @returns {Promise<boolean>} whether the key was taken (its default prevented).
+	 */
+	async key( event ) {
+
+		const landmarks = this.app.landmarks;
+		const mod = event.ctrlKey || event.metaKey, key = event.key.toLowerCase();
+		if ( mod && key === 'z' ) {
+
+			event.preventDefault();
+			if ( event.shiftKey ) landmarks.redo();
+			else landmarks.undo();
+
+		} else if ( mod && key === 'y' ) {
+
+			event.preventDefault();
+			landmarks.redo();
+
+		} else if ( mod && key === 's' ) {
+
+			event.preventDefault();
+			await this.save();
+
+		} else if ( mod || event.altKey ) {
+
+			return false;
+
+		} else if ( key === 'delete' || key === 'backspace' ) {
+
+			if ( landmarks.deleteSelected() ) event.preventDefault();
+
+		} else if ( key === 'm' ) {
+
+			this._mirror();
+
+		} else {
+
+			return false;
+
+		}
+
+		return true;
+
+	}
+
+	/** Stop listening. */
+	dispose() {
+
+		this._events.abort();
+		this.guide.dispose();
+
+	}
+
+	/**
+	 * The draft to store: the unsaved points, null to drop a stored one, undefined when
+	 * there is nothing to change.
+	 */
+	_draft() {
+
+		const app = this.app, project = app.project, landmarks = app.landmarks;
+		if ( ! project || ! app.face ) return undefined;
+		const draft = landmarks.dirty ? {
+			revision: project.revision,
+			layout: landmarks.state.layout,
+			points: landmarks.points.map( ( p ) => p && [ ...p.triangle, ...p.barycentric ] ),
+		} : null;
+		return draft || project.settings?.draft ? draft : undefined;
+
+	}
+
+	async _switchLayout( name ) {
+
+		const landmarks = this.app.landmarks;
+		if ( name === landmarks.state.layout ) return;
+		if ( landmarks.placedCount > 0 ) {
+
+			const dropped = landmarks.droppedBy( name );
+			const kept = landmarks.placedCount - dropped;
+			const answer = await ask(
+				`Switch the layout to ${ name }? ` + ( dropped ? `${ dropped } placed point${ dropped > 1 ? 's have' : ' has' } no counterpart there and will be dropped` : 'Every placed point carries over' )
+				+ ( kept && dropped ? `; ${ kept } carry over by name.` : '.' ) + ' Undo switches back.',
+				{ ok: 'Switch layout' } );
+			if ( answer !== 'ok' ) {
+
+				$( 'layout-select' ).value = landmarks.state.layout;
+				return;
+
+			}
+
+		}
+
+		landmarks.setLayout( name );
+		localStorage.setItem( LAST_LAYOUT_KEY, name );
+
+	}
+
+	_mirror() {
+
+		const { placed, plane } = this.app.picker.mirror();
+		const n = plane?.normal;
+		// no pair placed yet: the plane is x = const, as before any pair tells its tilt
+		const across = n && n.x === 1 ? `x = ${ plane.offset.toPrecision( 4 ) }`
+			: n && `the face's symmetry plane (normal ${ n.x.toFixed( 3 ) }, ${ n.y.toFixed( 3 ) }, ${ n.z.toFixed( 3 ) })`;
+		$( 'landmarks-note' ).textContent = placed ? `Mirrored ${ placed } point${ placed > 1 ? 's' : '' } across ${ across }.` : 'Nothing to mirror: every placed point has its partner.';
+
+	}
+
+	_bind() {
+
+		const app = this.app, landmarks = app.landmarks, signal = this._events.signal;
+		const guard = ( fn ) => guarded( app.errors, fn );
+		this.guide.addEventListener( 'pick', ( event ) => landmarks.select( event.detail.index ), { signal } );
+		$( 'layout-select' ).addEventListener( 'change', guard( ( event ) => this._switchLayout( event.target.value ) ), { signal } );
+		$( 'undo' ).addEventListener( 'click', () => landmarks.undo(), { signal } );
+		$( 'redo' ).addEventListener( 'click', () => landmarks.redo(), { signal } );
+		$( 'delete-point' ).addEventListener( 'click', () => landmarks.deleteSelected(), { signal } );
+		$( 'mirror' ).addEventListener( 'click', () => this._mirror(), { signal } );
+		$( 'clear-points' ).addEventListener( 'click', () => landmarks.clear(), { signal } );
+		$( 'save-landmarks' ).addEventListener( 'click', guard( () => this.save() ), { signal } );
+
+	}
+
+}

@@ -1,0 +1,246 @@
+import { StreamClient } from '../net/StreamClient.js';
+import { StreamDecoder } from '../net/wire.js';
+import { regionColor } from '../scene/palette.js';
+import { $, guarded } from './dom.js';
+
+const STATS_MS = 250;
+
+/**
+ * The Live panel (index.html #live-panel) and the project's stream: *Play* starts the
+ * Performance panel's source, *Stop* stops it; frames pose the face and the markers (and
+ * turn the face with the performer's head when the conditioning says so); the status
+ * badge, frame rate and latency; the region toggles, a view of the page's RegionMask
+ * (`app.regions`), whose `movingRegions()` the stream's mask is.
+ */
+export class LivePanel {
+
+	/**
+	 * @param {import('../App.js').App} app
+	 */
+	constructor( app ) {
+
+		this.app = app;
+		/** @type {StreamClient|null} */
+		this.stream = null;
+		/** Whether a source is playing on the stream. */
+		this.streaming = false;
+		this._events = new AbortController();
+		this._stats = setInterval( () => this._showStats(), STATS_MS );
+		this._bind();
+
+	}
+
+	/** Open a new stream for the shown project (its saved landmarks), closing the old one. */
+	connect() {
+
+		const app = this.app, old = this.stream;
+		const stream = new StreamClient( app.projectId );
+		this.stream = stream; // before closing the old one, whose 'closed' status is then ignored
+		old?.close();
+		this.streaming = false;
+		stream.addEventListener( 'status', ( event ) => {
+
+			if ( stream !== this.stream ) return;
+			const { state, reason } = event.detail;
+			const badge = $( 'status' );
+			badge.textContent = state;
+			badge.className = 'badge' + ( state === 'open' ? ' good' : state === 'closed' ? ' bad' : ' warn' );
+			badge.title = reason || '';
+			if ( state !== 'open' ) this._setStreaming( false );
+			if ( state === 'closed' && reason ) app.errors.show( `Live stream closed: ${ reason }` );
+
+		} );
+		stream.addEventListener( 'frame', ( event ) => {
+
+			if ( stream !== this.stream || ! app.face ) return;
+			const frame = event.detail;
+			app.face.setDisplacements( frame.displacements );
+			this._turnHead( frame.headRotation );
+			app.picker.setDisplacements( frame.displacements );
+			stream.markApplied( frame );
+			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
+
+		} );
+		stream.addEventListener( 'message', ( event ) => {
+
+			if ( stream !== this.stream ) return;
+			const message = event.detail;
+			if ( message.type === 'started' ) this._setStreaming( true );
+			else if ( message.type === 'stopped' ) this._setStreaming( false );
+			else if ( message.type === 'error' ) app.errors.show( `Live stream: ${ message.detail }` );
+			else app.sources.onMessage( message );
+
+		} );
+		stream.connect();
+
+	}
+
+	/** Close the stream (another project is being opened). */
+	close() {
+
+		if ( this.stream ) {
+
+			const stream = this.stream;
+			this.stream = null; // first: its 'closed' status is no news to report
+			stream.close();
+
+		}
+
+		this.streaming = false;
+		$( 'status' ).textContent = 'offline';
+		$( 'status' ).className = 'badge';
+
+	}
+
+	/**
+	 * The region toggles of a layout's regions that have points, ticked as the region
+	 * mask says.
+	 * @param {{regions: string[], points: Array<{region: string}>}|null} layout
+	 */
+	setLayout( layout ) {
+
+		const mask = this.app.regions;
+		mask.setRegions( layout ? layout.regions.filter( ( region ) => layout.points.some( ( p ) => p.region === region ) ) : [] );
+		const fieldset = $( 'regions' );
+		fieldset.replaceChildren( fieldset.querySelector( 'legend' ), ...mask.regions.map( ( region ) => {
+
+			const label = document.createElement( 'label' );
+			const box = document.createElement( 'input' );
+			box.type = 'checkbox';
+			box.checked = mask.moves( region );
+			box.dataset.region = region;
+			const swatch = document.createElement( 'span' );
+			swatch.className = 'swatch';
+			swatch.style.background = regionColor( region );
+			label.append( box, swatch, region.replace( /_/g, ' ' ) );
+			return label;
+
+		} ) );
+
+	}
+
+	/** Send the region mask, if a stream is open or opening. */
+	sendMask() {
+
+		this.stream?.send( { type: 'mask', regions: this.app.regions.movingRegions() } );
+
+	}
+
+	/**
+	 * What the stream still needs before it can play, or '' when it can.
+	 * @returns {string}
+	 */
+	missing() {
+
+		const project = this.app.project, landmarks = this.app.landmarks;
+		if ( ! project ) return 'Create a project first.';
+		if ( ! project.mesh ) return 'Upload a mesh first.';
+		if ( ! project.landmarks ) return `Place and save the ${ landmarks.layout?.n_points ?? '' } landmarks first (${ landmarks.placedCount } placed).`;
+		if ( ! project.rig ) return 'Compute the rig first: the stream moves the feature points, the rig carries them to the skin.';
+		return '';
+
+	}
+
+	/** The note under Play: what is missing, or that unsaved landmarks are not what plays. */
+	update() {
+
+		const missing = this.missing();
+		const note = $( 'live-note' );
+		note.textContent = missing || ( this.app.landmarks.dirty && this.app.project?.landmarks ? 'The stream drives the saved landmarks; save to use your edits.' : '' );
+		note.className = 'note' + ( missing ? ' warn' : '' );
+		$( 'play' ).title = missing || 'Play the chosen performance source on this face';
+		$( 'stop' ).disabled = ! this.streaming;
+
+	}
+
+	/** Stop listening and polling the statistics; close the stream. */
+	dispose() {
+
+		this._events.abort();
+		clearInterval( this._stats );
+		this.close();
+
+	}
+
+	async _play() {
+
+		const missing = this.missing();
+		if ( missing ) {
+
+			this.app.errors.show( `Cannot play: ${ missing }` );
+			return;
+
+		}
+
+		if ( ! this.stream ) this.connect();
+		const start = await this.app.sources.startMessage();
+		this.sendMask();
+		this.stream.send( start );
+
+	}
+
+	_stop() {
+
+		this.stream?.send( { type: 'stop' } );
+		this.app.sources.stopWebcam();
+		this._setStreaming( false );
+
+	}
+
+	_setStreaming( on ) {
+
+		this.streaming = on;
+		$( 'play' ).textContent = on ? '↻ Restart' : '▶ Play';
+		$( 'stop' ).disabled = ! on;
+		if ( ! on ) {
+
+			$( 'fps' ).textContent = '–';
+			this._turnHead( null );
+			this.app.sources.onStopped();
+
+		}
+
+	}
+
+	/**
+	 * Turn the face by the performer's head rotation (a source's head pose, when the
+	 * conditioning applies it), about the centre of its rest bounding sphere.
+	 * @param {Float32Array|null} q - quaternion x, y, z, w; null puts the face back.
+	 */
+	_turnHead( q ) {
+
+		const mesh = this.app.face?.mesh;
+		if ( ! mesh ) return;
+		if ( q ) mesh.quaternion.set( q[ 0 ], q[ 1 ], q[ 2 ], q[ 3 ] );
+		else mesh.quaternion.identity();
+		if ( ! mesh.geometry.boundingSphere ) mesh.geometry.computeBoundingSphere();
+		const centre = mesh.geometry.boundingSphere.center;
+		mesh.position.copy( centre ).applyQuaternion( mesh.quaternion ).negate().add( centre );
+
+	}
+
+	_showStats() {
+
+		const stream = this.stream;
+		if ( ! stream || ! this.streaming || ! stream.stats.frames ) return;
+		const { fps, latencyMs } = stream.stats;
+		$( 'fps' ).textContent = fps.toFixed( 0 );
+		if ( Number.isFinite( latencyMs.median ) ) $( 'latency' ).textContent = `${ latencyMs.median.toFixed( 1 ) } / ${ latencyMs.p99.toFixed( 1 ) } ms`;
+
+	}
+
+	_bind() {
+
+		const signal = this._events.signal;
+		$( 'play' ).addEventListener( 'click', guarded( this.app.errors, () => this._play() ), { signal } );
+		$( 'stop' ).addEventListener( 'click', () => this._stop(), { signal } );
+		$( 'regions' ).addEventListener( 'change', ( event ) => {
+
+			const region = event.target.dataset?.region;
+			if ( region ) this.app.regions.setMoving( region, event.target.checked );
+
+		}, { signal } );
+
+	}
+
+}
