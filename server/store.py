@@ -60,8 +60,9 @@ __all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "
 ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
 """What `secrets.token_urlsafe(16)` returns: 22 URL-safe base64 characters."""
 
-MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf")
-"""File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads)."""
+MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf", "zip")
+"""File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads; a
+zip holds a mesh file with its MTL, images or buffers)."""
 
 _FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file")
 _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz"

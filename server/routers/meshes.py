@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+import io
 import os
+import zipfile
 
 from fastapi import APIRouter, File, HTTPException, Response, UploadFile, status
 from fastapi.responses import FileResponse
@@ -27,6 +29,7 @@ MEDIA_TYPES = {
     "off": "application/octet-stream",
     "glb": "model/gltf-binary",
     "gltf": "model/gltf+json",
+    "zip": "application/zip",
 }
 _CHUNK = 1 << 20
 
@@ -61,22 +64,75 @@ def read_capped(upload: UploadFile, max_bytes: int) -> bytes:
     return b"".join(chunks)
 
 
+SIDE_EXTENSIONS = ("mtl", "png", "jpg", "jpeg", "bin")
+"""Files a mesh may bring along: an OBJ's MTL and texture images, a glTF's buffers."""
+MAX_SIDE_FILES = 16
+
+
 @router.put("", responses=responses(404, 415, 503))
-@body_limit(files=1)
+@body_limit(files=3)
 def put_mesh(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolation: IsolationDep,
-             file: UploadFile = File(description="obj, ply, stl, off, glb or gltf (embedded buffers)")) -> dict:
-    """Upload the project's mesh. It is parsed by `retarget.mesh.load_mesh` (in a child
-    process, `server.isolation`) and stored (its bytes unchanged) only if valid; the
-    landmarks and rig of a previous mesh are dropped. Answers the project."""
+             file: UploadFile = File(description="obj, ply, stl, off, glb, gltf, or a zip of one "
+                                     "of them with the files it refers to"),
+             files: list[UploadFile] | None = File(
+                 default=None, description="the files the mesh refers to: an OBJ's .mtl and "
+                 "texture images (.png, .jpg), a glTF's .bin buffers and images")) -> dict:
+    """Upload the project's mesh, with the files it refers to (or a zip of them all). It is
+    parsed by `retarget.mesh.load_mesh` (in a child process, `server.isolation`) and stored
+    only if valid: its bytes unchanged, or, with side files, one zip of them all (names
+    kept for matching only; they never reach the filesystem). The landmarks and rig of a
+    previous mesh are dropped. Answers the project."""
     ext = upload_extension(file.filename)
     data = read_capped(file, limits.max_upload_bytes)
     if not data:
         raise RetargetError(f"the uploaded file {file.filename!r} is empty")
+    if files:
+        if ext == "zip":
+            raise RetargetError("a zip already holds the mesh's files: upload it alone")
+        data, ext = _zipped(file.filename, data, files, limits), "zip"
+    unpacked = 2 * limits.max_upload_bytes if ext == "zip" else limits.max_upload_bytes
     n_vertices, n_faces = isolation.call(
-        mesh_counts, data, ext, file.filename, limits.max_vertices, limits.max_upload_bytes,
+        mesh_counts, data, ext, file.filename, limits.max_vertices, unpacked,
         what=f"uploaded mesh {file.filename!r} refused: not a readable {ext.upper()} file")
     return store.put_mesh(project["id"], data, ext, filename=file.filename or "",
                           n_vertices=n_vertices, n_faces=n_faces)
+
+
+def _zipped(name: str | None, data: bytes, files: list[UploadFile], limits) -> bytes:
+    """One stored (uncompressed) zip of the mesh and its side files; 415 for a side file
+    that is not one of `SIDE_EXTENSIONS`, 413 over the upload limit in all."""
+    if len(files) > MAX_SIDE_FILES:
+        raise RetargetError(f"{len(files)} side files; a mesh may bring at most {MAX_SIDE_FILES}")
+    members = {_base(name) or "mesh": data}
+    total = len(data)
+    for side in files:
+        upload_extension(side.filename, SIDE_EXTENSIONS)
+        content = read_capped(side, limits.max_upload_bytes)
+        total += len(content)
+        if total > 2 * limits.max_upload_bytes:
+            raise HTTPException(413, f"the mesh and its files are over the limit of "
+                                     f"{2 * limits.max_upload_bytes} bytes in all")
+        members[_base(side.filename)] = content
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as archive:
+        for member, content in members.items():
+            archive.writestr(member, content)
+    return out.getvalue()
+
+
+def _base(filename: str | None) -> str:
+    return (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
+
+
+@router.get("/texture", response_class=Response,
+            responses={200: {"content": {"image/png": {}}}, **responses(404, 409)})
+def get_mesh_texture(project: ProjectDep, mesh: MeshDep) -> Response:
+    """The mesh's base-colour texture as PNG (sampled with its uv); 404 when it has none."""
+    material = mesh.material
+    if material is None or material.base_color_texture is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND,
+                            f"the mesh of project {project['id']!r} has no texture")
+    return Response(material.base_color_texture, media_type="image/png")
 
 
 @router.get("", response_class=FileResponse)
