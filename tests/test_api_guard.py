@@ -189,7 +189,7 @@ def test_a_json_body_over_its_cap_is_413_before_it_is_parsed(client, sample_id):
 
 def test_an_upload_over_the_route_cap_is_413_by_its_declared_length(client):
     pid = client.post("/api/projects", json={"name": "cap"}).json()["id"]
-    body = b"--b\r\n" + b"x" * 600_000
+    body = b"--b\r\n" + b"x" * 1_000_000  # over 3 files of 200 kB plus the multipart slack
     r = client.put(f"/api/projects/{pid}/mesh", content=body,
                    headers={"content-type": "multipart/form-data; boundary=b"})
     assert r.status_code == 413 and "over the limit" in r.json()["detail"]
