@@ -20,7 +20,7 @@ export class App {
 	/**
 	 * @param {object} parts
 	 * @param {import('./scene/Viewer.js').Viewer} parts.viewer
-	 * @param {import('./panels/dialogs.js').ErrorBanner} parts.errors
+	 * @param {import('./panels/ErrorBanner.js').ErrorBanner} parts.errors
 	 * @param {import('./model/LandmarkSet.js').LandmarkSet} parts.landmarks
 	 * @param {import('./tools/LandmarkPicker.js').LandmarkPicker} parts.picker
 	 * @param {import('./model/ConditioningSettings.js').ConditioningSettings} parts.conditioning
@@ -71,13 +71,6 @@ export class App {
 	get streaming() {
 
 		return this.live?.streaming ?? false;
-
-	}
-
-	/** The rig's info (GET .../rig) of the shown project, or null. */
-	get rigInfo() {
-
-		return this.rig?.info ?? null;
 
 	}
 

@@ -16,8 +16,8 @@ import { ConditioningSettings } from './model/ConditioningSettings.js';
 import { LandmarkSet } from './model/LandmarkSet.js';
 import { RegionMask } from './model/RegionMask.js';
 import { ProjectSettings } from './net/ProjectSettings.js';
-import { ErrorBanner } from './panels/dialogs.js';
 import { $ } from './panels/dom.js';
+import { ErrorBanner } from './panels/ErrorBanner.js';
 import { ExportPanel } from './panels/ExportPanel.js';
 import { LandmarksPanel } from './panels/LandmarksPanel.js';
 import { LivePanel } from './panels/LivePanel.js';
@@ -42,7 +42,8 @@ const app = new App( {
 	projectSettings: new ProjectSettings( {
 		onSaved: ( project ) => {
 
-			if ( app.project && app.project.id === project.id ) app.project = project;
+			// only the settings: a rig or landmarks stored meanwhile may be newer than this answer
+			if ( app.project && app.project.id === project.id ) app.project = { ...app.project, settings: project.settings };
 
 		},
 		onError: ( error ) => errors.show( error ),

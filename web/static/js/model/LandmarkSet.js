@@ -280,12 +280,14 @@ export class LandmarkSet extends EventTarget {
 
 	}
 
+	/** Whether there is an edit to undo. */
 	get canUndo() {
 
 		return this._history.canUndo;
 
 	}
 
+	/** Whether there is an undone edit to redo. */
 	get canRedo() {
 
 		return this._history.canRedo;

@@ -66,6 +66,7 @@ export class LayoutGuide extends EventTarget {
 
 	}
 
+	/** Draw the reference face at the canvas's current size. */
 	draw() {
 
 		const canvas = this.canvas;
@@ -138,6 +139,7 @@ export class LayoutGuide extends EventTarget {
 
 	}
 
+	/** Stop listening and observing the canvas. */
 	dispose() {
 
 		this.canvas.removeEventListener( 'click', this._onClick );

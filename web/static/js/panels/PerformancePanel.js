@@ -194,6 +194,7 @@ export class PerformancePanel {
 
 	}
 
+	/** Stop the webcam (one still starting stops once it runs). */
 	stopWebcam() {
 
 		this.webcam?.then( ( webcam ) => webcam.stop(), () => {} ); // one still starting stops once it runs

@@ -1,5 +1,5 @@
 import { api } from '../net/api.js';
-import { ask } from './dialogs.js';
+import { ask } from './ask.js';
 import { $, guarded, option } from './dom.js';
 
 /**

@@ -1,5 +1,5 @@
 import { api } from '../net/api.js';
-import { ask } from './dialogs.js';
+import { ask } from './ask.js';
 import { $, guarded } from './dom.js';
 
 /**
@@ -64,6 +64,7 @@ export class TakeList extends EventTarget {
 
 	}
 
+	/** Show the takes, the chosen one selected. */
 	render() {
 
 		const list = $( 'take-list' );

@@ -62,36 +62,35 @@ export class LandmarkPicker extends EventTarget {
 
 	}
 
+	/** @returns {Array<import('../model/LandmarkSet.js').SurfacePoint|null>} one per layout point. */
 	get points() {
 
 		return this.landmarks.points;
 
 	}
 
-	get layout() {
-
-		return this.landmarks.layout;
-
-	}
-
+	/** The selected point, -1 for none. */
 	get selected() {
 
 		return this.landmarks.selected;
 
 	}
 
+	/** Number of placed points. */
 	get placedCount() {
 
 		return this.landmarks.placedCount;
 
 	}
 
+	/** Whether the points differ from the saved ones. */
 	get dirty() {
 
 		return this.landmarks.dirty;
 
 	}
 
+	/** Whether there is an edit to undo. */
 	get canUndo() {
 
 		return this.landmarks.canUndo;

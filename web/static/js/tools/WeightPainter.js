@@ -153,12 +153,14 @@ export class WeightPainter extends BrushSettings {
 
 	}
 
+	/** Whether there is an edit to undo. */
 	get canUndo() {
 
 		return Boolean( this.rig?.canUndo );
 
 	}
 
+	/** Whether there is an undone edit to redo. */
 	get canRedo() {
 
 		return Boolean( this.rig?.canRedo );
