@@ -72,15 +72,14 @@ class PerformanceFrame:
 class Cue:
     """A take ready to play frame by frame (`Performance.cue`).
 
-    raw : (F0, N, D) float32, the take's own points in the target layout's order (NaN rows for
+    raw : (F, N, D) float32, the take's own points in the target layout's order (NaN rows for
         the points it lacks). Frame i of a recording of the cue keeps ``raw[i]`` at
-        ``times[i]``: a recording starts, as the take does, with the frames its neutral is
-        captured from, so it plays back conditioned alike.
-    points : (F, N, D) float32, the conditioned frames, F <= F0 (the frames the neutral is
-        captured from are left out).
-    times : (F,) float64 seconds, 0 at the first kept frame.
-    rotations : (F, 3, 3) float64, the performer's head rotation per kept frame, or None
-        when the settings do not apply it.
+        ``times[i]``, so a recording plays back conditioned alike.
+    points : (F, N, D) float32, every frame conditioned (`condition_take`: the neutral is
+        found first, no frame is left out).
+    times : (F,) float64 seconds, 0 at the first frame.
+    rotations : (F, 3, 3) float64, the performer's head rotation per frame, or None when
+        the settings do not apply it.
     """
 
     raw: np.ndarray
@@ -93,7 +92,7 @@ class Cue:
         return len(self.points)
 
     def rotation(self, index: int) -> np.ndarray | None:
-        """(3, 3) head rotation of kept frame `index`, or None."""
+        """(3, 3) head rotation of frame `index`, or None."""
         return None if self.rotations is None else self.rotations[index]
 
 
@@ -236,8 +235,8 @@ class Performance:
         return self._fitted().displacements(frames, mask=self.mask_)
 
     def play(self, take: Take, name: str = "take", settings=None) -> Clip:
-        """The whole take retargeted (`cue`, then every kept frame) as a `Clip` named `name`,
-        at the take's own times from 0 s at the first kept frame. The head's rotation is not
+        """The whole take retargeted (`cue`, then every frame) as a `Clip` named `name`, at
+        the take's own times from 0 s at its first frame. The head's rotation is not
         part of a clip (feature displacements carry no rigid head motion)."""
         cue = self.cue(take, settings)
         return Clip(name, self.displacements(cue.points), cue.times)
@@ -254,21 +253,22 @@ class Performance:
         self._recording = []
 
     def stop_recording(self, *, source: str = "", fps: float = 30.0) -> Take:
-        """The frames recorded since `start_recording` as a take in the target's layout,
-        times from 0; `source` names what played them, `fps` is the take's rate when it holds
-        one frame (more give their own). `RetargetError` when nothing was recorded."""
+        """The frames recorded since `start_recording` as a take in the target's layout at
+        their true times from 0; `source` names what played them, `fps` is the rate they
+        were played at (the stream's nominal rate: a live camera that dropped frames still
+        recorded a 30 fps take, whose times say when each frame came). `RetargetError`
+        when nothing was recorded."""
         frames, self._recording = self._recording, None
         if not frames:
             raise RetargetError("nothing was recorded: no frame was played while recording")
         points = np.stack([p for p, _ in frames])
         times = np.array([t for _, t in frames], dtype=np.float64)
         times -= times[0]
-        rate = (len(times) - 1) / times[-1] if times[-1] > 0 else fps
         if self.layout is None:
             names, layout = tuple(f"point_{i}" for i in range(self.n_points)), None
         else:
             names, layout = self.layout.point_names, self.layout.name
-        return Take(points, names, float(rate), times=times, layout=layout, source=source)
+        return Take(points, names, float(fps), times=times, layout=layout, source=source)
 
     # -- inside -----------------------------------------------------------------------------
 

@@ -66,14 +66,15 @@ def test_first_seconds_neutral_is_captured_while_the_head_moves():
     frames = np.concatenate([still, moved])
     take = Take(frames, IBUG.point_names, 30.0, layout="ibug68")
     out, neutral = condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.5}})
-    # t <= 0.5 s: frames 0..15 are the capture; the output starts at frame 16
-    assert out.n_frames == 40 and out.meta["conditioned_from_s"] == pytest.approx(16 / 30)
+    # t <= 0.5 s: frames 0..15 give the neutral, and every frame is kept, at its own time
+    assert out.n_frames == 56
+    np.testing.assert_allclose(out.frame_times(), np.arange(56) / 30)
     # the neutral is the still face, in the first frame's head frame
     np.testing.assert_allclose(neutral, still[0], atol=1e-3)
-    # each output frame is the expression face in that same head frame: compare shapes
-    # by aligning the truth once, on the first frame's pose
+    # each output frame is the face in that same head frame: compare shapes by aligning
+    # the truth once, on the first frame's pose; the still frames are the neutral
     rotation0 = Rotation.from_rotvec([0, 0.2 * np.cos(0) - 0.2, 0]).as_matrix()
-    expected = face @ rotation0.T
+    expected = np.concatenate([np.repeat(still[:1], 16, 0), face @ rotation0.T])
     error = (out.points - out.points.mean(1, keepdims=True)) - (expected - expected.mean(1, keepdims=True))
     assert np.median(np.abs(error)) < 0.01 and np.abs(error).max() < 0.5
 
@@ -83,8 +84,8 @@ def test_keep_mode_neutral_is_the_takes_neutral_and_frame_mode_waits_for_its_fra
     take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
     out, neutral = condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.2},
                                          "head_pose": "keep"})
-    np.testing.assert_allclose(neutral, take.neutral(seconds=0.2), atol=1e-6)
-    np.testing.assert_array_equal(out.points, take.points[7:])     # t <= 0.2 s is frames 0..6
+    np.testing.assert_allclose(neutral, take.neutral(seconds=0.2), atol=1e-6)  # frames 0..6
+    np.testing.assert_array_equal(out.points, take.points)  # every frame, as it was
     conditioner = SourceConditioner("ibug68", 3, {"neutral": {"mode": "frame", "frame": 3}, "head_pose": "keep"})
     outputs = [conditioner.push(moved[i], i / 30) for i in range(6)]
     assert outputs[:3] == [None] * 3 and conditioner.neutral_ is not None
@@ -147,21 +148,25 @@ def test_one_euro_per_region_and_unit_free_beta():
     np.testing.assert_allclose(mm.points, 10 * cm.points, rtol=1e-4, atol=1e-3)
 
 
-def test_offline_equals_pushing_every_frame():
+def test_offline_equals_pushing_every_frame_once_the_neutral_is_known():
     _, moved = _performance(frames=45)
     moved[10:14, 5] = np.nan
     take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
     settings = {"neutral": {"mode": "first_seconds", "seconds": 0.3}, "filter": "one_euro",
                 "one_euro": {"mouth": {"min_cutoff": 2.0, "beta": 3.0}}, "gain": {"brows": 1.5}}
     out, neutral = condition_take(take, settings)
-    conditioner = SourceConditioner("ibug68", 3, ConditionSettings.from_dict(settings))
-    pushed = [conditioner.push(p, t) for p, t in zip(take.points, take.frame_times())]
-    kept = [p for p in pushed if p is not None]
-    np.testing.assert_array_equal(np.stack(kept), out.points)
-    np.testing.assert_array_equal(conditioner.neutral_, neutral)
-    # t <= 0.3 s is the capture (frames 0..9): the point lost in frames 10-13 is lost in 0-3
-    assert out.n_frames == 35
-    assert np.isnan(out.points[:4, 5]).all() and np.isfinite(out.points[4:, 5]).all()
+    # the neutral is what a live capture of the first 0.3 s (frames 0..9) takes
+    live = SourceConditioner("ibug68", 3, ConditionSettings.from_dict(settings))
+    for p, t in zip(take.points[:11], take.frame_times()[:11]):
+        live.push(p, t)
+    np.testing.assert_array_equal(live.neutral_, neutral)
+    # and every frame is pushed through a conditioner that has that neutral from the start
+    given = dict(settings, neutral={"mode": "given"})
+    known = SourceConditioner("ibug68", 3, ConditionSettings.from_dict(given), neutral=neutral)
+    pushed = [known.push(p, t) for p, t in zip(take.points, take.frame_times())]
+    np.testing.assert_array_equal(np.stack(pushed), out.points)
+    assert out.n_frames == 45 and out.meta["conditioning"]["neutral"]["mode"] == "first_seconds"
+    assert np.isnan(out.points[10:14, 5]).all() and np.isfinite(np.delete(out.points[:, 5], range(10, 14), 0)).all()
 
 
 def test_two_dimensional_sources_keep_their_head_pose():

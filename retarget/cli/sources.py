@@ -128,7 +128,7 @@ def add_condition(commands, parents) -> None:
                    '"filter": "one_euro"}); default: the first 0.5 s, head motion removed, no filter')
     p.add_argument("--neutral-out", required=True, metavar="S0.npy", help="(N, D) float32 neutral")
     p.add_argument("--out", required=True, metavar="FRAMES.npy",
-                   help="(F, N, D) float32 conditioned frames (the neutral capture left out)")
+                   help="(F, N, D) float32 conditioned frames, every frame of the take")
     p.set_defaults(run=_condition)
 
 

@@ -20,7 +20,7 @@ over a whole take, so a recorded take and a live stream are conditioned alike.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -262,18 +262,20 @@ class SourceConditioner:
 
 
 def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: bool = False):
-    """(conditioned take, (N, D) float32 neutral): `take` pushed frame by frame through a
-    `SourceConditioner`, the same as a live stream of it.
+    """(conditioned take, (N, D) float32 neutral): every frame of `take` pushed through a
+    `SourceConditioner`, as a live stream of it would be once its neutral is known.
 
-    The frames that gave no output (the neutral capture) are left out; the take's times
-    start at the first frame kept, and ``meta["conditioned_from_s"]`` says where that
-    was in the original. `RetargetError` if no frame is left.
+    A recorded take is all there before it plays, so its neutral is found first (from the
+    first seconds or the chosen frame, as a live capture would find it) and then every
+    frame is conditioned against it: no frame is left out, and the result has the take's
+    own times (a 6.72 s take stays 6.72 s; an export keeps the mouth in sync with the
+    take's sound). `RetargetError` when the take ends before its neutral capture does.
 
     Points that are lost in every frame (a 21-marker take read into a 68-point layout)
     are left out of the conditioning, which runs on the sub-layout of the others
     (`Layout.select`), and come back as NaN rows of the result and of the neutral.
 
-    with_rotations : also return the (F, 3, 3) head rotations (``rotation_``) of the kept
+    with_rotations : also return the (F, 3, 3) head rotations (``rotation_``) of the
         frames, for a player that turns the target's head.
     """
     present = ~np.isnan(take.points[..., 0]).all(axis=0)
@@ -284,30 +286,39 @@ def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: b
         if neutral is not None:
             neutral = np.asarray(neutral)[rows]
     points = take.points[:, rows]
-    conditioner = SourceConditioner(layout, take.dims, settings, neutral)
     times = take.frame_times()
-    out, kept, rotations = [], [], []
+    asked = settings if isinstance(settings, ConditionSettings) else ConditionSettings.from_dict(settings)
+    settings = asked
+    if neutral is None and asked.neutral["mode"] != "given":
+        neutral = _captured_neutral(layout, take.dims, asked, points, times)
+        settings = replace(asked, neutral={**asked.neutral, "mode": "given"})
+    conditioner = SourceConditioner(layout, take.dims, settings, neutral)
+    out, rotations = [], []
     for i in range(take.n_frames):
-        p = conditioner.push(points[i], times[i])
-        if p is not None:
-            out.append(p)
-            kept.append(i)
-            rotations.append(conditioner.rotation_)
-    if not kept:
-        raise RetargetError(
-            f"the take ({times[-1] - times[0]:.3f} s) ends before its neutral capture does "
-            f"({conditioner.settings.neutral['seconds']:g} s)")
-    conditioned = np.full((len(kept), take.n_points, take.dims), np.nan, np.float32)
+        out.append(conditioner.push(points[i], times[i]))
+        rotations.append(conditioner.rotation_)
+    conditioned = np.full((take.n_frames, take.n_points, take.dims), np.nan, np.float32)
     neutral_out = np.full((take.n_points, take.dims), np.nan, np.float32)
     conditioned[:, rows] = np.stack(out)
     neutral_out[rows] = conditioner.neutral_
-    meta = dict(take.meta, conditioned_from_s=float(times[kept[0]] - times[0]),
-                conditioning=conditioner.settings.to_dict())
-    result = Take(conditioned, take.names, take.fps, times[kept] - times[kept[0]],
-                  take.layout, take.source, meta)
+    meta = dict(take.meta, conditioning=asked.to_dict())
+    result = Take(conditioned, take.names, take.fps, times - times[0], take.layout,
+                  take.source, meta)
     if with_rotations:
         return result, neutral_out, np.stack(rotations)
     return result, neutral_out
+
+
+def _captured_neutral(layout, dims: int, settings, points: np.ndarray,
+                      times: np.ndarray) -> np.ndarray:
+    """The neutral a live capture of these frames would take (`SourceConditioner`)."""
+    capture = SourceConditioner(layout, dims, settings)
+    for i in range(len(points)):
+        if capture.push(points[i], times[i]) is not None:
+            return capture.neutral_
+    raise RetargetError(
+        f"the take ({times[-1] - times[0]:.3f} s) ends before its neutral capture does "
+        f"({settings.neutral['seconds']:g} s)")
 
 
 def _neutral(value) -> dict:
