@@ -29,13 +29,16 @@ Subcommands (``retarget <command> --help`` for the details):
     The target mesh rigged (feature points as joints of a glTF skin, or morph targets
     for rigs with negative weights) and, given a source, the retargeted take animated,
     as one glTF 2.0 binary (`retarget.gltf`).
+``open-mouth``
+    A mesh whose lips are joined (most scans and sculpts) cut open along the lip contact
+    line (`retarget.lips`), original vertices first, the cut's duplicates appended.
 
 ``serve`` (the web app) is the server's: `server.cli` owns the installed ``retarget``
 command and adds it to this parser, so the library never imports the web stack; ``python -m
 retarget.cli`` runs the library's commands alone.
 
 One module per command family: `retargeting` (transfer, rig, export-gltf, demo), `sources`
-(track, condition, calibrate), `layouts`; `parser` holds what their parsers share. The
+(track, condition, calibrate), `mouth` (open-mouth), `layouts`; `parser` holds what their parsers share. The
 work is the library's (`retarget.files` reads, checks and writes the files).
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
@@ -52,7 +55,7 @@ import sys
 from pathlib import Path
 
 from retarget import __version__
-from retarget.cli import layouts, retargeting, sources
+from retarget.cli import layouts, mouth, retargeting, sources
 from retarget.cli.parser import PROG, Parser, UsageError, quiet_option
 from retarget.errors import RetargetError
 
@@ -84,6 +87,7 @@ def build_parser(*, web_root: str | os.PathLike | None = None) -> Parser:
     sources.add_condition(commands, quiet)
     sources.add_calibrate(commands, quiet)
     retargeting.add_export_gltf(commands, quiet)
+    mouth.add_open_mouth(commands)
     layouts.add_layouts(commands)
     return parser
 
