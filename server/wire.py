@@ -3,7 +3,7 @@ JavaScript twin in `web/static/js/net/wire.js`, and tests run the two against ea
 
 - stream frame ``RTDF`` (server -> page, WebSocket): a frame's feature displacements;
 - source points ``RTSP`` (page -> server, WebSocket): one frame of tracked points;
-- mesh arrays ``RTMA`` (GET .../mesh/arrays): vertices and triangles to draw;
+- mesh arrays ``RTMA`` (GET .../mesh/arrays): vertices and triangles to draw, and uv;
 - rig weights ``RTSW`` (GET .../rig/weights): joint indices and weights per vertex;
 - weight edit ``RTSE`` (PATCH .../rig/weights): painted rows.
 
@@ -45,8 +45,14 @@ Mesh arrays (RTMA)
     12      4       uint32 F, triangle count
     16      12 V    float32 vertices, (V, 3) row-major, in the mesh's own units
     16+12V  12 F    uint32 faces, (F, 3) row-major, indices into the vertices
+    (only for a mesh with uv; without them the bytes end here)
+    16+12V+12F  4   uint32 flags: bit 0 = a base-colour texture is served at
+                    GET .../mesh/texture (sampled with the uv)
+    20+12V+12F  8 V float32 uv, (V, 2) row-major, OBJ's convention (v up, origin at the
+                    image's bottom-left)
 
-Vertex order is exactly `retarget.mesh.load_mesh`'s, which landmark indices refer to.
+Vertex order is exactly `retarget.mesh.load_mesh`'s, which landmark indices refer to. The uv
+block is a tail, so readers of vertices and faces alone need not know it.
 
 Rig weights (RTSW)
 ------------------
@@ -231,11 +237,24 @@ ARRAYS_VERSION = 1
 ARRAYS_HEADER = struct.Struct("<4sIII")
 
 
-def mesh_arrays(vertices: np.ndarray, faces: np.ndarray) -> bytes:
-    """The RTMA bytes of a mesh (module docstring)."""
+ARRAYS_TEXTURED = 1
+"""RTMA flags bit 0: the mesh has a base-colour texture."""
+
+
+def mesh_arrays(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None, *,
+                textured: bool = False) -> bytes:
+    """The RTMA bytes of a mesh (module docstring): vertices (V, 3), faces (F, 3) and, when
+    given, uv (V, 2) with the `textured` flag (ignored without uv: nothing could sample it)."""
     v = np.ascontiguousarray(vertices, dtype="<f4")
     f = np.ascontiguousarray(faces, dtype="<u4")
-    return ARRAYS_HEADER.pack(ARRAYS_MAGIC, ARRAYS_VERSION, len(v), len(f)) + v.tobytes() + f.tobytes()
+    data = ARRAYS_HEADER.pack(ARRAYS_MAGIC, ARRAYS_VERSION, len(v), len(f)) + v.tobytes() + f.tobytes()
+    if uv is None:
+        return data
+    uv = np.ascontiguousarray(uv, dtype="<f4")
+    if uv.shape != (len(v), 2):
+        raise ValueError(f"uv must be ({len(v)}, 2) for {len(v)} vertices; got {uv.shape}")
+    flags = ARRAYS_TEXTURED if textured else 0
+    return data + struct.pack("<I", flags) + uv.tobytes()
 
 
 # -- rig weights (RTSW) and weight edits (RTSE) ------------------------------------------

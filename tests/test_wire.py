@@ -183,17 +183,38 @@ def test_javascript_decodes_exactly_the_mesh_arrays_python_encodes(tmp_path, n_v
     (js,) = decode_in_node(tmp_path, [data], "decode-mesh")
     assert js["positionBits"] == bits(vertices)
     assert js["faces"] == faces.ravel().tolist()
+    assert js["uvBits"] is None and js["textured"] is False
+
+
+@pytest.mark.parametrize("n_vertices,n_faces,textured", [(1, 0, True), (3, 1, False), (1001, 1999, True)])
+def test_javascript_decodes_exactly_the_uv_python_encodes(tmp_path, n_vertices, n_faces, textured):
+    rng = np.random.default_rng(n_vertices)
+    vertices = rng.normal(size=(n_vertices, 3)).astype(np.float32)
+    faces = rng.integers(0, n_vertices, size=(n_faces, 3)).astype(np.uint32)
+    uv = rng.uniform(-0.5, 1.5, size=(n_vertices, 2)).astype(np.float32)
+    uv[0] = [np.float32(1e-45), -0.0]
+    data = mesh_arrays(vertices, faces, uv, textured=textured)
+    assert len(data) == 16 + 12 * n_vertices + 12 * n_faces + 4 + 8 * n_vertices
+    (js,) = decode_in_node(tmp_path, [data], "decode-mesh")
+    assert js["positionBits"] == bits(vertices) and js["faces"] == faces.ravel().tolist()
+    assert js["uvBits"] == bits(uv) and js["textured"] is textured
+
+
+def test_python_refuses_uv_that_are_not_one_pair_per_vertex():
+    with pytest.raises(ValueError, match=r"uv must be \(4, 2\)"):
+        mesh_arrays(np.ones((4, 3)), np.array([[0, 1, 2]]), np.ones((3, 2)))
 
 
 def test_javascript_refuses_broken_mesh_arrays_with_its_class_name(tmp_path):
     good = mesh_arrays(np.ones((4, 3)), np.array([[0, 1, 2], [1, 2, 3]]))
     broken = [b"XXXX" + good[4:], good[:4] + struct.pack("<I", 2) + good[8:], good[:-4], good + b"\0" * 4,
-              good[:10]]
+              good[:10], mesh_arrays(np.ones((4, 3)), np.array([[0, 1, 2], [1, 2, 3]]), np.ones((4, 2)))[:-8]]
     messages = [d["error"] for d in decode_in_node(tmp_path, broken, "decode-mesh")]
     assert all(m.startswith("MeshArraysDecoder:") for m in messages), messages
     assert '"RTMA"' in messages[0] and "version 2" in messages[1]
-    assert "4 vertices and 2 triangles need 88 bytes, got 84" in messages[2]
-    assert "need 88 bytes, got 92" in messages[3] and "shorter than its 16-byte header" in messages[4]
+    assert "4 vertices and 2 triangles need 88 bytes (124 with uv), got 84" in messages[2]
+    assert "need 88 bytes (124 with uv), got 92" in messages[3] and "shorter than its 16-byte header" in messages[4]
+    assert "got 116" in messages[5]
 
 
 # -- rig weights (RTSW): Python encodes, JavaScript decodes ---------------------------------

@@ -149,5 +149,8 @@ def get_mesh_file(project: ProjectDep, store: StoreDep):
 @router.get("/arrays", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}}}, **responses(404, 409)})
 def get_mesh_arrays(mesh: MeshDep) -> Response:
-    """Vertices and faces as `server.wire`'s RTMA bytes."""
-    return Response(mesh_arrays(mesh.vertices, mesh.faces), media_type="application/octet-stream")
+    """Vertices, faces and uv as `server.wire`'s RTMA bytes, flagged when the mesh has a
+    texture (GET .../mesh/texture)."""
+    textured = mesh.material is not None and mesh.material.base_color_texture is not None
+    return Response(mesh_arrays(mesh.vertices, mesh.faces, mesh.uv, textured=textured),
+                    media_type="application/octet-stream")

@@ -25,8 +25,8 @@ const decoders = {
 	},
 	'decode-mesh': ( buffer ) => {
 
-		const { positions, faces } = new MeshArraysDecoder().decode( buffer );
-		return { positionBits: bits( positions ), faces: Array.from( faces ) };
+		const { positions, faces, uv, textured } = new MeshArraysDecoder().decode( buffer );
+		return { positionBits: bits( positions ), faces: Array.from( faces ), uvBits: bits( uv ), textured };
 
 	},
 	'decode-weights': ( buffer ) => {

@@ -157,31 +157,39 @@ export class PointsEncoder {
 
 /**
  * Decoder of a mesh's arrays: a 16-byte header (magic "RTMA", uint32 version, uint32 V,
- * uint32 F) followed by V x 3 float32 vertices and F x 3 uint32 triangles.
+ * uint32 F) followed by V x 3 float32 vertices and F x 3 uint32 triangles; for a mesh with
+ * uv, then a uint32 of flags (bit 0: a base-colour texture is served at .../mesh/texture)
+ * and V x 2 float32 uv.
  */
 export class MeshArraysDecoder {
 
 	static HEADER_BYTES = 16;
+	static TEXTURED = 1;
 
 	/**
 	 * @param {ArrayBuffer} buffer
-	 * @returns {{positions: Float32Array, faces: Uint32Array}} views on `buffer`:
-	 *   positions (3V) in the mesh's own units, faces (3F) vertex indices.
+	 * @returns {{positions: Float32Array, faces: Uint32Array, uv: Float32Array|null, textured: boolean}}
+	 *   views on `buffer`: positions (3V) in the mesh's own units, faces (3F) vertex indices,
+	 *   uv (2V, OBJ's convention: v up) or null, textured: the mesh has a base-colour texture.
 	 */
 	decode( buffer ) {
 
 		const view = checkedHeader( 'MeshArraysDecoder', buffer, 'RTMA', MeshArraysDecoder.HEADER_BYTES );
 		const v = view.getUint32( 8, true ), f = view.getUint32( 12, true );
 		const size = MeshArraysDecoder.HEADER_BYTES + 12 * v + 12 * f;
-		if ( buffer.byteLength !== size ) {
+		const withUv = size + 4 + 8 * v;
+		if ( buffer.byteLength !== size && buffer.byteLength !== withUv ) {
 
-			throw new Error( `MeshArraysDecoder: ${ v } vertices and ${ f } triangles need ${ size } bytes, got ${ buffer.byteLength }.` );
+			throw new Error( `MeshArraysDecoder: ${ v } vertices and ${ f } triangles need ${ size } bytes (${ withUv } with uv), got ${ buffer.byteLength }.` );
 
 		}
 
+		const hasUv = buffer.byteLength === withUv;
 		return {
 			positions: new Float32Array( buffer, MeshArraysDecoder.HEADER_BYTES, 3 * v ),
 			faces: new Uint32Array( buffer, MeshArraysDecoder.HEADER_BYTES + 12 * v, 3 * f ),
+			uv: hasUv ? new Float32Array( buffer, size + 4, 2 * v ) : null,
+			textured: hasUv && ( view.getUint32( size, true ) & MeshArraysDecoder.TEXTURED ) !== 0,
 		};
 
 	}
