@@ -12,7 +12,9 @@ live sources, the glTF export's takes, the command line's files):
 Three ways in, one per kind of source:
 
 - ``push(points, t)``: frames as they come (a live tracker). The neutral is captured from the
-  first frames as the settings say (Woodward §5.1), `recapture` captures it again;
+  first frames as the settings say (Woodward §5.1), `recapture` captures it again; a capture
+  during which the performer moved is refused (`NeutralMoved`, `LIVE_NEUTRAL_MOTION`) and
+  none is taken until `recapture`;
 - ``cue(take)``, then ``frame(...)`` per frame: a recorded take conditioned whole once, then
   played frame by frame at its own times by a scheduler (which may loop it); ``play(take)``
   is the whole take at once, a `retarget.clips.Clip`;
@@ -41,7 +43,12 @@ from retarget.rbf import as_points
 from retarget.sources.conditioning import ConditionSettings, SourceConditioner, condition_take
 from retarget.sources.take import Take
 
-__all__ = ["MAX_RECORD_SECONDS", "Cue", "Performance", "PerformanceFrame", "take_clip"]
+__all__ = ["LIVE_NEUTRAL_MOTION", "MAX_RECORD_SECONDS", "Cue", "Performance", "PerformanceFrame", "take_clip"]
+
+LIVE_NEUTRAL_MOTION = 0.1
+"""The most a point of pushed frames may move during their neutral capture, in eye distances
+(`SourceConditioner`'s ``max_neutral_motion``): a tracker's jitter on a still face is a few
+hundredths, a puffed cheek or a spoken word several tenths."""
 
 MAX_RECORD_SECONDS = 600.0
 """A recording keeps its first ten minutes; what comes later is not kept (rather than failing
@@ -194,7 +201,8 @@ class Performance:
                                 f"coordinates; got {points.shape}")
         self._record(points, t)
         if self._conditioner is None:
-            self._conditioner = SourceConditioner(self.layout, self.dims, self.settings)
+            self._conditioner = SourceConditioner(self.layout, self.dims, self.settings,
+                                                  max_neutral_motion=LIVE_NEUTRAL_MOTION)
         conditioned = self._conditioner.push(points, t)
         if conditioned is None:
             return None

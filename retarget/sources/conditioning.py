@@ -27,10 +27,10 @@ import numpy as np
 from retarget.errors import RetargetError
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
 from retarget.sources.filters import OneEuroFilter, TemporalMean
-from retarget.sources.headpose import HeadMotionRemover, head_neutral, stable_indices
+from retarget.sources.headpose import HeadMotionRemover, head_neutral, remove_head_motion, stable_indices
 from retarget.sources.take import Take
 
-__all__ = ["ConditionSettings", "SourceConditioner", "condition_take"]
+__all__ = ["ConditionSettings", "NeutralMoved", "SourceConditioner", "condition_take", "eye_distance"]
 
 NEUTRAL_MODES = ("first_seconds", "frame", "given")
 HEAD_POSE_MODES = ("remove", "keep")
@@ -39,6 +39,18 @@ DEFAULT_ONE_EURO = {"min_cutoff": 1.0, "beta": 5.0}
 
 # Region keys the settings accept: regions, groups and the point names of every layout.
 _SELECTORS = set(REGIONS) | set(GROUPS) | {p for lay in LAYOUTS.values() for p in lay.point_names}
+
+
+class NeutralMoved(RetargetError):
+    """A neutral capture refused because the performer moved during it; ``motion`` is the
+    largest point spread found, in eye distances (`SourceConditioner`'s
+    ``max_neutral_motion``)."""
+
+    def __init__(self, motion: float, allowed: float):
+        self.motion = motion
+        super().__init__(
+            "You moved during the neutral capture: hold still and capture again "
+            f"(a point moved {motion:.2f} eye distances; at most {allowed:.2f} is still)")
 
 
 @dataclass
@@ -115,6 +127,13 @@ class SourceConditioner:
     dims : 2 or 3, the source's dimension.
     settings : `ConditionSettings` (or its dict form); default `ConditionSettings()`.
     neutral : (N, dims) float, the neutral for mode "given" (refused otherwise).
+    max_neutral_motion : None, or the most a point may move during a "first_seconds"
+        capture, in eye distances (`eye_distance`): each point's spread is its largest
+        distance from the captured neutral over the capture's frames (registered on the
+        stable points when head motion is removed, so moving the head is allowed, as
+        Woodward §5.1 has it). A capture that moved more raises `NeutralMoved`, and no
+        neutral is taken (`push` gives None) until `reset()`: a live performer is asked
+        to capture again rather than have a grimace become the rest pose.
 
     `push(points (N, D), t seconds) -> (N, D) float32 | None`: None while the neutral is
     being captured; lost points (NaN rows) stay NaN. After the capture, ``neutral_``
@@ -124,7 +143,8 @@ class SourceConditioner:
     known). `reset()` starts over, capturing the neutral again unless it was given.
     """
 
-    def __init__(self, layout, dims: int, settings=None, neutral=None):
+    def __init__(self, layout, dims: int, settings=None, neutral=None, *,
+                 max_neutral_motion: float | None = None):
         self.layout = None if layout is None else layout if isinstance(layout, Layout) else get_layout(layout)
         if dims not in (2, 3):
             raise RetargetError(f"dims must be 2 or 3; got {dims!r}")
@@ -146,12 +166,16 @@ class SourceConditioner:
                 raise RetargetError(f"the given neutral has lost points: {self._names(np.isnan(self._given[:, 0]))}")
         elif neutral is not None:
             raise RetargetError(f'a neutral was given but the neutral mode is {s.neutral["mode"]!r}')
+        if max_neutral_motion is not None and not (math.isfinite(max_neutral_motion) and max_neutral_motion > 0):
+            raise RetargetError(f"max_neutral_motion must be a positive number of eye distances; got {max_neutral_motion!r}")
+        self.max_neutral_motion = max_neutral_motion
         self.reset()
 
     def reset(self) -> None:
         """Forget all state: the neutral is captured again (unless given), filters restart."""
         self.neutral_ = None
         self.rotation_ = np.eye(3)
+        self._refused = False  # a capture moved: none is taken until reset()
         self._captured: list[np.ndarray] = []
         self._t0 = None
         self._count = 0
@@ -167,6 +191,8 @@ class SourceConditioner:
         if not math.isfinite(t):
             raise RetargetError(f"frame time must be finite; got {t!r}")
         index, self._count = self._count, self._count + 1
+        if self._refused:
+            return None
         if self.neutral_ is None:
             mode = self.settings.neutral
             if mode["mode"] == "frame":
@@ -196,8 +222,25 @@ class SourceConditioner:
                 f"no neutral for points lost throughout the first {self.settings.neutral['seconds']:g} s: "
                 f"{self._names(lost)}")
         if self.removes_head:
-            return head_neutral(frames, self._stable)
-        return frames[0] if len(frames) == 1 else np.nanmedian(frames, axis=0).astype(np.float32)
+            neutral = head_neutral(frames, self._stable)
+        else:
+            neutral = frames[0] if len(frames) == 1 else np.nanmedian(frames, axis=0).astype(np.float32)
+        if self.max_neutral_motion is not None:
+            motion = self._capture_motion(frames, neutral)
+            if motion > self.max_neutral_motion:
+                self._refused = True
+                raise NeutralMoved(motion, self.max_neutral_motion)
+        return neutral
+
+    def _capture_motion(self, frames: np.ndarray, neutral: np.ndarray) -> float:
+        """The largest distance of any point from `neutral` over (F, N, D) `frames`, in eye
+        distances (head motion taken out first when it is removed); 0 for one frame."""
+        if self.removes_head:
+            frames = remove_head_motion(frames, neutral, self._stable)[0]
+        spread = np.linalg.norm(frames - neutral, axis=2)  # (F, N), NaN where lost
+        if not np.isfinite(spread).any():
+            return 0.0
+        return float(np.nanmax(spread)) / eye_distance(neutral, self.layout)
 
     def _start(self, neutral: np.ndarray) -> None:
         """Set S0 and build the per-frame steps that depend on it."""
@@ -259,6 +302,24 @@ class SourceConditioner:
         idx = np.flatnonzero(mask)
         names = [self.layout.point_names[i] if self.layout else f"point {i}" for i in idx[:12]]
         return ", ".join(names) + (f" and {len(idx) - 12} more" if len(idx) > 12 else "")
+
+
+def eye_distance(points, layout: Layout | None) -> float:
+    """The distance between the eye centres of (N, D) `points` (the means of the layout's
+    ``eye_left*`` and ``eye_right*`` points), in the points' units; without a layout or
+    eye points, the face size (RMS distance of the points from their centroid). Never 0:
+    1.0 for a degenerate face."""
+    p = np.asarray(points, dtype=np.float64)
+    if layout is not None:
+        names = np.array(layout.point_names)
+        left, right = np.char.startswith(names, "eye_left"), np.char.startswith(names, "eye_right")
+        if left.any() and right.any():
+            d = float(np.linalg.norm(np.nanmean(p[left], axis=0) - np.nanmean(p[right], axis=0)))
+            if math.isfinite(d) and d > 0:
+                return d
+    centred = p - np.nanmean(p, axis=0)
+    size = float(np.sqrt(np.nanmean(np.sum(centred**2, axis=1))))
+    return size if math.isfinite(size) and size > 0 else 1.0
 
 
 def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: bool = False):

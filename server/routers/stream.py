@@ -16,6 +16,8 @@ are JSON text:
 - ``{"type": "settings", "settings": {...}}``: change the running take or live source's
   conditioning (a live source keeps its captured neutral unless the neutral mode changes);
 - ``{"type": "neutral"}``: a live source captures its neutral again from the next frames;
+  a capture during which the performer moved is answered ``{"type": "neutral_refused",
+  "detail"}`` and none is taken until the next ``neutral`` (`retarget.sources.conditioning.NeutralMoved`);
 - ``{"type": "record"}`` / ``{"type": "record_stop", "name": "..."}``: record the running
   source's raw points (demo, take or live); stopping stores them as a take and answers
   ``{"type": "recorded", "take": {...}}``. A source that stops or ends while recording
@@ -52,7 +54,7 @@ from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
-from retarget.sources.conditioning import ConditionSettings
+from retarget.sources.conditioning import ConditionSettings, NeutralMoved
 from server.players import DemoPlayer, LivePlayer, TakePlayer
 from server.wire import FLAG_NEUTRAL, decode_points, encode_frame
 from server.store import ProjectNotFound, TakeNotFound
@@ -132,6 +134,8 @@ async def _receive_controls(websocket, sending, hub, store, project_id, target_p
                 reply = _points(message["bytes"], hub, project_id)
             else:
                 reply = await _control(message.get("text"), hub, store, project_id, target_points, layout)
+        except NeutralMoved as exc:
+            reply = {"type": "neutral_refused", "detail": str(exc)}
         except (ValueError, RetargetError, TakeNotFound) as exc:
             reply = {"type": "error", "detail": str(exc)}
         except Exception as exc:  # noqa: BLE001 - one bad message never ends the stream
