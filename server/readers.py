@@ -20,6 +20,7 @@ from retarget.errors import RetargetError
 from retarget.gltf import export_mesh_gltf, read_gltf
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
+from retarget.lips import opened_mouth
 from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 from retarget.sources.files import read_take
@@ -30,8 +31,8 @@ from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
 from retarget.weights import METHODS, compute_weights
 
-__all__ = ["ImportedProject", "imported_project", "marker_take",
-           "mesh_counts", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
+__all__ = ["ImportedProject", "OpenedMesh", "imported_project", "marker_take",
+           "mesh_counts", "opened_mesh", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
            "video_opens"]
 
 def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
@@ -43,6 +44,29 @@ def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
         text = str(exc).replace("the given bytes", "the file")
         raise RetargetError(f"uploaded mesh {shown!r} refused: {text}") from None
     return mesh.n_vertices, mesh.n_faces
+
+
+@dataclass(frozen=True)
+class OpenedMesh:
+    """A stored mesh with its mouth cut open, as a project stores it: a mesh-only .glb (uv,
+    normals and material kept; the original vertices first), its counts and landmarks."""
+
+    mesh_file: bytes
+    n_vertices: int
+    n_faces: int
+    landmarks: dict
+    n_points: int
+
+
+def opened_mesh(mesh: Mesh, points: SurfacePoints) -> OpenedMesh:
+    """`mesh` cut open along its lip contact line (`retarget.lips.opened_mouth`); not an
+    upload, but its mesh file is written like an imported one (`export_mesh_gltf`)."""
+    if not points.layout:
+        raise RetargetError("the landmarks have no layout: the lips are found from a layout's "
+                            "mouth points")
+    opened = opened_mouth(mesh, points, get_layout(points.layout))
+    return OpenedMesh(export_mesh_gltf(opened.mesh), opened.mesh.n_vertices,
+                      opened.mesh.n_faces, opened.points.to_json(), opened.points.n_points)
 
 
 def take_from_upload(data: bytes, filename: str, shown: str, options: dict, forms: dict,

@@ -10,6 +10,10 @@ Layout on disk::
                                                  the rows painted over it, if any
     <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
 
+A mesh revision made from the current one (the mouth cut open, `put_mesh_revision`) keeps
+the mesh and landmarks it replaced (the row's ``previous_mesh``) until `revert_mesh` goes
+back to them or a new upload replaces both.
+
 R is the project revision the file was written for. The index is the source of truth:
 its row names the current file of each kind, and a file counts only once the row says
 so. A new file never overwrites the one in use: it is written atomically under a new
@@ -97,7 +101,8 @@ CREATE TABLE IF NOT EXISTS projects (
     rig_file      TEXT,              -- the automatic rig
     painted_file  TEXT,              -- rows painted over it, NULL = none
     rig_version   INTEGER NOT NULL DEFAULT 0,  -- bumped by every new rig, paint or reset
-    rig_painted   INTEGER NOT NULL DEFAULT 0   -- vertices whose rows differ from the automatic rig's
+    rig_painted   INTEGER NOT NULL DEFAULT 0,  -- vertices whose rows differ from the automatic rig's
+    previous_mesh TEXT               -- JSON: the mesh and landmarks a mesh revision replaced, NULL = none
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS takes (
@@ -241,6 +246,8 @@ class ProjectStore:
         for column in ("rig_version", "rig_painted"):
             if column not in columns:
                 db.execute(f"ALTER TABLE projects ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0")
+        if "previous_mesh" not in columns:
+            db.execute("ALTER TABLE projects ADD COLUMN previous_mesh TEXT")
         if "upload_key" not in {row["name"] for row in db.execute("PRAGMA table_info(takes)")}:
             db.execute("ALTER TABLE takes ADD COLUMN upload_key TEXT")
 
@@ -254,6 +261,9 @@ class ProjectStore:
             if row is None:
                 return
             keep = {row[column] for column in _FILE_COLUMNS}
+            if row["previous_mesh"] is not None:
+                previous = json.loads(row["previous_mesh"])
+                keep.update((previous["mesh_file"], previous["landmarks_file"]))
             keep.update(r["file"] for r in self._db.execute(
                 "SELECT file FROM takes WHERE project_id = ?", (project_id,)))
             for path in folder.iterdir() if folder.is_dir() else ():
@@ -325,6 +335,10 @@ class ProjectStore:
         landmarks = None
         if row["n_landmarks"] is not None:
             landmarks = {"layout": row["layout"], "n_points": row["n_landmarks"]}
+        previous = None
+        if row["previous_mesh"] is not None:
+            kept = json.loads(row["previous_mesh"])
+            previous = {"n_vertices": kept["n_vertices"], "n_faces": kept["n_faces"]}
         return {
             "id": row["id"],
             "name": row["name"],
@@ -335,6 +349,7 @@ class ProjectStore:
             "rig": None if row["rig_method"] is None else {"method": row["rig_method"]},
             "revision": row["revision"],
             "settings": json.loads(row["settings"]),
+            "previous_mesh": previous,
         }
 
     # -- meta ---------------------------------------------------------------------------
@@ -416,9 +431,61 @@ class ProjectStore:
                 "UPDATE projects SET mesh_filename = ?, mesh_format = ?, n_vertices = ?, "
                 "n_faces = ?, layout = NULL, n_landmarks = NULL, rig_method = NULL, "
                 "mesh_file = ?, landmarks_file = NULL, rig_file = NULL, painted_file = NULL, "
-                "rig_painted = 0, "
+                "rig_painted = 0, previous_mesh = NULL, "
                 "revision = revision + 1, updated = ? WHERE id = ?",
                 (filename[:255], extension, n_vertices, n_faces, name, _now(), project_id),
+            )
+        self._sweep(project_id)
+        return self.get(project_id)
+
+    def put_mesh_revision(self, project_id: str, data: bytes, extension: str, *, filename: str,
+                          n_vertices: int, n_faces: int, landmarks: dict, n_points: int,
+                          revision: int) -> dict:
+        """Store a mesh made from the mesh and landmarks of `revision` (already validated)
+        with its landmarks; the replaced mesh and landmarks are kept for `revert_mesh`.
+        Drops the rig, as any new mesh does. Raises `StaleRig` if the mesh or landmarks
+        changed since `revision`."""
+        if extension not in MESH_EXTENSIONS:
+            raise ValueError(f"extension {extension!r} is not one of {MESH_EXTENSIONS}")
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            old = self._row(project_id)
+            if old["revision"] != revision or old["n_landmarks"] is None:
+                raise StaleRig("the mesh or landmarks changed meanwhile; try again")
+            mesh_name = f"mesh-r{revision + 1}.{extension}"
+            landmarks_name = f"landmarks-r{revision + 1}.json"
+            write_atomic(folder / mesh_name, data)
+            write_atomic(folder / landmarks_name, json.dumps(landmarks).encode())
+            previous = {key: old[key] for key in (
+                "mesh_file", "landmarks_file", "mesh_filename", "mesh_format", "n_vertices",
+                "n_faces", "layout", "n_landmarks")}
+            db.execute(
+                "UPDATE projects SET mesh_filename = ?, mesh_format = ?, n_vertices = ?, "
+                "n_faces = ?, n_landmarks = ?, rig_method = NULL, mesh_file = ?, "
+                "landmarks_file = ?, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
+                "previous_mesh = ?, revision = revision + 1, updated = ? WHERE id = ?",
+                (filename[:255], extension, n_vertices, n_faces, n_points, mesh_name,
+                 landmarks_name, json.dumps(previous), _now(), project_id),
+            )
+        self._sweep(project_id)
+        return self.get(project_id)
+
+    def revert_mesh(self, project_id: str) -> dict:
+        """Go back to the mesh and landmarks the last `put_mesh_revision` replaced (as a
+        new revision: the rig is dropped). Raises `StaleRig` when there is none."""
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["previous_mesh"] is None:
+                raise StaleRig(f"project {project_id!r} has no earlier mesh to go back to")
+            previous = json.loads(row["previous_mesh"])
+            db.execute(
+                "UPDATE projects SET mesh_file = ?, landmarks_file = ?, mesh_filename = ?, "
+                "mesh_format = ?, n_vertices = ?, n_faces = ?, layout = ?, n_landmarks = ?, "
+                "rig_method = NULL, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
+                "previous_mesh = NULL, revision = revision + 1, updated = ? WHERE id = ?",
+                (*(previous[key] for key in (
+                    "mesh_file", "landmarks_file", "mesh_filename", "mesh_format", "n_vertices",
+                    "n_faces", "layout", "n_landmarks")), _now(), project_id),
             )
         self._sweep(project_id)
         return self.get(project_id)
