@@ -30,6 +30,11 @@ Layouts (`LAYOUTS`)
     - mouth, outer lip contour: corners 48, 54, upper lip 49, 51, 53, lower lip 55, 57,
       59, i.e. eight points about 45 degrees apart round the lip ellipse (the cupid's-bow
       peaks 50/52 would bunch the upper points near the midline).
+``"dutreve22"`` (22 points)
+    ``dutreve21`` and the chin (iBUG 8): the mouth's eight points alone cannot open a jaw,
+    so an open mouth only stretched the lower lip; with the chin the jaw follows. One more
+    click (the chin is on the midline; *Mirror* places the other side's partners), which is
+    why the web app starts new projects in it.
 ``"mediapipe68"`` (68 points)
     The same 68 points as ``ibug68``, named for reading MediaPipe face-mesh output:
     ``from_mediapipe468(mesh, get_layout("mediapipe68"))`` gives 68 iBUG-ordered points.
@@ -483,6 +488,8 @@ _DUTREVE21_IBUG = (
     48, 49, 51, 53, 54, 55, 57, 59,  # outer lip: corners, 3 upper, 3 lower
 )
 
+_DUTREVE22_IBUG = _DUTREVE21_IBUG + (8,)  # and the chin
+
 LAYOUTS: dict[str, Layout] = {
     layout.name: layout
     for layout in (
@@ -490,6 +497,11 @@ LAYOUTS: dict[str, Layout] = {
             "dutreve21",
             "Dutreve et al. 2008 §5: 3 per brow, 2 per eye, 3 on the nose, 8 around the mouth",
             _DUTREVE21_IBUG,
+        ),
+        _ibug_layout(
+            "dutreve22",
+            "Dutreve et al.'s 21 points and the chin, so the jaw follows the mouth",
+            _DUTREVE22_IBUG,
         ),
         _ibug_layout(
             "ibug68",
