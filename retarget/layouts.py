@@ -56,7 +56,7 @@ face mesh (``mediapipe/modules/face_geometry/data/canonical_face_model.obj``, Ap
 the 478-point "refined" output appends 10 iris points, which are not used). It is written
 for this module after the correspondences in common use (e.g. PeizhiYan/
 Mediapipe_2_Dlib_Landmarks, ros4hri/hri_face_detect's table), one vertex per point, and
-checked three ways (see ``tests/test_layouts.py``):
+checked three ways (see ``tests/unit/test_layouts.py``):
 
 1. Left/right: the table maps every iBUG mirror pair to a mirror pair of the canonical
    model (equal y, z and opposite x) and every midline point to a midline vertex

@@ -1,4 +1,4 @@
-// The browser's binary codecs (web/static/js/net/wire.js) driven from tests/test_wire.py:
+// The browser's binary codecs (web/static/js/net/wire.js) driven from tests/api/test_wire.py:
 //
 //   node wire.mjs decode-frames FILE    length-prefixed RTDF frames -> one JSON object each
 //   node wire.mjs decode-mesh FILE      length-prefixed RTMA bodies -> one JSON object each

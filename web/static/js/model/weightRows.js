@@ -1,7 +1,7 @@
 /**
  * One joint's weight in a row of sparse skin weights, and the painting rule that sets it:
  * the JavaScript twin of retarget/weights/painting.py `with_weight` followed by its top-k
- * (tests/test_painting.py runs both on the same rows).
+ * (tests/unit/test_painting.py runs both on the same rows).
  *
  * Rows are the server's form (GET /api/projects/{id}/rig/weights): vertex v's influences
  * are slots v*k .. v*k+k-1 of `indices` (joint) and `weights`; a slot of weight 0 is free.

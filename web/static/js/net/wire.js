@@ -1,6 +1,6 @@
 /**
  * Every binary format between the server and the page, in one module: the JavaScript
- * twin of `server/wire.py`, whose docstring gives each byte layout (tests/test_wire.py
+ * twin of `server/wire.py`, whose docstring gives each byte layout (tests/api/test_wire.py
  * runs the two against each other in node).
  *
  * - `StreamDecoder`: stream frames "RTDF" (server -> page, WebSocket), a frame's feature

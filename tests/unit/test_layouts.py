@@ -23,7 +23,7 @@ from retarget.layouts import (
     get_layout,
 )
 
-ICT_NPZ = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict_face" / "ict_face.npz"
+ICT_NPZ = Path(__file__).resolve().parents[3] / "shared" / "data" / "ict_face" / "ict_face.npz"
 
 # Vertices of MediaPipe's canonical face model (google/mediapipe,
 # mediapipe/modules/face_geometry/data/canonical_face_model.obj, Apache License 2.0),

@@ -18,7 +18,7 @@ from retarget.weights.painting import (
     automatic_rows, painted_rig, painted_vertices, reset_joints, weight_edit, with_weight,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 N = 7
 
 

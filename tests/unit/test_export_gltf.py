@@ -70,7 +70,7 @@ def exported(face, tmp_path_factory):
 # and skinning (§3.7) and animation sampling (§3.11), written to read animated takes. It
 # shares no code with the exporter (GltfDocument parses, GlbBuilder writes), so it checks
 # the file, not the exporter's own idea of it; three.js (tests/e2e/test_export_threejs.py)
-# and Blender (tests/test_blender.py) check it again.
+# and Blender (tests/unit/test_blender.py) check it again.
 
 
 @functools.lru_cache(maxsize=8)

@@ -31,7 +31,7 @@ from retarget.sample_face import demo_weights, posed_vertices, sample_face
 from retarget.skin import skin_displacements
 from retarget.weights import compute_weights
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EVALUATE = ROOT / "tests" / "blender" / "evaluate_glb.py"
 FPS = 30.0
 # key frames, subframes between keys (LINEAR interpolation), the last key

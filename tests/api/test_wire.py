@@ -22,7 +22,7 @@ from server.wire import (FLAG_HEAD_ROTATION, FLAG_LOST_POINTS, FLAG_NEUTRAL, HEA
                          decode_frame, decode_points, edit_arrays, encode_frame, encode_points,
                          mesh_arrays, weights_binary)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WIRE_JS = ROOT / "tests" / "js" / "wire.mjs"
 
 

@@ -14,7 +14,7 @@ from PIL import Image
 
 from retarget.gltf import read_gltf
 from server.app import create_app
-from tests.test_textures import MTL, _image, _obj
+from tests.unit.test_textures import MTL, _image, _obj
 
 
 @pytest.fixture(scope="module")
