@@ -6,7 +6,6 @@ reason and makes no project."""
 
 import io
 import struct
-import time
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ from retarget.sources.conditioning import ConditionSettings
 from server.app import create_app
 from server.players import TakePlayer
 from tests.gltf_check import assert_valid_gltf
+from tests.waits import wait_job
 
 FPS = 30.0
 
@@ -141,8 +141,7 @@ def test_a_painted_ellipsoid_rig_exports_as_a_skin(app, client, sample, exported
     pid, take = sample
     new = import_glb(client, exported[1].read_bytes(), "sample.glb").json()["project"]["id"]
     job = client.post(f"/api/projects/{new}/rig", json={"method": "ellipsoid"}).json()
-    while (job := client.get(f"/api/jobs/{job['id']}").json())["state"] == "running":
-        time.sleep(0.05)
+    job = wait_job(client, job["id"], poll_s=0.05)
     assert job["state"] == "done", job
     store = app.state.store
     automatic = store.rig(new)

@@ -9,7 +9,6 @@ import json
 import struct
 import subprocess
 import sys
-import time
 from functools import lru_cache
 
 import numpy as np
@@ -21,6 +20,7 @@ from retarget.sample_face import sample_face
 from server.app import create_app
 from server.deps import get_store
 from server.store import ProjectNotFound, ProjectStore, StaleRig
+from tests.waits import wait_job
 
 
 @lru_cache(maxsize=1)
@@ -45,10 +45,7 @@ def rigged_project(client: TestClient, tmp_path) -> str:
                    json={"vertex_indices": _face().landmarks68.tolist(), "layout": "ibug68"})
     assert r.status_code == 200, r.text
     job = client.post(f"/api/projects/{pid}/rig", json={"method": "biharmonic"}).json()
-    deadline = time.monotonic() + 30
-    while (state := client.get(f"/api/jobs/{job['id']}").json())["state"] == "running":
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    state = wait_job(client, job["id"])
     assert state["state"] == "done", state
     return pid
 

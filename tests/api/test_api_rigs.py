@@ -7,7 +7,6 @@ import re
 import shutil
 import struct
 import threading
-import time
 from functools import lru_cache
 
 import numpy as np
@@ -21,6 +20,7 @@ from retarget.sample_face import sample_face
 from retarget.weights import compute_weights
 from server.app import create_app
 from server.jobs import JobBusy, JobRegistry
+from tests.waits import wait_job
 
 
 @lru_cache(maxsize=1)
@@ -57,15 +57,10 @@ def ibug_json():
     return {"vertex_indices": _face().landmarks68.tolist(), "layout": "ibug68"}
 
 
-def run_job(client, job_id, timeout=30.0):
-    seen, deadline = [], time.monotonic() + timeout
-    while True:
-        state = client.get(f"/api/jobs/{job_id}").json()
-        seen.append(state["progress"])
-        if state["state"] != "running":
-            return state, seen
-        assert time.monotonic() < deadline, state
-        time.sleep(0.01)
+def run_job(client, job_id):
+    """(the stopped job, the progress figure of every poll)."""
+    seen = []
+    return wait_job(client, job_id, poll_s=0.01, progress=seen), seen
 
 
 def test_landmarks_round_trip(client, face_project):

@@ -5,7 +5,6 @@ calibration file or checkerboard videos) against the rendered truth, and bad inp
 leaves everything intact."""
 
 import io
-import time
 
 import cv2
 import numpy as np
@@ -26,6 +25,7 @@ from retarget.testing.stereo_rig import (
 from server.app import create_app
 from server.wire import FLAG_HEAD_ROTATION, encode_points
 from tests.ws_messages import binary_frames, replies
+from tests.waits import wait_job
 
 FPS = 30.0
 
@@ -105,17 +105,9 @@ def track_stereo(client, pid, files: dict, **fields):
                        data={"method": "stereo", **fields})
 
 
-def finished_job(client, job_id, timeout_s=120.0):
-    deadline = time.monotonic() + timeout_s
-    while (job := client.get(f"/api/jobs/{job_id}").json())["state"] == "running":
-        assert time.monotonic() < deadline, job
-        time.sleep(0.05)
-    return job
-
-
 def tracked_points(client, pid, answer):
     """The finished job's take: its info and (F, N, 3) points."""
-    job = finished_job(client, answer["id"])
+    job = wait_job(client, answer["id"], timeout_s=120, poll_s=0.05)
     assert job["state"] == "done", job["detail"]
     take_id = job["result"]["take"]
     info = client.get(f"/api/projects/{pid}/takes/{take_id}").json()
@@ -230,7 +222,7 @@ def test_a_ring_marker_video_is_tracked_in_a_job(client, sample_id, tmp_path):
     whole = (tmp_path / "rings.mkv").read_bytes()
     r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
                     files={"file": ("cut.mkv", whole[:int(0.6 * len(whole))])})
-    detail = finished_job(client, r.json()["id"])["result"]
+    detail = wait_job(client, r.json()["id"], timeout_s=120, poll_s=0.05)["result"]
     assert (detail["frames"], detail["frames_claimed"], detail["truncated"]) == (2, 4, True)
     expected = truth.points2d[:, 0] * [1, -1] + [0, 480]  # pixels, y up
     assert np.nanmedian(np.linalg.norm(points - expected, axis=2)) < 0.5
@@ -241,7 +233,7 @@ def test_a_ring_marker_video_is_tracked_in_a_job(client, sample_id, tmp_path):
     plain = write_video(tmp_path / "plain.mkv", [np.full((480, 640, 3), 200, np.uint8)] * 2)
     r = client.post(f"/api/projects/{sample_id}/takes/track", data={"method": "markers"},
                     files={"file": ("plain.mkv", plain.read_bytes())})
-    job = finished_job(client, r.json()["id"])
+    job = wait_job(client, r.json()["id"], timeout_s=120, poll_s=0.05)
     assert job["state"] == "failed" and job["detail"].startswith("'plain.mkv': found 0 ring markers")
 
 

@@ -22,6 +22,8 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import sync_playwright
 
+from tests.waits import scaled, scaled_ms
+
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "e2e"
@@ -55,7 +57,8 @@ class Server:
                 [sys.executable, "-m", "server.cli", "serve", "--port", str(self.port),
                  "--data-dir", str(self.data_dir), *self.args],
                 stdout=out, stderr=subprocess.STDOUT, cwd=Path(__file__).resolve().parents[2])
-        deadline = time.monotonic() + _STARTUP_S
+        startup_s = scaled(_STARTUP_S)
+        deadline = time.monotonic() + startup_s
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
                 raise RuntimeError(f"server exited with {self.process.returncode}:\n{self.log.read_text()}")
@@ -69,7 +72,7 @@ class Server:
                 time.sleep(0.1)
             except OSError:
                 time.sleep(0.1)
-        raise RuntimeError(f"server did not answer within {_STARTUP_S} s:\n{self.log.read_text()}")
+        raise RuntimeError(f"server did not answer within {startup_s:.0f} s:\n{self.log.read_text()}")
 
     def stop(self) -> None:
         if self.process is not None and self.process.poll() is None:
@@ -143,9 +146,10 @@ def open_project(page, server: Server, project_id: str) -> None:
 
 
 @pytest.fixture
-def server(tmp_path):
-    """A real server on a free port with a fresh data dir (holding the sample project)."""
-    srv = Server(tmp_path / "data").start()
+def server(tmp_path, copy_sample_data):
+    """A real server on a free port with a fresh data dir holding the sample project
+    (a copy of the one built once per run: the server would build the same at its start)."""
+    srv = Server(copy_sample_data(tmp_path / "data")).start()
     yield srv
     srv.stop()
 
@@ -167,6 +171,7 @@ def page(browser, request):
     """A fresh page (1280 x 800). Console errors and page exceptions fail the test; a
     screenshot is saved under test-artifacts/e2e/ whatever the outcome."""
     context = browser.new_context(viewport={"width": 1280, "height": 800})
+    context.set_default_timeout(scaled_ms(30_000))  # Playwright's own default, scaled to the load
     pg = context.new_page()
     errors: list[str] = []
     pg.on("console", lambda msg: errors.append(f"console.{msg.type}: {msg.text}")

@@ -17,7 +17,6 @@ from __future__ import annotations
 import base64
 import io
 import struct
-import time
 
 import httpx
 import numpy as np
@@ -28,6 +27,7 @@ from retarget.gltf.document import GltfDocument
 from retarget.sample_face import demo_weights, sample_face
 from retarget.skin import SkinWeights, skin_displacements
 from tests.e2e.conftest import Server, open_project
+from tests.waits import wait_job
 
 TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal
 FPS = 30.0
@@ -152,11 +152,7 @@ def _rest(server, pid) -> np.ndarray:
 
 def _rig(server, pid, method: str) -> None:
     job = server.api("POST", f"/api/projects/{pid}/rig", {"method": method})
-    deadline = time.monotonic() + 120
-    while job["state"] == "running":
-        assert time.monotonic() < deadline, job
-        time.sleep(0.1)
-        job = server.api("GET", f"/api/jobs/{job['id']}")
+    job = wait_job(server, job["id"], timeout_s=120, poll_s=0.1)
     assert job["state"] == "done", job
 
 

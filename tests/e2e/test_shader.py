@@ -13,12 +13,12 @@ pixels follow the pose, the heat map and the wireframe switch.
 from __future__ import annotations
 
 import base64
-import time
 
 import numpy as np
 import pytest
 
 from retarget.skin import SkinWeights, skin_displacements
+from tests.waits import wait_job
 
 TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal
 
@@ -120,11 +120,7 @@ def _stored_rig(server, project_id: str) -> SkinWeights:
 
 def _wait_for_rig(server, project_id: str, method: str) -> None:
     job = server.api("POST", f"/api/projects/{project_id}/rig", {"method": method})
-    deadline = time.monotonic() + 120
-    while job["state"] == "running":
-        assert time.monotonic() < deadline, job
-        time.sleep(0.2)
-        job = server.api("GET", f"/api/jobs/{job['id']}")
+    job = wait_job(server, job["id"], timeout_s=120, poll_s=0.2)
     assert job["state"] == "done", job
 
 

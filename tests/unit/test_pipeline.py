@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.interpolate import RBFInterpolator
 
 from retarget.errors import RetargetError
 from retarget.pipeline import Retargeter, transfer
@@ -30,6 +31,9 @@ def test_displacements_follow_the_fitted_space_transform(points):
     rt = Retargeter("linear", smoothing=0.0).fit(s0, t0)
     expected = rt.transform_.transform(frames) - t0
     np.testing.assert_allclose(rt.displacements(frames), expected, atol=1e-5)
+    oracle = RBFInterpolator(s0, t0, kernel="linear", degree=1)  # Dutreve eq. 1-2, scipy's own solve
+    np.testing.assert_allclose(rt.displacements(frames),
+                               np.stack([oracle(f) for f in frames]) - t0, atol=1e-5)
     # A source three times smaller than the target: motion is scaled up by the transform.
     assert np.linalg.norm(rt.displacements(frames)) > 2.0 * np.linalg.norm(frames - s0)
 
@@ -57,6 +61,11 @@ def test_2d_source_drives_3d_target(points):
     assert d.shape == (4, 20, 3) and np.isfinite(d).all()
     with pytest.raises(RetargetError, match=r"shape \(F, 20, 2\)"):
         rt.displacements(frames)
+    # the same kernel in scipy, fitted on the image-plane points, is the oracle
+    exact = Retargeter("linear", smoothing=0.0).fit(s0[:, :2], t0)
+    theirs = RBFInterpolator(s0[:, :2], t0, kernel="linear", degree=1)
+    expected = np.stack([theirs(f[:, :2]) for f in frames]) - t0
+    np.testing.assert_allclose(exact.displacements(frames[:, :, :2]), expected, atol=1e-5)
 
 
 def test_transfer_deforms_the_mesh_by_skinning(points):

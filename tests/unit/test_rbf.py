@@ -68,12 +68,18 @@ def test_2d_source_maps_into_3d_target_space(cloud):
     assert len(rbf.axes_) == 2  # the polynomial spans the source plane only
 
 
-def test_coplanar_3d_source_is_handled_without_nans(cloud):
+def test_coplanar_3d_source_is_handled_as_the_plane_it_spans(cloud):
+    """Markers seen by one camera, stored with a constant z: the polynomial cannot span
+    the missing axis, so the fit is the 2D one, and scipy's 2D interpolator agrees."""
     s0, t0, query = cloud
     flat = s0.copy()
     flat[:, 2] = 4.0
-    out = RBFTransform("linear").fit(flat, t0).transform(query)
-    assert np.isfinite(out).all()
+    assert np.isfinite(RBFTransform("linear").fit(flat, t0).transform(query)).all()
+    exact = RBFTransform("linear", smoothing=0.0).fit(flat, t0)
+    np.testing.assert_allclose(exact.transform(flat), t0, atol=1e-8)
+    on_plane = np.hstack([query[:, :2], np.full((50, 1), 4.0)])
+    theirs = RBFInterpolator(s0[:, :2], t0, kernel="linear", degree=1)(query[:, :2])
+    np.testing.assert_allclose(exact.transform(on_plane), theirs, rtol=1e-7, atol=1e-9)
 
 
 def test_smoothing_is_scale_free(cloud):

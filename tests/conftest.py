@@ -1,0 +1,41 @@
+"""What every test folder shares: the built-in sample project built once per run (waits
+for jobs and the timeout scale are in `tests.waits`).
+
+Folders: ``unit/`` tests the library (`retarget`), ``api/`` the server in process
+(FastAPI's TestClient, the isolation children, the wire formats), ``e2e/`` a real server on
+a real port driven by Chromium, ``js/`` holds the Node scripts some of them run.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def sample_data_dir(tmp_path_factory) -> Path:
+    """A server data dir holding only the built-in sample project (mesh, landmarks and
+    rig), built once per run; copy it (`copy_sample_data`) rather than use it."""
+    from server.sample import ensure_sample_project
+    from server.store import ProjectStore
+
+    folder = tmp_path_factory.mktemp("sample") / "data"
+    store = ProjectStore(folder)
+    try:
+        assert ensure_sample_project(store) is not None
+    finally:
+        store.close()
+    shutil.rmtree(folder / "scratch", ignore_errors=True)
+    return folder
+
+
+@pytest.fixture
+def copy_sample_data(sample_data_dir):
+    """A function: `copy_sample_data(dest)` makes `dest` a fresh data dir holding the
+    sample project, as a server started on an empty data dir would make it."""
+    def copy(dest: Path) -> Path:
+        shutil.copytree(sample_data_dir, dest)
+        return dest
+    return copy
