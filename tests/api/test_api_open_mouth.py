@@ -6,7 +6,6 @@ the rig dropped) whose lips are separate, and revert brings the welded mesh back
 from __future__ import annotations
 
 import struct
-import time
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from retarget.mesh import load_mesh, mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
 from retarget.testing.welded import welded_lips_face
 from server.app import create_app
+from tests.waits import wait_job
 
 
 def _obj(tmp_path, face) -> bytes:
@@ -56,9 +56,7 @@ def test_welded_lips_open_into_a_new_revision_and_revert(client, tmp_path):
                     "detail": "The lips are joined in one surface: the mouth cannot open."}
     r = client.post(f"/api/projects/{pid}/rig", json={"method": "ellipsoid"})
     assert r.status_code == 202
-    job = r.json()["id"]
-    while client.get(f"/api/jobs/{job}").json()["state"] == "running":
-        time.sleep(0.1)
+    assert wait_job(client, r.json()["id"])["state"] == "done"
     before = client.get(f"/api/projects/{pid}").json()
     assert before["rig"] and before["previous_mesh"] is None
     v0, f0 = _arrays(client, pid)
