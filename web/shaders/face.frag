@@ -1,5 +1,6 @@
 // Display pass of SkinnedFace: a matte skin-like surface lit by the scene's lights (the
-// Viewer's hemisphere, key, fill and rim), or coloured by one joint's weights (heat map).
+// Viewer's hemisphere, key, fill and rim), its albedo the scan's base-colour texture or a
+// plain skin tone, or coloured by one joint's weights (heat map, over either).
 // Lights follow three.js's conventions (ShaderMaterial with lights: true, Lambert / PI),
 // so the face and any three.js material beside it answer the same lights the same way.
 
@@ -10,10 +11,13 @@ uniform vec3 diffuse;      // albedo, linear
 uniform float specular;    // reflectance at normal incidence (skin: about 0.03)
 uniform float shininess;   // Blinn-Phong exponent
 uniform int heatJoint;     // -1: off
+uniform sampler2D baseColorMap; // sRGB texture, decoded to linear by the sampler
+uniform bool textured;     // albedo from baseColorMap (else diffuse)
 
 in vec3 vViewPosition;
 in vec3 vNormal;
 in float vHeat;
+in vec2 vUv;
 
 // three.js's output chunks below write gl_FragColor
 layout( location = 0 ) out highp vec4 pc_fragColor;
@@ -45,7 +49,7 @@ void main() {
 	vec3 normal = normalize( vNormal ) * ( gl_FrontFacing ? 1.0 : - 1.0 );
 	vec3 toEye = isOrthographic ? vec3( 0.0, 0.0, 1.0 ) : normalize( - vViewPosition );
 
-	vec3 albedo = heatJoint >= 0 ? heatColor( vHeat ) : diffuse;
+	vec3 albedo = heatJoint >= 0 ? heatColor( vHeat ) : textured ? texture( baseColorMap, vUv ).rgb : diffuse;
 
 	vec3 irradiance = getAmbientLightIrradiance( ambientLightColor );
 

@@ -1,6 +1,6 @@
 // Display pass of SkinnedFace: the surface at the positions the skinning pass wrote, with
 // the normals the normal pass wrote (both per pose, not per draw), lit in face.frag.
-// three.js's ShaderMaterial prefix declares position, normal and the matrices.
+// three.js's ShaderMaterial prefix declares position, normal, uv and the matrices.
 
 #include "skinning.glsl"
 #include "vertex_texels.glsl"
@@ -11,6 +11,7 @@ uniform int heatJoint;                  // joint whose weights colour the surfac
 out vec3 vViewPosition; // view space
 out vec3 vNormal;       // view space
 out float vHeat;        // weight of heatJoint
+out vec2 vUv;           // texture coordinates (0, 0 for a mesh without uv)
 
 void main() {
 
@@ -18,6 +19,7 @@ void main() {
 	vViewPosition = viewPosition.xyz;
 	vNormal = normalMatrix * texelFetch( skinnedNormals, skinTexel( gl_VertexID ), 0 ).xyz;
 	vHeat = heatJoint >= 0 ? skinWeightOf( gl_VertexID, heatJoint ) : 0.0;
+	vUv = uv;
 
 	gl_Position = projectionMatrix * viewPosition;
 

@@ -150,6 +150,7 @@ export class App {
 				$( 'hint' ).textContent = 'Loading the mesh…';
 				const arrays = await api.meshArrays( id );
 				const face = await SkinnedFace.create( arrays );
+				if ( arrays.textured ) face.setTexture( await api.meshTexture( id ) );
 				if ( ! current() ) {
 
 					face.dispose();
@@ -160,6 +161,7 @@ export class App {
 				this.face = face;
 				this.viewer.setObject( face.mesh );
 				this.viewer.setWireframe( $( 'wireframe' ).checked );
+				this.showSurface( { reset: true } );
 				this.picker.setMesh( face.mesh );
 				$( 'mesh-info' ).textContent = meshInfo( project.mesh, arrays.positions );
 
@@ -197,6 +199,20 @@ export class App {
 	}
 
 	/** Drop everything of the current project from the page (not from the server). */
+	/**
+	 * Draw the face with its texture or plain shaded, as the Texture / Shaded switch says;
+	 * the switch shows only for a face with a texture.
+	 * @param {{reset?: boolean}} [options] - reset: back to the default, the texture.
+	 */
+	showSurface( { reset = false } = {} ) {
+
+		const textured = this.face?.hasTexture ?? false;
+		$( 'surface-switch' ).hidden = ! textured;
+		if ( reset ) $( 'surface-texture' ).checked = true;
+		this.face?.setTextured( $( 'surface-texture' ).checked );
+
+	}
+
 	closeProject() {
 
 		this.projectSettings.cancel(); // what was not sent belongs to this project
@@ -219,6 +235,7 @@ export class App {
 		$( 'mesh-info' ).textContent = '';
 		this.marks.clear();
 
+		$( 'surface-switch' ).hidden = true;
 	}
 
 	/** The shown project was deleted: show the first one left, or none. */

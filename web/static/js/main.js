@@ -84,6 +84,7 @@ app.regions.addEventListener( 'change', () => {
 $( 'wireframe' ).addEventListener( 'change', ( event ) => viewer.setWireframe( event.target.checked ) );
 $( 'frame-view' ).addEventListener( 'click', () => viewer.frame() );
 window.addEventListener( 'keydown', async ( event ) => {
+for ( const id of [ 'surface-texture', 'surface-shaded' ] ) $( id ).addEventListener( 'change', () => app.showSurface() );
 
 	try {
 
@@ -107,7 +108,7 @@ async function key( event ) {
 
 	const target = event.target;
 	if ( target.closest?.( 'dialog[open]' ) ) return;
-	const typing = target instanceof HTMLInputElement && target.type !== 'checkbox' || target instanceof HTMLSelectElement || target instanceof HTMLTextAreaElement;
+	const typing = target instanceof HTMLInputElement && target.type !== 'checkbox' && target.type !== 'radio' || target instanceof HTMLSelectElement || target instanceof HTMLTextAreaElement;
 	const k = event.key.toLowerCase();
 	if ( k === 'escape' ) {
 
@@ -129,6 +130,7 @@ async function key( event ) {
 	if ( k === 'w' ) $( 'wireframe' ).click();
 	else if ( k === 'f' ) viewer.frame();
 
+	else if ( k === 't' && ! $( 'surface-switch' ).hidden ) $( $( 'surface-texture' ).checked ? 'surface-shaded' : 'surface-texture' ).click();
 }
 
 window.app = app;

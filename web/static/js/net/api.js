@@ -133,12 +133,25 @@ export const api = {
 
 	/**
 	 * The mesh as arrays (the "RTMA" format of server/wire.py).
-	 * @returns {Promise<{positions: Float32Array, faces: Uint32Array}>} positions (3V) in the
-	 *   mesh's own units; faces (3F) vertex indices.
+	 * @returns {Promise<{positions: Float32Array, faces: Uint32Array, uv: Float32Array|null, textured: boolean}>}
+	 *   positions (3V) in the mesh's own units; faces (3F) vertex indices; uv (2V) or null;
+	 *   textured: `meshTexture` has an image for it.
 	 */
 	async meshArrays( id ) {
 
 		return new MeshArraysDecoder().decode( await request( 'GET', `/api/projects/${ id }/mesh/arrays`, { binary: true } ) );
+
+	},
+
+	/**
+	 * The mesh's base-colour texture (GET .../mesh/texture, a PNG), flipped so its first
+	 * row is at v = 0 as WebGL samples it with OBJ-convention uv.
+	 * @returns {Promise<ImageBitmap>}
+	 */
+	async meshTexture( id ) {
+
+		const response = await request( 'GET', `/api/projects/${ id }/mesh/texture`, { raw: true } );
+		return createImageBitmap( await response.blob(), { imageOrientation: 'flipY' } );
 
 	},
 
@@ -224,7 +237,15 @@ export const api = {
 	 * @param {(fraction: number) => void} onProgress - 0..1 of the bytes sent
 	 * @returns {Promise<object>} the updated project
 	 */
-	uploadMesh: ( id, file, onProgress ) => upload( 'PUT', `/api/projects/${ id }/mesh`, file, {}, onProgress ),
+	/**
+	 * Upload a mesh file with the files it refers to (an OBJ's MTL and images, a glTF's
+	 * buffers), with progress.
+	 * @param {File} file - the mesh, or a zip of it and its files.
+	 * @param {(fraction: number) => void} [onProgress]
+	 * @param {File[]} [sideFiles] - sent as the `files` field.
+	 * @returns {Promise<object>} the project
+	 */
+	uploadMesh: ( id, file, onProgress, sideFiles = [] ) => upload( 'PUT', `/api/projects/${ id }/mesh`, file, { files: sideFiles }, onProgress ),
 
 	/** @returns {Promise<Array<object>>} takes {id, name, source, layout, fps, n_frames, n_points, dims, duration, trim}, oldest first */
 	takes: ( id ) => request( 'GET', `/api/projects/${ id }/takes` ),
@@ -320,8 +341,8 @@ function uploadKey() {
 }
 
 /**
- * A multipart upload (field "file" plus `fields`, whose Files go as files) with progress;
- * XHR because fetch reports no upload progress.
+ * A multipart upload (field "file" plus `fields`, whose Files, or arrays of them, go as
+ * files) with progress; XHR because fetch reports no upload progress.
  * @param {Object<string, string>} [headers] - extra request headers
  * @returns {Promise<object>} the JSON answer
  */
@@ -365,7 +386,8 @@ function upload( method, url, file, fields, onProgress, headers = {} ) {
 		form.append( 'file', file, file.name );
 		for ( const [ key, value ] of Object.entries( fields ?? {} ) ) {
 
-			if ( value instanceof Blob ) form.append( key, value, value.name );
+			if ( Array.isArray( value ) ) for ( const item of value ) form.append( key, item, item.name );
+			else if ( value instanceof Blob ) form.append( key, value, value.name );
 			else if ( value !== undefined && value !== null && value !== '' ) form.append( key, String( value ) );
 
 		}

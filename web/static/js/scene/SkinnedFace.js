@@ -4,8 +4,11 @@ import {
 	Color,
 	DoubleSide,
 	GLSL3,
+	LinearMipmapLinearFilter,
 	Mesh,
+	SRGBColorSpace,
 	ShaderMaterial,
+	Texture,
 	UniformsLib,
 	UniformsUtils,
 	WebGLRenderer,
@@ -34,18 +37,22 @@ const SHADER_FILES = [ 'skinning.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 
  * default biharmonic rig weights every vertex by every joint) in an RGBA32F texture
  * (GPUSkinWeights). Both upload once per rig, and painting (`updateWeights`) uploads only
  * the span of rows it changed; a pose updates only the N-texel displacement texture.
+ *
+ * A mesh with uv may be drawn with its base-colour texture (`setTexture`, `setTextured`);
+ * the heat map is drawn over it all the same.
  */
 export class SkinnedFace {
 
 	/**
-	 * @param {{positions: Float32Array, faces: Uint32Array}} arrays - rest positions (V*3,
-	 *   mesh units, vertex-major) and triangles (F*3 vertex indices); used in place, not copied.
+	 * @param {{positions: Float32Array, faces: Uint32Array, uv?: Float32Array|null}} arrays -
+	 *   rest positions (V*3, mesh units, vertex-major), triangles (F*3 vertex indices) and
+	 *   texture coordinates (V*2, v up) or null; used in place, not copied.
 	 * @param {{shaderURL?: string}} [options] - where the GLSL files are served.
 	 * @returns {Promise<SkinnedFace>}
 	 */
-	static async create( { positions, faces }, { shaderURL = '/shaders/' } = {} ) {
+	static async create( { positions, faces, uv = null }, { shaderURL = '/shaders/' } = {} ) {
 
-		return new SkinnedFace( positions, faces, await new ShaderLoader().load( shaderURL, SHADER_FILES ) );
+		return new SkinnedFace( positions, faces, await new ShaderLoader().load( shaderURL, SHADER_FILES ), uv );
 
 	}
 
@@ -54,8 +61,9 @@ export class SkinnedFace {
 	 * @param {Float32Array} positions - (V*3) rest positions.
 	 * @param {Uint32Array} faces - (F*3) vertex indices.
 	 * @param {Object<string, string>} shaders - GLSL by file name, includes resolved.
+	 * @param {Float32Array|null} [uv] - (V*2) texture coordinates, OBJ's convention (v up).
 	 */
-	constructor( positions, faces, shaders ) {
+	constructor( positions, faces, shaders, uv = null ) {
 
 		if ( ! ( positions instanceof Float32Array ) || positions.length === 0 || positions.length % 3 !== 0 ) {
 
@@ -70,6 +78,12 @@ export class SkinnedFace {
 		}
 
 		const nVertices = positions.length / 3;
+		if ( uv !== null && ( ! ( uv instanceof Float32Array ) || uv.length !== 2 * nVertices ) ) {
+
+			throw new TypeError( `SkinnedFace: uv must be null or a Float32Array of ${ nVertices } x 2 = ${ 2 * nVertices }; got ${ describe( uv ) }.` );
+
+		}
+
 		if ( nVertices > MAX_VERTICES ) throw new RangeError( `SkinnedFace: ${ nVertices } vertices; at most ${ MAX_VERTICES } are supported.` );
 		let maxIndex = 0;
 		for ( let i = 0; i < faces.length; i ++ ) if ( faces[ i ] > maxIndex ) maxIndex = faces[ i ];
@@ -89,6 +103,7 @@ export class SkinnedFace {
 		const geometry = new BufferGeometry();
 		geometry.setAttribute( 'position', new BufferAttribute( positions, 3 ) );
 		geometry.setIndex( new BufferAttribute( faces, 1 ) );
+		if ( uv !== null ) geometry.setAttribute( 'uv', new BufferAttribute( uv, 2 ) );
 		geometry.computeVertexNormals(); // rest normals: for picking tools, and where triangles collapse
 		geometry.computeBoundingBox();
 		geometry.computeBoundingSphere();
@@ -112,6 +127,8 @@ export class SkinnedFace {
 			specular: { value: 0.03 },
 			shininess: { value: 24 },
 			heatJoint: { value: - 1 },
+			baseColorMap: { value: null },
+			textured: { value: false },
 		} );
 
 		const material = new ShaderMaterial( {
@@ -298,6 +315,51 @@ export class SkinnedFace {
 
 	}
 
+	/** True when the face has uv and a base-colour texture to draw (`setTexture`). */
+	get hasTexture() {
+
+		return this.mesh.geometry.getAttribute( 'uv' ) !== undefined && this.mesh.material.uniforms.baseColorMap.value !== null;
+
+	}
+
+	/**
+	 * Set (or with null, remove) the base-colour texture, sampled with the uv; it is drawn
+	 * once `setTextured( true )`.
+	 * @param {ImageBitmap|HTMLImageElement|HTMLCanvasElement|null} image - sRGB colours, its
+	 *   first row at v = 0 (an ImageBitmap made with imageOrientation: 'flipY'; WebGL does not
+	 *   flip bitmaps on upload).
+	 */
+	setTexture( image ) {
+
+		const uniforms = this.mesh.material.uniforms;
+		uniforms.baseColorMap.value?.dispose();
+		uniforms.baseColorMap.value = null;
+		if ( image !== null ) {
+
+			const texture = new Texture( image );
+			texture.flipY = false;
+			texture.colorSpace = SRGBColorSpace; // decoded to linear by the sampler
+			texture.minFilter = LinearMipmapLinearFilter;
+			texture.needsUpdate = true;
+			uniforms.baseColorMap.value = texture;
+
+		}
+
+		uniforms.textured.value = uniforms.textured.value && this.hasTexture;
+
+	}
+
+	/**
+	 * Draw the base-colour texture (true) or the plain shaded surface (false), e.g. to judge
+	 * the shape; without a texture the surface is plain either way.
+	 * @param {boolean} on
+	 */
+	setTextured( on ) {
+
+		this.mesh.material.uniforms.textured.value = Boolean( on ) && this.hasTexture;
+
+	}
+
 	/** @param {boolean} on - draw triangle edges instead of the surface. */
 	setWireframe( on ) {
 
@@ -335,6 +397,7 @@ export class SkinnedFace {
 	dispose() {
 
 		this._disposeRigTextures();
+		this.setTexture( null );
 		this.mesh.geometry.dispose();
 		this.mesh.material.dispose();
 		this._passes.dispose();
