@@ -240,6 +240,11 @@ def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page
 
 @pytest.mark.parametrize("camera", ["no face"], indirect=True)
 def test_a_camera_without_a_face_says_so_and_leaves_the_face_at_rest(server, page):
+    # a capture over the first seconds waits for a face (another test may have left the
+    # project's neutral on a frame number, which must have a face)
+    sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
+    conditioning = {**sample["settings"].get("conditioning", {}), "neutral": {"mode": "first_seconds", "seconds": 0.5}}
+    server.api("PATCH", f"/api/projects/{sample['id']}", {"settings": {"conditioning": conditioning}})
     sample = open_sample(server, page)
     before = [server.api("GET", f"/api/projects/{sample['id']}{part}") for part in ("", "/takes")]
     play_webcam(page, clicks=2)  # impatient: again while the camera and the tracker load

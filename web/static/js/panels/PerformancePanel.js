@@ -1,6 +1,7 @@
 import { PointsEncoder } from '../net/wire.js';
 import { ConditioningForm } from './ConditioningForm.js';
 import { $, guarded } from './dom.js';
+import { NeutralCapture } from './NeutralCapture.js';
 import { Recorder } from './Recorder.js';
 import { SourceStatus } from './SourceStatus.js';
 import { TakeImport } from './TakeImport.js';
@@ -13,7 +14,10 @@ import { TakeList } from './TakeList.js';
  * recording (Recorder) and the conditioning (ConditioningForm, a view of the page's
  * ConditioningSettings, which every start carries).
  *
- * Markerless tracking runs here, in the page (tracking/). The panel holds no maths: the
+ * Markerless tracking runs here, in the page (tracking/). Its neutral is captured after a
+ * countdown (NeutralCapture): no points go out before it ends, so the performer's rest
+ * pose is what the server captures, and a capture the server refuses (the performer
+ * moved) says so and takes none. The panel holds no maths: the
  * server conditions and retargets whatever the page sends.
  */
 export class PerformancePanel {
@@ -30,6 +34,8 @@ export class PerformancePanel {
 		this.imports = new TakeImport( app, this.list, this.status, ( take ) => this._chooseTake( take ) );
 		this.recorder = new Recorder( app, this.status );
 		this.conditioning = new ConditioningForm( app.conditioning );
+		this.capture = new NeutralCapture();
+		this._sending = true; // whether tracked points go out (not during the first countdown)
 		this._pointIndex = 0; // the index of the webcam's next points message
 		this._neutralFrom = 0; // _pointIndex when the last neutral capture was asked for
 		this._neutralWait = null; // {stream, listener} until a neutral capture is in
@@ -112,6 +118,7 @@ export class PerformancePanel {
 		const webcam = this.startWebcam();
 		await webcam;
 		if ( webcam !== this.webcam ) throw new Error( 'The webcam was stopped before it started.' );
+		this._captureNeutral( { holdPoints: true } ); // a new live source has no neutral: none before the countdown ends
 		return { type: 'start', source: 'live', dims: 3, fps: 30, settings: this.settings() };
 
 	}
@@ -148,6 +155,12 @@ export class PerformancePanel {
 		} else if ( message.type === 'neutral' ) {
 
 			this._awaitNeutral();
+
+		} else if ( message.type === 'neutral_refused' ) {
+
+			this._endNeutralWait();
+			this.capture.refused( message.detail );
+			this.status.note( `Webcam: ${ message.detail }`, true );
 
 		}
 
@@ -201,6 +214,7 @@ export class PerformancePanel {
 		this.webcam = null;
 		if ( this.status.text.startsWith( 'Webcam:' ) ) this.status.note( '' ); // not tracking any more
 		$( 'webcam-box' ).hidden = true;
+		this.capture.cancel();
 		this._endNeutralWait();
 
 	}
@@ -228,6 +242,7 @@ export class PerformancePanel {
 		const lost = new Float32Array( 3 * layout.points.length ).fill( NaN );
 		return startWebcam( video, ( { points, time } ) => {
 
+			if ( ! this._sending ) return null; // counting down: the performer is not ready yet
 			// a frame without a face goes as lost points, so the stream knows the time
 			const stream = this.app.stream;
 			const index = this._pointIndex ++;
@@ -243,7 +258,7 @@ export class PerformancePanel {
 
 	}
 
-	/** The server captures the webcam's neutral again: say so until a frame retargeted with it comes. */
+	/** The server captures the webcam's neutral again: once a frame retargeted with it comes, show it. */
 	_awaitNeutral() {
 
 		this._endNeutralWait();
@@ -257,11 +272,11 @@ export class PerformancePanel {
 			if ( event.detail.frameIndex < first ) return;
 			this._endNeutralWait();
 			this.status.note( 'Webcam: neutral captured.' );
+			this.capture.captured();
 
 		};
 		stream.addEventListener( 'frame', listener );
-		this._neutralWait = { stream, listener };
-		this.status.note( 'Webcam: hold a neutral face…' );
+		this._neutralWait = { stream, listener }; // the overlay over the view asks the performer to hold still
 
 	}
 
@@ -270,6 +285,25 @@ export class PerformancePanel {
 		const wait = this._neutralWait;
 		wait?.stream.removeEventListener( 'frame', wait.listener );
 		this._neutralWait = null;
+
+	}
+
+	/**
+	 * Count down, then have the server capture the neutral from the next points.
+	 * @param {{holdPoints?: boolean}} [options] - holdPoints: send no points until then
+	 *   (a new live source would capture them; a recapture keeps the old neutral meanwhile).
+	 */
+	_captureNeutral( { holdPoints = false } = {} ) {
+
+		if ( holdPoints ) this._sending = false;
+		const neutral = this.settings().neutral;
+		this.capture.start( $( 'webcam-video' ), () => {
+
+			this._neutralFrom = this._pointIndex;
+			this._sending = true;
+			this.app.stream?.send( { type: 'neutral' } );
+
+		}, neutral.mode === 'first_seconds' ? neutral.seconds : 0 );
 
 	}
 
@@ -294,12 +328,7 @@ export class PerformancePanel {
 			if ( $( 'source-select' ).value !== 'webcam' ) this.stopWebcam();
 
 		}, { signal } );
-		$( 'recapture-neutral' ).addEventListener( 'click', () => {
-
-			this._neutralFrom = this._pointIndex;
-			this.app.stream?.send( { type: 'neutral' } );
-
-		}, { signal } );
+		$( 'recapture-neutral' ).addEventListener( 'click', () => this._captureNeutral(), { signal } );
 
 	}
 
