@@ -247,6 +247,18 @@ export const api = {
 	 */
 	uploadMesh: ( id, file, onProgress, sideFiles = [] ) => upload( 'PUT', `/api/projects/${ id }/mesh`, file, { files: sideFiles }, onProgress ),
 
+	/**
+	 * Whether the mesh's lips are one surface, found from the saved landmarks.
+	 * @returns {Promise<{joined: boolean|null, detail: string}>}
+	 */
+	lips: ( id ) => request( 'GET', `/api/projects/${ id }/mesh/lips` ),
+
+	/** Cut the mesh open along the lip contact line (a new mesh revision); the project. */
+	openMouth: ( id ) => request( 'POST', `/api/projects/${ id }/mesh/open-mouth` ),
+
+	/** Go back to the mesh and landmarks before the mouth was opened; the project. */
+	revertMesh: ( id ) => request( 'POST', `/api/projects/${ id }/mesh/revert` ),
+
 	/** @returns {Promise<Array<object>>} takes {id, name, source, layout, fps, n_frames, n_points, dims, duration, trim}, oldest first */
 	takes: ( id ) => request( 'GET', `/api/projects/${ id }/takes` ),
 
