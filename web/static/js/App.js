@@ -198,7 +198,6 @@ export class App {
 
 	}
 
-	/** Drop everything of the current project from the page (not from the server). */
 	/**
 	 * Draw the face with its texture or plain shaded, as the Texture / Shaded switch says;
 	 * the switch shows only for a face with a texture.
@@ -213,6 +212,7 @@ export class App {
 
 	}
 
+	/** Drop everything of the current project from the page (not from the server). */
 	closeProject() {
 
 		this.projectSettings.cancel(); // what was not sent belongs to this project
@@ -233,9 +233,9 @@ export class App {
 
 		this.project = null;
 		$( 'mesh-info' ).textContent = '';
+		$( 'surface-switch' ).hidden = true;
 		this.marks.clear();
 
-		$( 'surface-switch' ).hidden = true;
 	}
 
 	/** The shown project was deleted: show the first one left, or none. */

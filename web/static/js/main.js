@@ -82,9 +82,9 @@ app.regions.addEventListener( 'change', () => {
 } );
 
 $( 'wireframe' ).addEventListener( 'change', ( event ) => viewer.setWireframe( event.target.checked ) );
+for ( const id of [ 'surface-texture', 'surface-shaded' ] ) $( id ).addEventListener( 'change', () => app.showSurface() );
 $( 'frame-view' ).addEventListener( 'click', () => viewer.frame() );
 window.addEventListener( 'keydown', async ( event ) => {
-for ( const id of [ 'surface-texture', 'surface-shaded' ] ) $( id ).addEventListener( 'change', () => app.showSurface() );
 
 	try {
 
@@ -128,9 +128,9 @@ async function key( event ) {
 
 	if ( await app.marks.key( event ) || event.ctrlKey || event.metaKey || event.altKey ) return;
 	if ( k === 'w' ) $( 'wireframe' ).click();
+	else if ( k === 't' && ! $( 'surface-switch' ).hidden ) $( $( 'surface-texture' ).checked ? 'surface-shaded' : 'surface-texture' ).click();
 	else if ( k === 'f' ) viewer.frame();
 
-	else if ( k === 't' && ! $( 'surface-switch' ).hidden ) $( $( 'surface-texture' ).checked ? 'surface-shaded' : 'surface-texture' ).click();
 }
 
 window.app = app;
