@@ -6,6 +6,9 @@ import { LayoutGuide } from './LayoutGuide.js';
 const DEFAULT_LAYOUT = 'dutreve22'; // Dutreve's points and the chin: the jaw follows the mouth, one more click
 const LAST_LAYOUT_KEY = 'retarget.layout';
 
+/** Where a point of the face's side is in the guide, which shows the face as you see it. */
+const SIDE_WORDS = { right: '· on your left', left: '· on your right' };
+
 /**
  * The Landmarks panel (index.html #landmarks-panel): the layout, the reference face
  * (LayoutGuide), the count and the next point, undo, redo, Mirror, delete, clear and
@@ -144,6 +147,7 @@ export class LandmarksPanel {
 		$( 'landmark-count' ).className = 'badge' + ( layout && landmarks.placedCount === layout.n_points ? ' good' : '' );
 		$( 'unsaved' ).hidden = ! landmarks.dirty || ! hasMesh;
 		$( 'next-point' ).textContent = ! layout ? '' : next >= 0 ? layout.points[ next ].name : 'all placed ✓';
+		$( 'next-side' ).textContent = layout && next >= 0 ? SIDE_WORDS[ layout.points[ next ].side ] ?? '' : '';
 		$( 'undo' ).disabled = ! landmarks.canUndo;
 		$( 'redo' ).disabled = ! landmarks.canRedo;
 		$( 'delete-point' ).disabled = landmarks.selected < 0;

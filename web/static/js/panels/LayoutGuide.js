@@ -1,13 +1,16 @@
 import { regionColor } from '../scene/palette.js';
+import { faceSketch } from './faceSketch.js';
 
 const MARGIN = 14; // CSS px around the drawing
 const HIT_RADIUS = 9; // CSS px: how close a click must be to pick a point
 
 /**
- * The reference face of a landmark layout, drawn front-on in a small canvas: the face's
- * contours (consecutive points of one feature joined), the placed points filled in their
- * region's colour, the next point ringed. Clicking a point dispatches 'pick' with its
- * index, so the user can choose which point to place next.
+ * The reference face of a landmark layout, drawn front-on in a small canvas as you see a
+ * person facing you (the face's right on your left): a sketch of the face behind it all
+ * (outline, eyes, lips: faceSketch.js), the face's contours (consecutive points of one
+ * feature joined), the placed points filled in their region's colour, the next point
+ * ringed and named above it. Clicking a point dispatches 'pick' with its index, so the
+ * user can choose which point to place next.
  */
 export class LayoutGuide extends EventTarget {
 
@@ -22,6 +25,9 @@ export class LayoutGuide extends EventTarget {
 		this.state = { placed: [], next: - 1, selected: - 1 };
 		this._screen = []; // [x, y] CSS px per point
 		this._contours = [];
+		this._sketch = [];
+		/** The sketch as last drawn: [{name, path}], path (K, 2) CSS px (for tests). */
+		this.sketch = [];
 
 		this._onClick = ( event ) => {
 
@@ -51,6 +57,7 @@ export class LayoutGuide extends EventTarget {
 
 		this.layout = layout;
 		this._contours = layout ? contours( layout.points ) : [];
+		this._sketch = layout ? faceSketch( layout.points ) : [];
 		this.draw();
 
 	}
@@ -86,12 +93,30 @@ export class LayoutGuide extends EventTarget {
 		if ( ! this.layout ) return;
 
 		const points = this.layout.points;
-		this._screen = fit( points.map( ( p ) => p.reference ), width, height );
+		const sketched = this._sketch.flatMap( ( shape ) => shape.path );
+		const fitted = fit( [ ...points.map( ( p ) => p.reference ), ...sketched ], width, height );
+		this._screen = fitted.slice( 0, points.length );
+		let at = points.length;
+		this.sketch = this._sketch.map( ( { name, path } ) => ( { name, path: fitted.slice( at, at += path.length ) } ) );
 		const { placed, next, selected } = this.state;
 		const xy = this._screen;
 
-		ctx.lineWidth = 1.25;
 		ctx.lineJoin = ctx.lineCap = 'round';
+		for ( const { name, path } of this.sketch ) {
+
+			const lips = name === 'lips';
+			ctx.beginPath();
+			path.forEach( ( [ x, y ], k ) => ( k ? ctx.lineTo( x, y ) : ctx.moveTo( x, y ) ) );
+			ctx.closePath();
+			ctx.fillStyle = lips ? withAlpha( regionColor( 'upper_lip' ), 0.16 ) : 'rgba(255, 255, 255, 0.04)';
+			ctx.fill();
+			ctx.strokeStyle = 'rgba(176, 182, 190, 0.45)';
+			ctx.lineWidth = name === 'face' ? 1.5 : 1;
+			ctx.stroke();
+
+		}
+
+		ctx.lineWidth = 1.25;
 		for ( const { indices, closed } of this._contours ) {
 
 			ctx.strokeStyle = withAlpha( regionColor( points[ indices[ 0 ] ].region ), 0.38 );
@@ -134,6 +159,7 @@ export class LayoutGuide extends EventTarget {
 			ctx.beginPath();
 			ctx.arc( xy[ next ][ 0 ], xy[ next ][ 1 ], radius, 0, 2 * Math.PI );
 			ctx.fill();
+			label( ctx, points[ next ].name, xy[ next ], radius + 10, width );
 
 		}
 
@@ -173,7 +199,7 @@ export class LayoutGuide extends EventTarget {
 /**
  * Canvas positions of reference points seen from the front (x right, y up), fitted into
  * the canvas with the same scale on both axes.
- * @param {number[][]} references - (N, 3) positions, +y up, the face looking down +z.
+ * @param {number[][]} references - (N, 2 or 3) positions, +y up, the face looking down +z.
  * @returns {number[][]} (N, 2) CSS px.
  */
 function fit( references, width, height ) {
@@ -232,6 +258,21 @@ function contours( points ) {
 		indices: r.indices,
 		closed: r.indices.length > 2 && ( r.feature === 'eyes' || r.feature.startsWith( 'lips' ) ),
 	} ) );
+
+}
+
+/** `text` centred above the point at (x, y) (below it near the top), inside the canvas. */
+function label( ctx, text, [ x, y ], gap, width ) {
+
+	ctx.font = '10px ui-monospace, Menlo, Consolas, monospace';
+	const w = ctx.measureText( text ).width;
+	const tx = Math.min( Math.max( 2, x - w / 2 ), width - w - 2 );
+	const ty = y - gap - 6 > 2 ? y - gap : y + gap;
+	ctx.fillStyle = 'rgba(30, 31, 34, 0.8)';
+	ctx.fillRect( tx - 2, ty - 7, w + 4, 13 );
+	ctx.fillStyle = '#ffd54a';
+	ctx.textBaseline = 'middle';
+	ctx.fillText( text, tx, ty );
 
 }
 
