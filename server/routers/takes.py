@@ -94,7 +94,11 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolati
                 mapping: str | None = Form(default=None,
                                            description='JSON {"file label": "layout point name"}'),
                 labelled_vertices: str | None = Form(
-                    default=None, description='animated faces: JSON {"point name": vertex index}')) -> dict:
+                    default=None, description='animated faces: JSON {"point name": vertex index}'),
+                source: str | None = Form(
+                    default=None, max_length=200,
+                    description="what made the take, for the take list (e.g. 'video: clip.mp4' "
+                                "for points the page tracked); default: the file's format")) -> dict:
     """Read a take from a file (in a child process, `server.isolation`) and store it;
     answers the take's info. The file is refused (422, with the reason) and nothing is
     stored if it does not parse. A retry with the same Idempotency-Key answers the take
@@ -114,6 +118,8 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolati
         take_from_upload, data, f"{_default_name(file.filename, 'take')}.{ext}", file.filename,
         options, forms, project_layout,
         what=f"take file {file.filename!r} refused: not a readable {ext.upper()} file")
+    if source:
+        take.source = source
     return store.put_take(project["id"], take, name=name or _default_name(file.filename, "take"),
                           key=key)
 

@@ -312,12 +312,13 @@ export class App {
 
 	}
 
-	/** The heat-map features and the region toggles follow the saved landmarks (the rig's joints, the stream's points). */
+	/** The heat-map features, the region toggles and the conditioning's rows follow the saved landmarks (the rig's joints, the stream's points). */
 	_showSavedLandmarks( project ) {
 
 		const layout = this.layouts.find( ( l ) => l.name === project?.landmarks?.layout ) || this.landmarks.layout;
 		this.rig.setJoints( project, layout );
 		this.live.setLayout( layout );
+		this.sources.setLayout( layout );
 
 	}
 

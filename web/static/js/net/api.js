@@ -266,7 +266,7 @@ export const api = {
 	 * Upload a take file (csv, json, npy, trc, c3d, glb, gltf, zip) with progress. When no
 	 * answer comes it is sent once more with the same Idempotency-Key, so a take stored by
 	 * the first try whose answer was lost is answered, not stored twice.
-	 * @param {Object<string, string>} fields - optional form fields: name, fps, layout, mapping, labelled_vertices.
+	 * @param {Object<string, string>} fields - optional form fields: name, fps, layout, mapping, labelled_vertices, source.
 	 * @returns {Promise<object>} the stored take's info
 	 */
 	uploadTake: async ( id, file, fields, onProgress ) => {

@@ -75,11 +75,8 @@ export class PerformancePanel {
 		this.recorder.set( false ); // its source went with the old project's stream
 		this.imports.stop();
 		this.list.clear();
-		const conditioning = this.app.conditioning;
-		conditioning.load( project?.settings?.conditioning ?? null );
-		const layout = this.app.layouts?.find( ( l ) => l.name === ( project?.landmarks?.layout || 'ibug68' ) );
-		conditioning.setRegions( layout ? [ ...new Set( layout.points.map( ( p ) => p.region ) ) ] : [] );
-		this.conditioning.render();
+		this.app.conditioning.load( project?.settings?.conditioning ?? null );
+		this.setLayout( this.app.layouts?.find( ( l ) => l.name === project?.landmarks?.layout ) ?? ( project ? this.app.landmarks.layout : null ) );
 		if ( ! project ) return;
 		await this.list.refresh();
 
@@ -175,6 +172,19 @@ export class PerformancePanel {
 
 		if ( this.recorder.recording ) this.recorder.save();
 		this._endNeutralWait();
+
+	}
+
+	/**
+	 * Show a gain and cutoff row for each region of `layout` that has points (a layout
+	 * without jaw points has no jaw row).
+	 * @param {{points: Array<{region: string}>}|null} layout - the saved landmarks' layout,
+	 *   else the one being placed.
+	 */
+	setLayout( layout ) {
+
+		this.app.conditioning.setRegions( layout ? [ ...new Set( layout.points.map( ( p ) => p.region ) ) ] : [] );
+		this.conditioning.render();
 
 	}
 

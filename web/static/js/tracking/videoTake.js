@@ -176,6 +176,7 @@ async function videoBlob( fileOrUrl, signal ) {
 }
 
 const MEDIA_ERRORS = { 1: 'loading was aborted', 2: 'a network error', 3: 'it could not be decoded', 4: 'it is not a video this browser can play' };
+const NOT_A_VIDEO = 'not a video the browser can read: use MP4 (H.264) or WebM';
 
 function loaded( video, url, fileOrUrl ) {
 
@@ -186,8 +187,18 @@ function loaded( video, url, fileOrUrl ) {
 		video.addEventListener( 'loadeddata', () => resolve(), { once: true } );
 		video.addEventListener( 'error', () => {
 
-			const error = video.error;
-			reject( new Error( `trackVideo: cannot read ${ nameOf( fileOrUrl ) }: ${ MEDIA_ERRORS[ error?.code ] ?? 'unknown media error' }${ error?.message ? ` (${ error.message })` : '' }.` ) );
+			const code = video.error?.code;
+			// a file the browser cannot open or decode is, to the user, not a video: the
+			// decoder's own words (PipelineStatus::DEMUXER_ERROR_...) tell them nothing
+			if ( code === MediaError.MEDIA_ERR_SRC_NOT_SUPPORTED || code === MediaError.MEDIA_ERR_DECODE ) {
+
+				reject( new Error( `${ nameOf( fileOrUrl ) } is ${ NOT_A_VIDEO }.` ) );
+
+			} else {
+
+				reject( new Error( `trackVideo: cannot read ${ nameOf( fileOrUrl ) }: ${ MEDIA_ERRORS[ code ] ?? 'unknown media error' }.` ) );
+
+			}
 
 		}, { once: true } );
 		video.src = url;
