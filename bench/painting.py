@@ -48,6 +48,10 @@ _STROKE = """async ([x0, y0, x1, y1, moves]) => {
     const at = (type, t) => new PointerEvent(type, {bubbles: true, button: 0, buttons: 1, pointerId: 1,
         pointerType: 'mouse', clientX: x0 + t * (x1 - x0), clientY: y0 + t * (y1 - y0)});
     const dabs = [], draws = [], pixel = new Uint8Array(4);
+    const painter = window.app.paint.painter, rig = painter.rig;
+    let rows = 0;  // the rows of the stroke's undo step, as the painter records it
+    const record = rig.record;
+    rig.record = (step) => { rows = step.vertices.length; return record.call(rig, step); };
     canvas.dispatchEvent(at('pointerdown', 0));
     for (let i = 1; i <= moves; i ++) {
         let t = performance.now();
@@ -60,8 +64,7 @@ _STROKE = """async ([x0, y0, x1, y1, moves]) => {
         draws.push(performance.now() - t);
     }
     canvas.dispatchEvent(at('pointerup', 1));
-    const painter = window.app.paint.painter;
-    const rows = painter._undo[painter._undo.length - 1].vertices.length;
+    rig.record = record;
     await painter.flush();
     return {dabs, draws, rows};
 }"""
