@@ -26,17 +26,6 @@ FPS = 30.0
 
 
 @pytest.fixture(scope="module")
-def app(tmp_path_factory):
-    return create_app(tmp_path_factory.mktemp("data"))
-
-
-@pytest.fixture(scope="module")
-def client(app):
-    with TestClient(app) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
 def sample(client):
     """The sample project's id and a take uploaded to it: (pid, take info)."""
     pid = next(p["id"] for p in client.get("/api/projects").json() if p["landmarks"])

@@ -10,23 +10,9 @@ from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
 from retarget.layouts import get_layout
-from server.app import create_app
 from server.hub import StreamHub
 from server.wire import FLAG_NEUTRAL, decode_frame
 from tests.ws_messages import binary_frames, replies
-
-
-@pytest.fixture(scope="module")
-def app(tmp_path_factory):
-    return create_app(tmp_path_factory.mktemp("data"))  # with the built-in sample project
-
-
-@pytest.fixture(scope="module")
-def sample_id(app):
-    with TestClient(app) as client:
-        return next(p["id"] for p in client.get("/api/projects").json() if p["landmarks"])
-
-
 
 
 def test_hello_then_demo_frames_arrive_and_move(app, sample_id):

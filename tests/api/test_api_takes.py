@@ -31,22 +31,6 @@ FPS = 30.0
 
 
 @pytest.fixture(scope="module")
-def app(tmp_path_factory):
-    return create_app(tmp_path_factory.mktemp("data"))
-
-
-@pytest.fixture(scope="module")
-def client(app):
-    with TestClient(app) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
-def sample_id(client):
-    return next(p["id"] for p in client.get("/api/projects").json() if p["landmarks"])
-
-
-@pytest.fixture(scope="module")
 def performance():
     """A performer's 68 landmarks: neutral (68, 3) and 60 frames, cm."""
     face = sample_face(identity=np.array([0.8, 0.5, -0.6, 1.0, 0.3]))
