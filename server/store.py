@@ -155,6 +155,19 @@ class StaleRig(RuntimeError):
                    f"this edit was made on: reload the weights and paint again")
 
 
+def _unique_name(db, name: str, project_id: str | None = None) -> str:
+    """`name`, or when another project has it, `name (2)`, `name (3)`, ... the first free:
+    two projects never share a name (an imported .glb beside its source, two windows
+    making "Untitled 1" at once). Called inside the transaction that stores it."""
+    taken = {row[0] for row in db.execute("SELECT name FROM projects WHERE id IS NOT ?", (project_id,))}
+    if name not in taken:
+        return name
+    k = 2
+    while f"{name} ({k})" in taken:
+        k += 1
+    return f"{name} ({k})"
+
+
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
@@ -366,6 +379,7 @@ class ProjectStore:
     # -- projects -----------------------------------------------------------------------
 
     def create(self, name: str, settings: dict | None = None) -> dict:
+        """A new empty project; its name made unique (`_unique_name`)."""
         project_id = secrets.token_urlsafe(16)
         folder = self.folder(project_id)
         folder.mkdir(parents=True, exist_ok=False)
@@ -374,7 +388,7 @@ class ProjectStore:
             db.execute(
                 "INSERT INTO projects (id, name, created, updated, settings) "
                 "VALUES (?, ?, ?, ?, ?)",
-                (project_id, name, now, now, json.dumps(settings or {})),
+                (project_id, _unique_name(db, name), now, now, json.dumps(settings or {})),
             )
         return self.get(project_id)
 
@@ -389,9 +403,12 @@ class ProjectStore:
 
     def update(self, project_id: str, *, name: str | None = None,
                settings: dict | None = None) -> dict:
-        """Rename and/or shallow-merge `settings` (a key set to None is removed)."""
+        """Rename (to a name made unique, `_unique_name`) and/or shallow-merge `settings`
+        (a key set to None is removed)."""
         with self._transaction() as db:
             row = self._row(project_id)
+            if name is not None and name != row["name"]:
+                name = _unique_name(db, name, project_id)
             merged = json.loads(row["settings"])
             for key, value in (settings or {}).items():
                 if value is None:

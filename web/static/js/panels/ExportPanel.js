@@ -37,13 +37,24 @@ export class ExportPanel {
 
 	}
 
-	/** Fetch the project's takes again (they change in the Performance panel). */
+	/** Fetch the project's takes again. */
 	async refresh() {
 
 		const id = this.app.projectId;
 		if ( ! id ) return;
 		const takes = await api.takes( id );
 		if ( id !== this.app.projectId ) return;
+		this.showTakes( takes );
+
+	}
+
+	/**
+	 * List these takes (the Performance panel's list, whenever it changes: a take added,
+	 * renamed, trimmed or deleted), ticks kept for the takes still there.
+	 * @param {object[]} takes - GET .../takes of the shown project.
+	 */
+	showTakes( takes ) {
+
 		this.takes = takes;
 		this._render();
 
@@ -138,8 +149,6 @@ export class ExportPanel {
 			else this._chosen.delete( id );
 
 		}, { signal } );
-		// takes are added and removed in the Performance panel: list them afresh on the way in
-		$( 'export-panel' ).addEventListener( 'pointerenter', () => this.refresh().catch( ( error ) => this._refused( error ) ), { signal } );
 		$( 'import-file' ).addEventListener( 'change', async ( event ) => {
 
 			const file = event.target.files[ 0 ];

@@ -2,6 +2,7 @@ import { StreamClient } from '../net/StreamClient.js';
 import { StreamDecoder } from '../net/wire.js';
 import { regionColor } from '../scene/palette.js';
 import { $, guarded } from './dom.js';
+import { PointsToggle } from './PointsToggle.js';
 
 const STATS_MS = 250;
 
@@ -10,7 +11,8 @@ const STATS_MS = 250;
  * Performance panel's source, *Stop* stops it; frames pose the face and the markers (and
  * turn the face with the performer's head when the conditioning says so); the status
  * badge, frame rate and latency; the region toggles, a view of the page's RegionMask
- * (`app.regions`), whose `movingRegions()` the stream's mask is.
+ * (`app.regions`), whose `movingRegions()` the stream's mask is. The feature points hide
+ * while a source plays (PointsToggle, the view's *Show points*).
  */
 export class LivePanel {
 
@@ -24,6 +26,7 @@ export class LivePanel {
 		this.stream = null;
 		/** Whether a source is playing on the stream. */
 		this.streaming = false;
+		this.points = new PointsToggle( app.picker );
 		this._events = new AbortController();
 		this._stats = setInterval( () => this._showStats(), STATS_MS );
 		this._bind();
@@ -89,6 +92,12 @@ export class LivePanel {
 		this.streaming = false;
 		$( 'status' ).textContent = 'offline';
 		$( 'status' ).className = 'badge';
+		this.points.setPlaying( false );
+		// the figures were the old project's stream's
+		$( 'fps' ).textContent = '–';
+		$( 'latency' ).textContent = '–';
+		$( 'play' ).textContent = '▶ Play';
+		$( 'stop' ).disabled = true;
 
 	}
 
@@ -157,6 +166,7 @@ export class LivePanel {
 	dispose() {
 
 		this._events.abort();
+		this.points.dispose();
 		clearInterval( this._stats );
 		this.close();
 
@@ -190,6 +200,7 @@ export class LivePanel {
 	_setStreaming( on ) {
 
 		this.streaming = on;
+		this.points.setPlaying( on );
 		$( 'play' ).textContent = on ? '↻ Restart' : '▶ Play';
 		$( 'stop' ).disabled = ! on;
 		if ( ! on ) {

@@ -3,7 +3,8 @@ import { $, guarded } from './dom.js';
 
 const RADIUS_RANGE = [ 0.005, 0.5 ]; // brush radius slider ends, in bounding-sphere radii
 const RADIUS_STEPS = 1000; // the slider is logarithmic: fine control for small brushes
-const SETTINGS_KEY = 'retarget.paint'; // brush settings kept across reloads (radius in bounding-sphere radii)
+const SETTINGS_KEY = 'retarget.brush'; // brush settings kept across reloads (radius in face scales, `_faceScale`)
+const DEFAULT_RADIUS = 1 / 3; // a new brush's radius, in face scales: a third of the eye-to-eye distance
 
 /**
  * The rig panel's weight painting controls (index.html #paint-*): the Paint weights toggle,
@@ -45,7 +46,8 @@ export class PaintPanel {
 		const layout = app.layouts.find( ( l ) => l.name === app.project?.landmarks?.layout ) || null;
 		const settings = localStorage.getItem( SETTINGS_KEY ); // before setRig's change event stores the current ones
 		this.painter.setRig( weights && app.face, app.projectId, info, weights, layout );
-		if ( weights ) this._restoreSettings( settings );
+		if ( weights && settings ) this._restoreSettings( settings );
+		else if ( weights ) this.painter.configure( { radius: DEFAULT_RADIUS * this._faceScale() } );
 		const names = [ ...$( 'heatmap-select' ).options ].filter( ( o ) => o.value !== '' );
 		$( 'paint-joint' ).replaceChildren( ...names.map( ( o ) => new Option( o.textContent, o.value ) ) );
 		this._update();
@@ -134,6 +136,7 @@ export class PaintPanel {
 		if ( ! face || ! face.nJoints ) return;
 		face.setHeatmap( joint );
 		$( 'heatmap-select' ).value = String( joint );
+		this.app.rig?.legend.update(); // the painted weights' range
 
 	}
 
@@ -164,7 +167,7 @@ export class PaintPanel {
 
 		localStorage.setItem( SETTINGS_KEY, JSON.stringify( {
 			brush: painter.brush, strength: painter.strength, value: painter.value, mirror: painter.mirror,
-			radius: painter.radius / this._boundsRadius(),
+			radius: painter.radius / this._faceScale(),
 		} ) );
 
 		const state = painter.saveState;
@@ -191,13 +194,34 @@ export class PaintPanel {
 		try {
 
 			const settings = JSON.parse( text );
-			if ( settings ) this.painter.configure( { ...settings, radius: settings.radius * this._boundsRadius() } );
+			if ( settings ) this.painter.configure( { ...settings, radius: settings.radius * this._faceScale() } );
 
 		} catch ( error ) {
 
 			console.warn( 'retarget: stored brush settings ignored:', error.message );
 
 		}
+
+	}
+
+	/**
+	 * The face's scale, mesh units: the distance between the eye centres of its landmarks
+	 * (the means of the placed `eye_left*` and `eye_right*` points), so a brush fits a face
+	 * whatever its units; without eye points, a third of the bounding-sphere radius.
+	 */
+	_faceScale() {
+
+		const { layout, points } = this.app.landmarks, picker = this.app.picker;
+		const centre = ( side ) => {
+
+			const placed = ( layout?.points ?? [] ).map( ( p, i ) => p.name.startsWith( `eye_${ side }` ) && points[ i ] ? picker.position( i ) : null ).filter( Boolean );
+			return placed.length ? placed.reduce( ( sum, p ) => sum.add( p ), placed[ 0 ].clone().setScalar( 0 ) ).divideScalar( placed.length ) : null;
+
+		};
+
+		const left = centre( 'left' ), right = centre( 'right' );
+		const distance = left && right ? left.distanceTo( right ) : 0;
+		return distance > 0 ? distance : this._boundsRadius() / 3;
 
 	}
 

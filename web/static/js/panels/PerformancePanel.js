@@ -75,6 +75,8 @@ export class PerformancePanel {
 		this.recorder.set( false ); // its source went with the old project's stream
 		this.imports.stop();
 		this.list.clear();
+		this.status.note( '' ); // "Recorded ...", "Imported ...": news of the old project
+		$( 'record-name' ).value = '';
 		this.app.conditioning.load( project?.settings?.conditioning ?? null );
 		this.setLayout( this.app.layouts?.find( ( l ) => l.name === project?.landmarks?.layout ) ?? ( project ? this.app.landmarks.layout : null ) );
 		if ( ! project ) return;

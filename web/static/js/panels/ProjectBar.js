@@ -71,20 +71,32 @@ export class ProjectBar {
 
 	async _newProject() {
 
-		const app = this.app;
-		const taken = new Set( app.projects.map( ( p ) => p.name ) );
-		let n = 1;
-		while ( taken.has( `Untitled ${ n }` ) ) n ++;
-		const project = await api.createProject( `Untitled ${ n }` );
-		await app.refreshProjects();
-		if ( await app.openProject( project.id ) ) {
+		const app = this.app, button = $( 'new-project' );
+		if ( button.disabled ) return null;
+		// one project per press: a double click's second click finds the button disabled
+		// (the server also keeps names unique, for two windows pressing at once)
+		button.disabled = true;
+		try {
 
-			$( 'project-name' ).focus();
-			$( 'project-name' ).select();
+			const taken = new Set( app.projects.map( ( p ) => p.name ) );
+			let n = 1;
+			while ( taken.has( `Untitled ${ n }` ) ) n ++;
+			const project = await api.createProject( `Untitled ${ n }` );
+			await app.refreshProjects();
+			if ( await app.openProject( project.id ) ) {
+
+				$( 'project-name' ).focus();
+				$( 'project-name' ).select();
+
+			}
+
+			return project;
+
+		} finally {
+
+			button.disabled = false;
 
 		}
-
-		return project;
 
 	}
 
@@ -102,6 +114,7 @@ export class ProjectBar {
 		try {
 
 			app.project = await api.patchProject( app.project.id, { name } );
+			input.value = app.project.name; // the server's: another project's name gets a " (2)"
 			await app.refreshProjects();
 
 		} catch ( error ) {

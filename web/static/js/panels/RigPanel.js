@@ -1,9 +1,11 @@
 import { ApiError, api } from '../net/api.js';
 import { $, guarded, option } from './dom.js';
+import { HeatmapLegend } from './HeatmapLegend.js';
 
 /**
  * The Rig panel (index.html #rig-panel): the deformer and *Compute* (a server job, its
- * progress in the bar), the rig's badge, and the heat map of one feature's weights.
+ * progress in the bar), the rig's badge, and the heat map of one feature's weights with
+ * its legend (HeatmapLegend).
  * Weight painting is its own panel (PaintPanel) inside it.
  */
 export class RigPanel {
@@ -17,6 +19,7 @@ export class RigPanel {
 		/** GET /api/projects/{id}/rig of the shown project, or null. */
 		this.info = null;
 		this._job = null; // AbortController of the rig job being followed
+		this.legend = new HeatmapLegend( app );
 		this._events = new AbortController();
 		this._bind();
 
@@ -46,6 +49,7 @@ export class RigPanel {
 		const names = ! n ? [] : layout && layout.n_points === n ? layout.points.map( ( p ) => p.name ) : Array.from( { length: n }, ( _, j ) => `feature ${ j }` );
 		heatmap.replaceChildren( option( '', 'off' ), ...names.map( ( name, j ) => option( String( j ), `${ j } · ${ name }` ) ) );
 		heatmap.disabled = ! this.app.face?.nJoints;
+		this.legend.update();
 
 	}
 
@@ -65,6 +69,7 @@ export class RigPanel {
 		this.info = info;
 		this.update();
 		app.paint.setRig( info, weights );
+		this.legend.update();
 
 	}
 
@@ -76,6 +81,7 @@ export class RigPanel {
 		this.info = null;
 		$( 'rig-progress' ).value = 0;
 		$( 'rig-message' ).textContent = '';
+		$( 'heat-legend' ).hidden = true;
 
 	}
 
@@ -163,6 +169,7 @@ export class RigPanel {
 		$( 'heatmap-select' ).addEventListener( 'change', ( event ) => {
 
 			this.app.face?.setHeatmap( event.target.value === '' ? null : Number( event.target.value ) );
+			this.legend.update();
 
 		}, { signal } );
 

@@ -64,13 +64,14 @@ export class TakeList extends EventTarget {
 
 	}
 
-	/** Show the takes, the chosen one selected. */
+	/** Show the takes, the chosen one selected; the Export panel lists the same takes. */
 	render() {
 
 		const list = $( 'take-list' );
 		list.replaceChildren();
 		$( 'takes-empty' ).hidden = this.takes.length > 0;
 		for ( const take of this.takes ) list.append( this._row( take ) );
+		this.app.exports?.showTakes( this.takes );
 
 	}
 

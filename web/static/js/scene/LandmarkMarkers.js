@@ -24,6 +24,8 @@ export class LandmarkMarkers {
 		this.group = new Group();
 		this.group.name = 'landmarks';
 		this.group.matrixAutoUpdate = false; // follows the mesh's world matrix
+		/** Whether the markers are drawn at all (`setShown`; hidden ones cannot be grabbed). */
+		this.shown = true;
 		this._sphere = new SphereGeometry( 1, 16, 12 );
 		this._materials = new Map();
 		this._selectedMaterial = new MeshStandardMaterial( { color: 0xffffff, emissive: 0x666666, roughness: 0.35 } );
@@ -53,7 +55,7 @@ export class LandmarkMarkers {
 
 		const mesh = surface.mesh;
 		this.scene.add( group );
-		group.visible = true;
+		group.visible = this.shown;
 		mesh.updateWorldMatrix( true, false );
 		group.matrix.copy( mesh.matrixWorld );
 		const radius = mesh.geometry.boundingSphere.radius * MARKER_SCALE;
@@ -69,6 +71,17 @@ export class LandmarkMarkers {
 			marker.renderOrder = 1;
 
 		} );
+
+	}
+
+	/**
+	 * Draw the markers or hide them all (they keep following the face).
+	 * @param {boolean} shown
+	 */
+	setShown( shown ) {
+
+		this.shown = Boolean( shown );
+		if ( this.group.parent ) this.group.visible = this.shown;
 
 	}
 
