@@ -51,8 +51,8 @@ export class App {
 
 	/**
 	 * The panels, each a view of part of the page.
-	 * @param {{bar: object, upload: object, marks: object, rig: object, paint: object,
-	 *   sources: object, live: object, exports: object}} panels
+	 * @param {{bar: object, upload: object, marks: object, rig: object, mouth: object,
+	 *   paint: object, sources: object, live: object, exports: object}} panels
 	 */
 	setPanels( panels ) {
 
@@ -177,6 +177,7 @@ export class App {
 			if ( project.landmarks ) this.live.connect();
 			await this.sources.setProject( project );
 			await this.exports.setProject( project );
+			await this.mouth.load( project, current );
 			return true;
 
 		} catch ( error ) {
@@ -217,6 +218,7 @@ export class App {
 
 		this.projectSettings.cancel(); // what was not sent belongs to this project
 		this.rig.clear();
+		this.mouth.clear();
 		this.live.close();
 		this.sources.stopWebcam();
 		this.exports.setProject( null );
@@ -267,6 +269,7 @@ export class App {
 		this.face?.setHeatmap( null );
 		this.paint.setRig( null, null );
 		this._showSavedLandmarks( this.project );
+		this.mouth.load( this.project, this.ticket() ).catch( ( error ) => this.errors.show( error ) );
 		this.rig.update();
 		this.live.connect();
 		this.live.update();

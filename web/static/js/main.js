@@ -22,6 +22,7 @@ import { ExportPanel } from './panels/ExportPanel.js';
 import { LandmarksPanel } from './panels/LandmarksPanel.js';
 import { LivePanel } from './panels/LivePanel.js';
 import { MeshUpload } from './panels/MeshUpload.js';
+import { MouthPanel } from './panels/MouthPanel.js';
 import { PaintPanel } from './panels/PaintPanel.js';
 import { PerformancePanel } from './panels/PerformancePanel.js';
 import { ProjectBar } from './panels/ProjectBar.js';
@@ -54,6 +55,7 @@ app.setPanels( {
 	upload: new MeshUpload( app ),
 	marks: new LandmarksPanel( app ),
 	rig: new RigPanel( app ),
+	mouth: new MouthPanel( app ),
 	paint: new PaintPanel( app ),
 	sources: new PerformancePanel( app ),
 	live: new LivePanel( app ),
