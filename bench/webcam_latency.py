@@ -120,6 +120,12 @@ def webcam_run(browser, url: str, project_id: str, frames: int, timeout_s: float
         page.wait_for_function("() => window.app.face && window.app.face.nJoints > 0", timeout=60_000)
         page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=30_000)
         page.evaluate(_RECORDER, reply_delay_ms)
+        # the neutral from one frame: the looped performer never holds still through a
+        # capture window, which the live source would refuse
+        page.click("#conditioning summary")
+        page.select_option("#neutral-mode", "frame")
+        page.fill("#neutral-value", "0")
+        page.dispatch_event("#neutral-value", "change")
         page.select_option("#source-select", "webcam")
         page.click("#play")
         page.wait_for_function("() => window.bench.back.length > 0", timeout=120_000)
