@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from retarget.sample_face import sample_face
+from retarget.sample_face import DEMO_PERFORMER, sample_face
 
-__all__ = ["WeldedFace", "welded_lips_face"]
+__all__ = ["WeldedFace", "mouth_opened_to", "welded_lips_face"]
 
 _UPPER_INNER, _LOWER_INNER = (61, 62, 63), (65, 66, 67)
 
@@ -63,3 +63,19 @@ def _row_neighbour(uv: np.ndarray, keep: np.ndarray, v: int, step: int) -> int:
     rows = uv[column, 1]
     ahead = column[(rows - uv[v, 1]) * step > 1e-12]
     return int(ahead[np.argmin(np.abs(uv[ahead, 1] - uv[v, 1]))])
+
+
+def mouth_opened_to(fraction: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """(neutral, opened): the demo performer's 68 points (cm, (68, 3) float64) at rest and
+    with its jaw open (its ``jawOpen`` shape, bisected on the weight) until its inner lip
+    centres are `fraction` of its mouth width apart: the source of issue 13's figure."""
+    performer = sample_face(1, identity=DEMO_PERFORMER)
+    neutral = performer.vertices[performer.landmarks68]
+    jaw = performer.expressions[list(performer.expression_names).index("jawOpen")][performer.landmarks68]
+    width = np.linalg.norm(neutral[54] - neutral[48])
+    lo, hi = 0.0, 4.0
+    for _ in range(60):
+        w = 0.5 * (lo + hi)
+        gap = np.linalg.norm((neutral[62] + w * jaw[62]) - (neutral[66] + w * jaw[66]))
+        lo, hi = (w, hi) if gap < fraction * width else (lo, w)
+    return neutral, neutral + w * jaw

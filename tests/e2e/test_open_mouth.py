@@ -17,8 +17,7 @@ import trimesh
 
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import mesh_from_arrays, save_mesh
-from retarget.sample_face import DEMO_PERFORMER, sample_face
-from retarget.testing.welded import welded_lips_face
+from retarget.testing.welded import mouth_opened_to, welded_lips_face
 from tests.e2e.conftest import open_project
 from tests.waits import wait_job
 
@@ -44,16 +43,8 @@ _HELD = """() => {
 def _opening_take() -> np.ndarray:
     """(F, 68, 3) float32: the demo performer's 68 points at rest in frame 0, then with the
     jaw open until its inner lips are 30 % of its mouth width apart, held for OPEN_S."""
-    performer = sample_face(1, identity=DEMO_PERFORMER)
-    neutral = performer.vertices[performer.landmarks68]
-    jaw = performer.expressions[list(performer.expression_names).index("jawOpen")][performer.landmarks68]
-    width = np.linalg.norm(neutral[54] - neutral[48])
-    lo, hi = 0.0, 4.0
-    for _ in range(50):
-        w = 0.5 * (lo + hi)
-        gap = np.linalg.norm((neutral[62] + w * jaw[62]) - (neutral[66] + w * jaw[66]))
-        lo, hi = (w, hi) if gap < 0.3 * width else (lo, w)
-    opened = np.repeat((neutral + w * jaw)[None], int(OPEN_S * FPS), axis=0)
+    neutral, opened = mouth_opened_to(0.3)
+    opened = np.repeat(opened[None], int(OPEN_S * FPS), axis=0)
     return np.concatenate([neutral[None], opened]).astype(np.float32)
 
 

@@ -14,9 +14,8 @@ from retarget.layouts import LAYOUTS, get_layout
 from retarget.lips import opened_mouth
 from retarget.mesh import mesh_from_arrays
 from retarget.pipeline import Retargeter
-from retarget.sample_face import DEMO_PERFORMER, sample_face
 from retarget.skin import skin_displacements
-from retarget.testing.welded import welded_lips_face
+from retarget.testing.welded import mouth_opened_to, welded_lips_face
 from retarget.weights import compute_weights
 
 CHIN = 8  # iBUG
@@ -45,21 +44,13 @@ def _chin_motion(layout_name: str) -> tuple[float, float]:
     mesh = mesh_from_arrays(face.vertices, face.faces, uv=face.uv)
     points = from_vertex_indices(face.landmarks68[idx], mesh.n_vertices, layout_name)
     opened = opened_mouth(mesh, points, layout)
-    performer = sample_face(1, identity=DEMO_PERFORMER)
-    neutral = performer.vertices[performer.landmarks68]
-    jaw = performer.expressions[list(performer.expression_names).index("jawOpen")][performer.landmarks68]
-    width = np.linalg.norm(neutral[54] - neutral[48])
-    lo, hi = 0.0, 4.0
-    for _ in range(50):
-        w = 0.5 * (lo + hi)
-        gap = np.linalg.norm((neutral[62] + w * jaw[62]) - (neutral[66] + w * jaw[66]))
-        lo, hi = (w, hi) if gap < 0.3 * width else (lo, w)
+    neutral, frame = mouth_opened_to(0.3)
     weights = compute_weights("biharmonic", opened.mesh.vertices, opened.mesh.faces,
                               opened.points, layout)
     retargeter = Retargeter().fit(neutral[idx], opened.points.positions(opened.mesh.vertices))
-    d = retargeter.displacements((neutral + w * jaw)[idx][None])[0]
+    d = retargeter.displacements(frame[idx][None])[0]
     moved = skin_displacements(weights, d[None])[0]
-    return float(np.linalg.norm(moved[face.landmarks68[CHIN]])), float(np.linalg.norm(w * jaw[CHIN]))
+    return float(np.linalg.norm(moved[face.landmarks68[CHIN]])), float(np.linalg.norm(frame[CHIN] - neutral[CHIN]))
 
 
 @pytest.mark.parametrize("name, least, most", [("dutreve22", 0.8, 1.3), ("dutreve21", 0.0, 0.5)])

@@ -15,9 +15,9 @@ from retarget.layouts import get_layout
 from retarget.lips import lip_crease, lips_joined, opened_mouth
 from retarget.mesh import mesh_from_arrays
 from retarget.pipeline import Retargeter
-from retarget.sample_face import DEMO_PERFORMER, sample_face
+from retarget.sample_face import sample_face
 from retarget.skin import skin_displacements
-from retarget.testing.welded import welded_lips_face
+from retarget.testing.welded import mouth_opened_to, welded_lips_face
 from retarget.weights import compute_weights
 
 IBUG = get_layout("ibug68")
@@ -102,26 +102,11 @@ def test_a_layout_without_mouth_points_is_refused(welded):
         lips_joined(mesh.vertices, mesh.faces, sub, layout)
 
 
-def _opening_frame():
-    """The performer's 68 points at neutral and with the jaw open until its inner lips are
-    30 % of its mouth width apart."""
-    performer = sample_face(1, identity=DEMO_PERFORMER)
-    neutral = performer.vertices[performer.landmarks68]
-    jaw = performer.expressions[list(performer.expression_names).index("jawOpen")][performer.landmarks68]
-    width = np.linalg.norm(neutral[54] - neutral[48])
-    lo, hi = 0.0, 4.0
-    for _ in range(60):
-        w = 0.5 * (lo + hi)
-        gap = np.linalg.norm((neutral[62] + w * jaw[62]) - (neutral[66] + w * jaw[66]))
-        lo, hi = (w, hi) if gap < 0.3 * width else (lo, w)
-    return neutral, neutral + w * jaw
-
-
 def _gap_at_the_lips(mesh, points) -> tuple[bool, float]:
     """(whether a frontal ray through the midpoint of the deformed inner-lip centres hits
     the surface within a lip's depth of them, the deformed lip gap over mouth width)."""
     weights = compute_weights("biharmonic", mesh.vertices, mesh.faces, points, IBUG)
-    neutral, frame = _opening_frame()
+    neutral, frame = mouth_opened_to(0.3)
     retargeter = Retargeter().fit(neutral, points.positions(mesh.vertices))
     d = retargeter.displacements(frame[None])[0]
     deformed = mesh.vertices + skin_displacements(weights, d[None])[0]
