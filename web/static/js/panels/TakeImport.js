@@ -82,7 +82,7 @@ export class TakeImport {
 		} ) );
 		if ( result.faces === 0 ) throw new Error( `No face was found in ${ file.name } (${ result.n_frames } frames): nothing to keep.` );
 		const npy = new File( [ npyBytes( result.points, [ result.n_frames, result.n_points, 3 ] ) ], file.name.replace( /\.[^.]*$/, '' ) + '.npy' );
-		const info = await api.uploadTake( id, npy, { layout: layout.name, fps: result.fps, name: file.name.replace( /\.[^.]*$/, '' ), source: `video: ${ file.name }` } );
+		const info = await api.uploadTake( id, npy, { layout: layout.name, fps: result.fps, name: file.name.replace( /\.[^.]*$/, '' ).slice( 0, 200 ), source: `video: ${ file.name }`.slice( 0, 200 ) } ); // the server takes 200 characters of each
 		if ( id !== this.app.projectId ) return; // kept in its project; this one lists its own takes
 		const share = result.faces / result.n_frames;
 		this.status.note( `Tracked "${ info.name }": ${ result.n_frames } frames at ${ +result.fps.toFixed( 3 ) } fps, a face in ${ ( 100 * share ).toFixed( 0 ) } % of them (${ ( result.n_frames / result.seconds ).toFixed( 1 ) } frames tracked a second).`, share < 0.9 );
