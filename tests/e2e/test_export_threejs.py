@@ -226,6 +226,9 @@ def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
     assert path.read_bytes() == expected
     (clip,) = read_gltf(path).clips
     assert clip.name == take["name"] and np.abs(clip.displacements).max() > 0.1
+    # the whole take at its own times, the neutral window's frames included (issue 13 item 3)
+    assert clip.n_frames == take["n_frames"] == 45
+    np.testing.assert_allclose(clip.times, np.arange(45) / FPS, atol=1e-6)
 
     # import: a new project, opened, with the exported mesh, landmarks and rig
     before = {p["id"] for p in server.api("GET", "/api/projects")}
