@@ -132,7 +132,7 @@ def upload_face(server: Server, page, face_file, name: str) -> tuple[dict, objec
     open_project(page, server, project["id"])
     page.set_input_files("#file-input", str(path))
     page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
-                           ".attributes.position.count === n", arg=len(face.vertices), timeout=30_000)
+                           ".attributes.position.count === n", arg=len(face.vertices), timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     assert page.inner_text("#error").strip() == ""
     return project, face

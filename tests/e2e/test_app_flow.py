@@ -12,6 +12,7 @@ from PIL import Image
 
 from retarget.landmarks import landmarks_from_json
 from tests.e2e.conftest import write_face_file, ARTIFACTS, upload_face
+from tests.waits import scaled_ms
 
 _IDENTITY = np.array([-0.8, 0.6, -0.5, 0.4, 0.9])  # not the sample project's face
 
@@ -77,7 +78,7 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
     # the demo performance moves the face: frames arrive and the face's pixels change
     page.click("#play")
     page.wait_for_function("() => window.app.stream && window.app.stream.stats.frames > 30",
-                           timeout=30_000)
+                           timeout=scaled_ms(30_000))
     clip = face_clip(page, targets)
     shots = []
     for _ in range(4):
@@ -95,7 +96,7 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
     # a restart loses nothing: the open page's stream reconnects by itself, and a reload
     # finds the project, its landmarks and its rig
     server.restart()
-    page.wait_for_function("() => window.app.stream.state === 'open'", timeout=30_000)
+    page.wait_for_function("() => window.app.stream.state === 'open'", timeout=scaled_ms(30_000))
     page.click("#stop")
     page.reload()
     page.wait_for_function("() => window.app && window.app.projectId")
@@ -106,4 +107,4 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
     assert server.api("GET", f"/api/projects/{project['id']}/landmarks") == stored
     page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
                            ".attributes.position.count === n && window.app.face.nJoints === 68",
-                           arg=len(face.vertices), timeout=30_000)
+                           arg=len(face.vertices), timeout=scaled_ms(30_000))

@@ -7,6 +7,7 @@ import json
 import pytest
 
 from tests.e2e.conftest import Server
+from tests.waits import scaled_ms
 
 
 @pytest.fixture
@@ -42,7 +43,7 @@ def test_bad_upload_shows_the_reason_and_keeps_projects(small_server, page, tmp_
     file.write_bytes(data)
     page.set_input_files("#file-input", str(file))
     page.wait_for_function("() => document.querySelector('#error').innerText.trim() !== ''",
-                           timeout=15_000)
+                           timeout=scaled_ms(15_000))
     message = page.inner_text("#error")
     assert reason.lower() in message.lower(), message
 

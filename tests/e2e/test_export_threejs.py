@@ -28,6 +28,7 @@ from retarget.sample_face import demo_weights, sample_face
 from retarget.skin import SkinWeights, skin_displacements
 from tests.e2e.conftest import Server, open_project
 from tests.waits import wait_job
+from tests.waits import scaled_ms
 
 TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal
 FPS = 30.0
@@ -210,7 +211,7 @@ def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
     rig; refusals show the server's reason."""
     pid, take = sample
     open_project(page, server, pid)
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     box = page.locator(f"#export-takes input[data-take='{take['id']}']")
     box.check()
     with page.expect_download() as download:
@@ -234,7 +235,7 @@ def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
     before = {p["id"] for p in server.api("GET", "/api/projects")}
     page.set_input_files("#import-file", str(path))
     page.wait_for_function("(id) => window.app.projectId && window.app.projectId !== id "
-                           "&& window.app.face && window.app.face.nJoints === 68", arg=pid, timeout=30_000)
+                           "&& window.app.face && window.app.face.nJoints === 68", arg=pid, timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     new = page.evaluate("() => window.app.projectId")
     assert new not in before and page.input_value("#project-name") == "exported"

@@ -12,6 +12,7 @@ import numpy as np
 from retarget.layouts import get_layout
 from retarget.sample_face import demo_performance
 from tests.e2e.conftest import open_project
+from tests.waits import scaled_ms
 
 _RECORD = """() => {
     window.received = [];
@@ -26,22 +27,22 @@ _RECORD = """() => {
 def wait_for_mask(page, regions) -> None:
     """Until the server has acknowledged the mask `regions` (None: all)."""
     page.wait_for_function("m => window.lastMask === m", arg=json.dumps(regions, separators=(",", ":")),
-                           timeout=10_000)
+                           timeout=scaled_ms(10_000))
 
 
 def recent_frames(page, n: int) -> np.ndarray:
     """(n, N, 3) the last n frames the page received after the recorder started."""
     page.evaluate("() => { window.received.length = 0; }")
-    page.wait_for_function(f"() => window.received.length >= {n}", timeout=30_000)
+    page.wait_for_function(f"() => window.received.length >= {n}", timeout=scaled_ms(30_000))
     return np.array(page.evaluate(f"() => window.received.slice(-{n})")).reshape(n, -1, 3)
 
 
 def test_region_toggles_restrict_the_motion_live_and_stop_rests(server, page):
     sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
     open_project(page, server, sample["id"])
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     page.click("#play")
-    page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=30_000)
+    page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=scaled_ms(30_000))
     page.evaluate(_RECORD)
     layout = get_layout(sample["landmarks"]["layout"])
     mouth = layout.region_mask(["mouth"])
@@ -69,7 +70,7 @@ def test_region_toggles_restrict_the_motion_live_and_stop_rests(server, page):
     page.click("#stop")
     page.wait_for_function("() => window.received.length > 0 && "
                            "window.received[window.received.length - 1].every(v => v === 0)",
-                           timeout=10_000)
+                           timeout=scaled_ms(10_000))
     rest = page.evaluate("() => Array.from(window.app.face.deformedPositions())")
     arrays = server.read(f"/api/projects/{sample['id']}/mesh/arrays")
     n = np.frombuffer(arrays, "<u4", 1, 8)[0]
@@ -91,21 +92,21 @@ RECORD_S = 1.5
 def test_recording_the_demo_gives_a_take_that_plays_once_to_its_end(server, page):
     sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
     open_project(page, server, sample["id"])
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     # nothing plays: nothing to record, and the button says why
     assert page.is_disabled("#record") and "Play" in page.get_attribute("#record", "title")
     assert page.inner_text("#record-time") == ""
 
     page.click("#play")
-    page.wait_for_function("() => !document.getElementById('record').disabled", timeout=30_000)
+    page.wait_for_function("() => !document.getElementById('record').disabled", timeout=scaled_ms(30_000))
     page.evaluate(_LOG)
     page.fill("#record-name", "demo e2e")
     page.click("#record")
-    page.wait_for_function("() => window.log.some(m => m.got === 'recording')", timeout=10_000)
+    page.wait_for_function("() => window.log.some(m => m.got === 'recording')", timeout=scaled_ms(10_000))
     page.wait_for_function("() => document.getElementById('record-time').textContent.startsWith('REC')")
     page.wait_for_timeout(RECORD_S * 1000)
     page.click("#record")
-    page.wait_for_selector("#take-list li.selected:has-text('demo e2e') input:checked", timeout=10_000)
+    page.wait_for_selector("#take-list li.selected:has-text('demo e2e') input:checked", timeout=scaled_ms(10_000))
     assert page.inner_text("#record-time") == "" and page.inner_text("#record").startswith("●")
 
     take = next(t for t in server.api("GET", f"/api/projects/{sample['id']}/takes") if t["name"] == "demo e2e")
@@ -132,11 +133,11 @@ def test_recording_the_demo_gives_a_take_that_plays_once_to_its_end(server, page
     page.evaluate("() => { window.log.length = 0; }")
     page.click("#play")
     # recording while it plays: the take's end stops the source, and the recording is kept
-    page.wait_for_function("() => window.log.some(m => m.got === 'started')", timeout=30_000)
+    page.wait_for_function("() => window.log.some(m => m.got === 'started')", timeout=scaled_ms(30_000))
     page.fill("#record-name", "to the end")
     page.click("#record")
-    page.wait_for_function("() => window.log.some(m => m.flags & 8)", timeout=30_000)
-    page.wait_for_selector("#take-list li.selected:has-text('to the end')", timeout=10_000)
+    page.wait_for_function("() => window.log.some(m => m.flags & 8)", timeout=scaled_ms(30_000))
+    page.wait_for_selector("#take-list li.selected:has-text('to the end')", timeout=scaled_ms(10_000))
     replay = next(t for t in server.api("GET", f"/api/projects/{sample['id']}/takes") if t["name"] == "to the end")
     assert replay["source"] == "take" and 0 < replay["n_frames"] <= take["n_frames"]
     log = page.evaluate("() => window.log")
@@ -144,6 +145,6 @@ def test_recording_the_demo_gives_a_take_that_plays_once_to_its_end(server, page
     frames = [m for m in log[started:] if "flags" in m]  # the take's, not the demo's
     assert frames[-1]["flags"] & 8 and not any(f["flags"] & 8 for f in frames[:-1])
     assert max(f["moved"] for f in frames) > 1e-3
-    page.wait_for_function("() => document.getElementById('play').textContent.includes('Play')", timeout=5_000)
+    page.wait_for_function("() => document.getElementById('play').textContent.includes('Play')", timeout=scaled_ms(5_000))
     assert page.is_disabled("#stop") and page.is_disabled("#record")
     assert page.inner_text("#source-note").startswith('Recorded "to the end"')

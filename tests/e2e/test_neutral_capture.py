@@ -16,6 +16,7 @@ import pytest
 from tests.e2e.fake_camera import video_frames, write_y4m
 from tests.e2e.test_webcam import (CAMERA_FPS, CAMERA_SIZE, VIDEO, browser, needs_shared,  # noqa: F401 (fixture)
                                    on_screen, open_sample, play_webcam, press, rest_vertices, server)
+from tests.waits import scaled_ms
 
 # every text the overlay over the view shows, in order, and when (ms since the page began)
 _OVERLAY = """() => {
@@ -42,7 +43,7 @@ def test_a_still_face_is_captured_after_a_countdown_and_shown(server, page):
     sample = open_sample(server, page)
     page.evaluate(_OVERLAY)
     play_webcam(page)
-    page.wait_for_function("() => window.overlay.some(o => o.text === 'Neutral captured')", timeout=60_000)
+    page.wait_for_function("() => window.overlay.some(o => o.text === 'Neutral captured')", timeout=scaled_ms(60_000))
     texts = [o["text"] for o in page.evaluate("() => window.overlay")]
     counted = [t for t in texts if t.startswith("Hold a neutral face: ")]
     assert counted == ["Hold a neutral face: 3", "Hold a neutral face: 2", "Hold a neutral face: 1"]
@@ -62,19 +63,19 @@ def test_a_still_face_is_captured_after_a_countdown_and_shown(server, page):
         return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); }"""))
     assert pixels.reshape(-1, 4)[:, :3].std() > 10  # an image, not an empty canvas
     assert page.inner_text("#source-note") == "Webcam: neutral captured."
-    page.wait_for_function("() => window.log.frames.filter(f => f.flags === 0).length >= 3", timeout=30_000)
+    page.wait_for_function("() => window.log.frames.filter(f => f.flags === 0).length >= 3", timeout=scaled_ms(30_000))
     # a still face at its own neutral: the target barely moves (0.05 cm at most)
     assert np.abs(on_screen(page) - rest_vertices(server, sample["id"])).max() < 0.05
-    page.wait_for_function("() => document.getElementById('neutral-overlay').hidden", timeout=10_000)
+    page.wait_for_function("() => document.getElementById('neutral-overlay').hidden", timeout=scaled_ms(10_000))
 
     # Capture neutral counts down again, and the points keep going meanwhile
     sent = page.evaluate("() => window.log.sent.length")
     press(page, "#recapture-neutral")
     page.wait_for_function("() => document.getElementById('neutral-overlay').textContent.startsWith('Hold a neutral face')",
-                           timeout=5_000)
+                           timeout=scaled_ms(5_000))
     assert page.is_hidden("#neutral-thumb-box")
-    page.wait_for_function(f"() => window.log.sent.slice({sent}).some(s => s.control === 'neutral')", timeout=20_000)
-    page.wait_for_function("() => window.overlay.filter(o => o.text === 'Neutral captured').length === 2", timeout=30_000)
+    page.wait_for_function(f"() => window.log.sent.slice({sent}).some(s => s.control === 'neutral')", timeout=scaled_ms(20_000))
+    page.wait_for_function("() => window.overlay.filter(o => o.text === 'Neutral captured').length === 2", timeout=scaled_ms(30_000))
     press(page, "#stop")
 
 
@@ -90,7 +91,7 @@ def test_moving_during_the_capture_is_refused_with_a_message(server, page):
     play_webcam(page)
     message = "You moved during the neutral capture: hold still and capture again"
     page.wait_for_function(f"() => document.getElementById('neutral-overlay').textContent.startsWith('{message}')",
-                           timeout=60_000)
+                           timeout=scaled_ms(60_000))
     assert page.is_visible("#neutral-overlay")
     assert page.inner_text("#source-note").startswith(f"Webcam: {message}")
     assert page.is_hidden("#neutral-thumb-box")
@@ -100,4 +101,4 @@ def test_moving_during_the_capture_is_refused_with_a_message(server, page):
     assert not [f for f in page.evaluate("() => window.log.frames") if f["flags"] == 0]
     assert np.abs(on_screen(page) - rest_vertices(server, sample["id"])).max() < 1e-5
     press(page, "#stop")
-    page.wait_for_function("() => document.getElementById('neutral-overlay').hidden", timeout=10_000)
+    page.wait_for_function("() => document.getElementById('neutral-overlay').hidden", timeout=scaled_ms(10_000))

@@ -20,6 +20,7 @@ from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.testing.welded import mouth_opened_to, welded_lips_face
 from tests.e2e.conftest import open_project
 from tests.waits import wait_job
+from tests.waits import scaled_ms
 
 FPS = 30
 OPEN_S = 10.0
@@ -51,7 +52,7 @@ def _opening_take() -> np.ndarray:
 def _wait_rigged(page, n_vertices: int) -> None:
     page.wait_for_function(
         "n => window.app.face && window.app.face.mesh.geometry.attributes.position.count === n"
-        " && window.app.face.nJoints === 68 && window.app.project.rig", arg=n_vertices, timeout=120_000)
+        " && window.app.face.nJoints === 68 && window.app.project.rig", arg=n_vertices, timeout=scaled_ms(120_000))
     page.evaluate("() => window.app.ready")
 
 
@@ -63,7 +64,7 @@ def _deformed_open(page, take_id: str) -> np.ndarray:
     page.evaluate(_RECORD)
     page.click("#play")
     for _ in range(5):
-        page.wait_for_function(_HELD, timeout=60_000, polling=50)
+        page.wait_for_function(_HELD, timeout=scaled_ms(60_000), polling=50)
         held = page.evaluate("() => window.received[window.received.length - 1]")
         positions = np.array(page.evaluate("() => Array.from(window.app.face.deformedPositions())"))
         # still the open pose after the read-back (the take loops through its rest frame)
@@ -109,7 +110,7 @@ def test_joined_lips_open_in_the_browser_and_undo(server, page, tmp_path):
     open_project(page, server, pid)
     page.set_input_files("#file-input", str(path))
     page.wait_for_function("n => window.app.face && window.app.face.mesh.geometry"
-                           ".attributes.position.count === n", arg=n, timeout=30_000)
+                           ".attributes.position.count === n", arg=n, timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     assert page.input_value("#layout-select") == "dutreve22"
     assert page.is_hidden("#mouth-box")  # no landmarks yet: nothing to tell
@@ -133,7 +134,7 @@ def test_joined_lips_open_in_the_browser_and_undo(server, page, tmp_path):
     _wait_rigged(page, n)
 
     # the joined lips are told, with the action to open them
-    page.wait_for_selector("#mouth-box", state="visible", timeout=30_000)
+    page.wait_for_selector("#mouth-box", state="visible", timeout=scaled_ms(30_000))
     assert page.inner_text("#mouth-note").strip() == JOINED
     assert page.is_visible("#open-mouth") and page.is_hidden("#undo-open-mouth")
 
@@ -161,6 +162,6 @@ def test_joined_lips_open_in_the_browser_and_undo(server, page, tmp_path):
     _wait_rigged(page, n)
     again = np.array(page.evaluate("() => Array.from(window.app.face.mesh.geometry.attributes.position.array)"))
     np.testing.assert_array_equal(again, rest)
-    page.wait_for_selector("#open-mouth", state="visible", timeout=30_000)
+    page.wait_for_selector("#open-mouth", state="visible", timeout=scaled_ms(30_000))
     assert page.inner_text("#mouth-note").strip() == JOINED and page.is_hidden("#undo-open-mouth")
     assert server.api("GET", f"/api/projects/{pid}")["mesh"]["n_vertices"] == n

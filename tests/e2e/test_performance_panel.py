@@ -26,6 +26,7 @@ from retarget.sources.take import Take
 from retarget.testing.marker_video import default_camera, render_marker_video
 from retarget.testing.render import render_face
 from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project
+from tests.waits import scaled_ms
 
 FPS = 30.0
 N_FRAMES = 90
@@ -84,7 +85,7 @@ def shared_page(browser, server):
     page.on("pageerror", lambda exc: page.console_errors.append(f"page error: {exc}"))
     sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
     open_project(page, server, sample["id"])
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     page.sample = sample
     yield page
     context.close()
@@ -135,7 +136,7 @@ def reload(page) -> None:
     page.reload()
     page.wait_for_function("() => window.app && window.app.projectId")
     page.evaluate("() => window.app.ready")
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
 
 
 def open_conditioning(page) -> None:
@@ -156,12 +157,12 @@ def play_to_the_end(page) -> tuple[dict, list[dict]]:
     received up to its last one."""
     page.evaluate("() => { window.streamFrames.length = 0; window.messages.length = 0; }")
     page.click("#play")
-    page.wait_for_function("() => window.messages.some(m => m.type === 'started')", timeout=15_000)
+    page.wait_for_function("() => window.messages.some(m => m.type === 'started')", timeout=scaled_ms(15_000))
     started = page.evaluate("() => window.messages.find(m => m.type === 'started')")
     page.wait_for_function("n => window.streamFrames.some(f => f.index === n - 1)",
-                           arg=started["frames"], timeout=30_000)
+                           arg=started["frames"], timeout=scaled_ms(30_000))
     # the last frame says it is the last: the page is back at Play, nothing to stop
-    page.wait_for_function("() => document.getElementById('stop').disabled", timeout=5_000)
+    page.wait_for_function("() => document.getElementById('stop').disabled", timeout=scaled_ms(5_000))
     return started, page.evaluate("() => window.streamFrames")
 
 
@@ -185,7 +186,7 @@ def test_imported_take_plays_renames_trims_downloads_and_deletes(server, page, j
     write_take_csv(jaw_take, path)
     page.select_option("#source-select", "demo")
     page.set_input_files("#take-file", str(path))
-    page.wait_for_selector("#take-list li", timeout=15_000)
+    page.wait_for_selector("#take-list li", timeout=scaled_ms(15_000))
     (info,) = takes(server, page)
     assert info["name"] == "jaw open" and info["n_frames"] == N_FRAMES and info["n_points"] == 68
     assert info["dims"] == 3 and info["layout"] == "ibug68"
@@ -274,7 +275,7 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     page.evaluate(_WATCH_PROGRESS)
     page.set_input_files("#video-file", str(marker_video))
     page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1,
-                           timeout=30_000)
+                           timeout=scaled_ms(30_000))
     page.wait_for_selector("#source-progress", state="hidden")
     (info,) = [t for t in takes(server, page) if t["id"] not in {b["id"] for b in before}]
     assert info["name"] == "markers" and info["source"] == "markers"
@@ -317,7 +318,7 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     page.evaluate(_RECORD)
     page.click("#play")
     page.wait_for_function("() => window.streamFrames.length >= 20 || "
-                           "!document.querySelector('#error').hidden", timeout=30_000)
+                           "!document.querySelector('#error').hidden", timeout=scaled_ms(30_000))
     assert page.inner_text("#error-text") == ""
     _, size = motion(page.evaluate("() => window.streamFrames"))
     assert size.max() > 0.05
@@ -456,7 +457,7 @@ def test_bad_input_says_what_is_wrong_and_keeps_the_project(server, page, kept_t
     # video whose frames up to the cut were kept, as a warning under the takes
     page.wait_for_function("() => !document.getElementById('error').hidden || "
                            "document.getElementById('source-note').classList.contains('warn')",
-                           timeout=45_000)
+                           timeout=scaled_ms(45_000))
     shown = page.inner_text("#error-text") or page.inner_text("#source-note")
     assert re.search(expected, shown, re.IGNORECASE), shown
 

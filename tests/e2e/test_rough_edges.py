@@ -15,6 +15,7 @@ from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.sample_face import demo_performance
 from tests.e2e.conftest import open_project
+from tests.waits import scaled_ms
 
 
 def _sample(server) -> dict:
@@ -24,15 +25,15 @@ def _sample(server) -> dict:
 def _open_sample(server, page) -> dict:
     sample = _sample(server)
     open_project(page, server, sample["id"])
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     return sample
 
 
 def _play_demo(page) -> None:
-    page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=30_000)
+    page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=scaled_ms(30_000))
     page.select_option("#source-select", "demo")
     page.click("#play")
-    page.wait_for_function("() => window.app.streaming", timeout=30_000)
+    page.wait_for_function("() => window.app.streaming", timeout=scaled_ms(30_000))
 
 
 def test_play_is_visible_on_first_open_without_scrolling(server, page):
@@ -47,7 +48,7 @@ def test_a_double_click_on_new_makes_one_project(server, page):
     _open_sample(server, page)
     before = {p["id"] for p in server.api("GET", "/api/projects")}
     page.dblclick("#new-project")
-    page.wait_for_function("() => window.app.project && window.app.project.name.startsWith('Untitled')", timeout=30_000)
+    page.wait_for_function("() => window.app.project && window.app.project.name.startsWith('Untitled')", timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     page.wait_for_timeout(1500)  # a second request would have landed by now
     projects = server.api("GET", "/api/projects")
@@ -66,29 +67,29 @@ def test_the_export_panel_lists_a_new_take_without_being_hovered(server, page, t
     path = tmp_path / "smile.npy"
     np.save(path, frames[:45, np.r_[:68]].astype(np.float32))
     page.set_input_files("#take-file", str(path))
-    page.wait_for_selector("#take-list li:has-text('smile')", timeout=60_000)
-    page.wait_for_selector("#export-takes label:has-text('smile')", timeout=5_000)
+    page.wait_for_selector("#take-list li:has-text('smile')", timeout=scaled_ms(60_000))
+    page.wait_for_selector("#export-takes label:has-text('smile')", timeout=scaled_ms(5_000))
     assert page.is_hidden("#export-none")
     # deleted in the Performance panel: gone from the Export panel too
     page.click("#take-list li:has-text('smile') .delete")
     page.click("#confirm-ok")
-    page.wait_for_function("() => !document.querySelector('#take-list li')", timeout=30_000)
-    page.wait_for_selector("#export-takes label", state="detached", timeout=5_000)
+    page.wait_for_function("() => !document.querySelector('#take-list li')", timeout=scaled_ms(30_000))
+    page.wait_for_selector("#export-takes label", state="detached", timeout=scaled_ms(5_000))
     assert page.is_visible("#export-none")
 
 
 def test_a_new_project_shows_none_of_the_old_ones_figures_or_notes(server, page):
     _open_sample(server, page)
     _play_demo(page)
-    page.wait_for_function("() => document.getElementById('latency').textContent.endsWith('ms')", timeout=30_000)
+    page.wait_for_function("() => document.getElementById('latency').textContent.endsWith('ms')", timeout=scaled_ms(30_000))
     page.click("#record")
-    page.wait_for_function("() => document.getElementById('record').textContent.startsWith('■')", timeout=10_000)
+    page.wait_for_function("() => document.getElementById('record').textContent.startsWith('■')", timeout=scaled_ms(10_000))
     page.wait_for_timeout(500)
     page.click("#record")
     page.wait_for_function("() => document.getElementById('source-note').textContent.startsWith('Recorded')",
-                           timeout=30_000)
+                           timeout=scaled_ms(30_000))
     page.click("#new-project")
-    page.wait_for_function("() => window.app.project && window.app.project.name.startsWith('Untitled')", timeout=30_000)
+    page.wait_for_function("() => window.app.project && window.app.project.name.startsWith('Untitled')", timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     assert page.inner_text("#latency") == "–" and page.inner_text("#fps") == "–"
     assert page.inner_text("#source-note") == ""
@@ -104,17 +105,17 @@ def test_points_hide_while_playing_unless_the_user_chooses(server, page):
     _open_sample(server, page)
     assert _points_shown(page) and page.is_checked("#show-points")
     _play_demo(page)
-    page.wait_for_function("() => !window.app.picker.markers.group.visible", timeout=10_000)
+    page.wait_for_function("() => !window.app.picker.markers.group.visible", timeout=scaled_ms(10_000))
     assert not page.is_checked("#show-points")
     page.click("#stop")
-    page.wait_for_function("() => window.app.picker.markers.group.visible", timeout=10_000)
+    page.wait_for_function("() => window.app.picker.markers.group.visible", timeout=scaled_ms(10_000))
     assert page.is_checked("#show-points")
     # the user's choice holds, playing or not
     page.uncheck("#show-points")
     assert not _points_shown(page)
     _play_demo(page)
     page.click("#stop")
-    page.wait_for_function("() => !window.app.streaming", timeout=10_000)
+    page.wait_for_function("() => !window.app.streaming", timeout=scaled_ms(10_000))
     assert not _points_shown(page) and not page.is_checked("#show-points")
     page.check("#show-points")
     _play_demo(page)
@@ -158,7 +159,7 @@ def test_the_heat_map_has_a_legend_with_the_features_weight_range(server, page):
     w = np.where(indices == joint, weights, 0).sum(axis=1)  # (V,) 0 where it has no influence
     assert w.min() < 0  # the default (interpolating) rig has negative weights
     page.select_option("#heatmap-select", str(joint))
-    page.wait_for_selector("#heat-legend", state="visible", timeout=5_000)
+    page.wait_for_selector("#heat-legend", state="visible", timeout=scaled_ms(5_000))
     assert float(page.inner_text("#heat-min")) == round(float(w.min()), 3)
     assert float(page.inner_text("#heat-max")) == round(float(w.max()), 3)
     assert "negative weight: the skin moves against the feature point" in page.inner_text("#heat-legend").lower()

@@ -19,6 +19,7 @@ import pytest
 from retarget.sources.calibration import StereoCalibration
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
 from tests.e2e.conftest import Server, open_project
+from tests.waits import scaled_ms
 
 N_FRAMES = 6
 
@@ -85,7 +86,7 @@ def test_a_stereo_pair_tracked_through_the_form_plays_and_bad_input_is_named(ser
     left, right, calibration, not_calibration, truth, rig = pair
     sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
     open_project(page, server, sample["id"])
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     before = server.api("GET", f"/api/projects/{sample['id']}/takes")
 
     # the form says what is missing and stays open
@@ -99,7 +100,7 @@ def test_a_stereo_pair_tracked_through_the_form_plays_and_bad_input_is_named(ser
     page.set_input_files("#stereo-right", str(right))
     page.set_input_files("#stereo-calibration", str(not_calibration))
     page.click("#stereo-track")
-    page.wait_for_selector("#error", state="visible", timeout=30_000)
+    page.wait_for_selector("#error", state="visible", timeout=scaled_ms(30_000))
     message = page.inner_text("#error-text")
     assert "'points.npz' is not a stereo calibration saved by retarget" in message and "HTTP 422" in message
     assert page.is_hidden("#source-progress") and page.is_enabled("#video-file")
@@ -112,7 +113,7 @@ def test_a_stereo_pair_tracked_through_the_form_plays_and_bad_input_is_named(ser
     page.set_input_files("#stereo-calibration", str(calibration))
     page.evaluate(_WATCH)
     page.click("#stereo-track")
-    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=60_000)
+    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=scaled_ms(60_000))
     page.wait_for_selector("#source-progress", state="hidden")
     (info,) = [t for t in server.api("GET", f"/api/projects/{sample['id']}/takes")
                if t["id"] not in {b["id"] for b in before}]
@@ -142,7 +143,7 @@ def test_a_stereo_pair_tracked_through_the_form_plays_and_bad_input_is_named(ser
     page.check("#take-loop")
     page.evaluate(_RECORD)
     page.click("#play")
-    page.wait_for_function("() => window.frames.length >= 24", timeout=30_000)
+    page.wait_for_function("() => window.frames.length >= 24", timeout=scaled_ms(30_000))
     frames = page.evaluate("() => window.frames")
     index = np.array([f["index"] for f in frames]) % N_FRAMES  # frame indices go on over loops
     size = np.linalg.norm(np.array([f["d"] for f in frames]).reshape(len(frames), -1, 3), axis=2).max(axis=1)
@@ -169,7 +170,7 @@ def test_checkerboard_videos_calibrate_through_the_form(server, page, pair, boar
     assert page.inner_text("#stereo-note") == "Choose the right camera's checkerboard video."
     page.set_input_files("#stereo-board-right", str(boards[1]))
     page.click("#stereo-track")
-    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=60_000)
+    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=scaled_ms(60_000))
     note = page.inner_text("#source-note")
     assert "calibration from 6 checkerboard views" in note, note
     # the calibration it made: the rig's, to be downloaded for the next pairs

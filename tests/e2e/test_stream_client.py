@@ -6,6 +6,7 @@ from __future__ import annotations
 
 
 import pytest
+from tests.waits import scaled_ms
 
 # The page is written into a document of the server's origin (a JSON route) rather than
 # served by page.route: Chromium treats a route-fulfilled page as a public address and
@@ -56,7 +57,7 @@ def test_frames_and_stats(server, client_page):
     page = client_page
     project_id = _sample_id(server)
     page.evaluate("(id) => { const c = open_(id); c.send({type: 'start', source: 'demo', fps: 30}); c.connect(); }", project_id)
-    page.wait_for_function("log.frames >= 45", timeout=20_000)
+    page.wait_for_function("log.frames >= 45", timeout=scaled_ms(20_000))
     log = _log(page)
     assert [s["state"] for s in log["statuses"]] == ["connecting", "open"]
     assert log["hello"]["project"] == project_id and log["hello"]["n_points"] == 68
@@ -80,14 +81,14 @@ def test_reconnects_and_restarts_the_demo(server, client_page):
     page = client_page
     project_id = _sample_id(server)
     page.evaluate("(id) => { const c = open_(id); c.connect(); c.send({type: 'start', source: 'demo', fps: 30}); }", project_id)
-    page.wait_for_function("log.frames >= 5", timeout=20_000)
+    page.wait_for_function("log.frames >= 5", timeout=scaled_ms(20_000))
 
     server.restart()  # same port and data: the page sees the connection drop
-    page.wait_for_function("log.statuses.some((s) => s.state === 'reconnecting')", timeout=20_000)
-    page.wait_for_function("log.statuses.at(-1).state === 'open'", timeout=30_000)
+    page.wait_for_function("log.statuses.some((s) => s.state === 'reconnecting')", timeout=scaled_ms(20_000))
+    page.wait_for_function("log.statuses.at(-1).state === 'open'", timeout=scaled_ms(30_000))
     # the new server has no source until the client re-sends its start
     frames = _log(page)["frames"]
-    page.wait_for_function(f"log.frames >= {frames + 10}", timeout=20_000)
+    page.wait_for_function(f"log.frames >= {frames + 10}", timeout=scaled_ms(20_000))
     assert sum(m.get("type") == "started" for m in _log(page)["messages"]) == 2
 
     page.evaluate("client.close()")
@@ -99,7 +100,7 @@ def test_policy_close_does_not_reconnect(server, client_page):
     page = client_page
     project_id = server.api("POST", "/api/projects", {"name": "no landmarks"})["id"]
     page.evaluate("(id) => open_(id).connect()", project_id)
-    page.wait_for_function("log.statuses.at(-1).state === 'closed'", timeout=20_000)
+    page.wait_for_function("log.statuses.at(-1).state === 'closed'", timeout=scaled_ms(20_000))
     page.wait_for_timeout(1000)  # longer than the first backoff steps
     statuses = _log(page)["statuses"]
     assert [s["state"] for s in statuses] == ["connecting", "open", "closed"], statuses

@@ -12,6 +12,7 @@ import pytest
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from tests.e2e.conftest import write_face_file, open_project, upload_face
+from tests.waits import scaled_ms
 
 _IDENTITY = np.array([0.5, -0.4, 0.7, -0.3, 0.2])  # neither the sample project's face nor test_app_flow's
 CLICK_TOLERANCE = 0.15  # cm: a click lands within a few pixels, about 0.03 cm each at this zoom
@@ -211,7 +212,7 @@ def test_drop_a_mesh_on_the_view_keeps_the_landmarked_project(server, page, face
     # the sample has landmarks and a rig: the dropped mesh goes into a new project
     drop_file(page, path.name, path.read_bytes())
     page.wait_for_function("id => window.app.projectId !== id && window.app.face && window.app.face"
-                           ".mesh.geometry.attributes.position.count === 8430", arg=sample["id"], timeout=30_000)
+                           ".mesh.geometry.attributes.position.count === 8430", arg=sample["id"], timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     projects = server.api("GET", "/api/projects")
     assert [p["name"] for p in projects] == ["Sample face", path.stem]

@@ -23,6 +23,7 @@ import pytest
 from retarget.layouts import get_layout
 from tests.e2e.conftest import Server, open_project
 from tests.e2e.fake_camera import video_frames
+from tests.waits import scaled_ms
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
@@ -178,7 +179,7 @@ def test_a_face_video_tracked_in_the_panel_is_a_take_of_all_its_frames(server, p
     before = {t["id"] for t in server.api("GET", f"/api/projects/{sample['id']}/takes")}
     page.select_option("#video-method", "markerless")
     page.set_input_files("#video-file", str(path))
-    page.wait_for_selector("#take-list li:has-text('performer')", timeout=120_000)
+    page.wait_for_selector("#take-list li:has-text('performer')", timeout=scaled_ms(120_000))
     [take] = [t for t in server.api("GET", f"/api/projects/{sample['id']}/takes") if t["id"] not in before]
     assert take["n_frames"] == FACE_FRAMES and take["fps"] == FACE_FPS
     assert take["duration"] == pytest.approx((FACE_FRAMES - 1) / FACE_FPS)

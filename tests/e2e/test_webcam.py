@@ -25,6 +25,7 @@ from playwright.sync_api import sync_playwright
 from retarget.layouts import get_layout
 from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project
 from tests.e2e.fake_camera import checkerboard, video_frames, write_y4m
+from tests.waits import scaled_ms
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
@@ -101,8 +102,8 @@ def open_sample(server, page) -> dict:
     """The rigged sample project, shown in the page with the log running."""
     sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
     open_project(page, server, sample["id"])
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
-    page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=10_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
+    page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=scaled_ms(10_000))
     page.evaluate(_LOG)
     return sample
 
@@ -112,7 +113,7 @@ def play_webcam(page, clicks: int = 1) -> None:
     for _ in range(clicks):
         page.click("#play")
     page.wait_for_function("() => window.log.messages.some(m => m.type === 'started' && m.source === 'live')",
-                           timeout=60_000)
+                           timeout=scaled_ms(60_000))
 
 
 def rest_vertices(server, project_id: str) -> np.ndarray:
@@ -137,12 +138,12 @@ def stop_releases_the_camera_and_rests(page, server, project_id: str) -> None:
     go out, and the face is back at rest."""
     press(page, "#stop")
     page.wait_for_function("() => window.cameras.every(c => c.getTracks().every(t => t.readyState === 'ended'))",
-                           timeout=10_000)
+                           timeout=scaled_ms(10_000))
     assert page.evaluate("() => window.cameras.length") == 1
     assert page.evaluate("() => document.getElementById('webcam-video').srcObject === null")
     assert page.is_hidden("#webcam-box") and not page.inner_text("#source-note").startswith("Webcam:")
     page.wait_for_function("() => window.log.frames.length > 0 && window.log.frames.at(-1).flags & 1",
-                           timeout=10_000)
+                           timeout=scaled_ms(10_000))
     sent = page.evaluate("() => window.log.sent.length")
     page.wait_for_timeout(1000)
     assert page.evaluate("() => window.log.sent.length") == sent
@@ -173,7 +174,7 @@ def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page
     play_webcam(page)
     assert page.evaluate("() => { const v = document.getElementById('webcam-video');"
                          " return !v.paused && v.readyState >= 2 && v.videoWidth; }") == CAMERA_SIZE
-    page.wait_for_function("() => window.log.frames.length >= 12", timeout=60_000)
+    page.wait_for_function("() => window.log.frames.length >= 12", timeout=scaled_ms(60_000))
     assert np.abs(on_screen(page) - rest_vertices(server, sample["id"])).max() > 0.05  # cm
     assert page.inner_text("#source-note") == "Webcam: neutral captured."  # after its countdown
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
@@ -197,22 +198,22 @@ def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page
 
     # capture neutral: acknowledged, and frames come again once the new neutral is in
     press(page, "#recapture-neutral")
-    page.wait_for_function("() => window.log.messages.some(m => m.type === 'neutral')", timeout=10_000)
+    page.wait_for_function("() => window.log.messages.some(m => m.type === 'neutral')", timeout=scaled_ms(10_000))
     n = page.evaluate("() => window.log.frames.length")
-    page.wait_for_function(f"() => window.log.frames.length > {n}", timeout=30_000)
+    page.wait_for_function(f"() => window.log.frames.length > {n}", timeout=scaled_ms(30_000))
 
     # record about 2 s under a name
     page.fill("#record-name", "webcam e2e")
     press(page, "#record")
-    page.wait_for_function("() => window.log.messages.some(m => m.type === 'recording')", timeout=10_000)
+    page.wait_for_function("() => window.log.messages.some(m => m.type === 'recording')", timeout=scaled_ms(10_000))
     assert page.inner_text("#record").startswith("■")
     page.wait_for_timeout(RECORD_S * 1000)
     press(page, "#record")
-    page.wait_for_selector("#take-list li:has-text('webcam e2e')", timeout=20_000)
+    page.wait_for_selector("#take-list li:has-text('webcam e2e')", timeout=scaled_ms(20_000))
     # a tracked frame after the recording stopped bounds its end (below)
     page.wait_for_function("() => { const s = window.log.sent;"
                            " const stop = s.findLastIndex(m => m.control === 'record_stop');"
-                           " return s.slice(stop).some(m => 'index' in m); }", timeout=10_000)
+                           " return s.slice(stop).some(m => 'index' in m); }", timeout=scaled_ms(10_000))
     log = page.evaluate("() => window.log.sent")
     start, stop = (max(i for i, s in enumerate(log) if s.get("control") == c) for c in ("record", "record_stop"))
     recorded = [s for s in log[start + 1:stop] if "index" in s]
@@ -249,10 +250,10 @@ def test_a_camera_without_a_face_says_so_and_leaves_the_face_at_rest(server, pag
     before = [server.api("GET", f"/api/projects/{sample['id']}{part}") for part in ("", "/takes")]
     play_webcam(page, clicks=2)  # impatient: again while the camera and the tracker load
     page.wait_for_function("() => document.getElementById('source-note').textContent.includes('no face')",
-                           timeout=60_000)
+                           timeout=scaled_ms(60_000))
     assert page.inner_text("#source-note") == \
         "Webcam: no face found in the camera image. Face the camera, in good light."
-    page.wait_for_function("() => window.log.sent.filter(s => 'index' in s).length >= 5", timeout=30_000)
+    page.wait_for_function("() => window.log.sent.filter(s => 'index' in s).length >= 5", timeout=scaled_ms(30_000))
 
     log = page.evaluate("() => window.log")
     lost = np.array([s["points"] for s in log["sent"] if "index" in s], np.float32)

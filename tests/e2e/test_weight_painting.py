@@ -14,6 +14,7 @@ import numpy as np
 
 from retarget.layouts import get_layout
 from tests.e2e.conftest import open_project
+from tests.waits import scaled_ms
 
 STRENGTH = 1.0
 RADIUS = 0.6  # cm: the sample face is about 15 cm wide
@@ -74,7 +75,7 @@ def stroke(page, points) -> None:
 
 def wait_saved(page, version: int) -> None:
     page.wait_for_function("v => window.app.paint.painter.saveState === 'saved' && "
-                           "window.app.paint.painter.rig.version === v", arg=version, timeout=20_000)
+                           "window.app.paint.painter.rig.version === v", arg=version, timeout=scaled_ms(20_000))
     assert page.get_attribute("#paint-note", "data-state") == "saved"
 
 
@@ -98,7 +99,7 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
     version = server.api("GET", f"/api/projects/{pid}/rig")["version"]
 
     open_project(page, server, pid)
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     assert page.is_hidden("#paint-panel")
     page.click("#paint-toggle")
     page.select_option("#paint-joint", "30")  # nose tip
@@ -141,7 +142,7 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
 
     # mirrored subtract on the right eye's inner corner while the demo plays
     page.click("#play")
-    page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=30_000)
+    page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=scaled_ms(30_000))
     corner = landmarks[39]
     page.keyboard.down("Control")  # Ctrl+click picks the feature point nearest the click
     page.mouse.click(*screen(page, corner + [0.05, 0.0, 0.0]))
@@ -152,7 +153,7 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
     stroke(page, [corner, corner + [0.0, 0.05, 0.0]])
     wait_saved(page, version + 4)
     frames = page.evaluate("() => window.app.stream.stats.frames")
-    page.wait_for_function("n => window.app.stream.stats.frames > n + 5", arg=frames, timeout=20_000)
+    page.wait_for_function("n => window.app.stream.stats.frames > n + 5", arg=frames, timeout=scaled_ms(20_000))
     mirrored = server_weights(server, pid)
     for joint, point in ((39, corner), (MIRROR[39], landmarks[MIRROR[39]])):
         close = np.linalg.norm(rest - point, axis=1) < 0.3 * radius
@@ -161,7 +162,7 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
 
     # a reload shows the painted rig
     page.reload()
-    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=30_000)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     assert "painted" in page.inner_text("#paint-state")
     np.testing.assert_allclose(drawn_column(page, 39, rest), mirrored[:, 39], atol=1e-4)
@@ -203,7 +204,7 @@ def test_paint_undo_mirror_reload_reset_and_a_refused_save(server, page):
     server.api("POST", f"/api/projects/{pid}/rig/reset", {"joints": None})
     page.check("input[name='paint-brush'][value='add']")
     stroke(page, [tip, base])
-    page.wait_for_function("() => window.app.paint.painter.saveState === 'failed'", timeout=20_000)
+    page.wait_for_function("() => window.app.paint.painter.saveState === 'failed'", timeout=scaled_ms(20_000))
     note = page.inner_text("#paint-note")
     assert f"the rig changed (now version {version + 9}) since version {version + 8}" in note
     assert page.is_visible("#paint-retry")
