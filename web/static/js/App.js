@@ -1,4 +1,5 @@
 import { api } from './net/api.js';
+import { DEFAULT_LAYOUT } from './panels/LandmarksPanel.js';
 import { projectFromHash } from './panels/ProjectBar.js';
 import { $ } from './panels/dom.js';
 import { SkinnedFace } from './scene/SkinnedFace.js';
@@ -243,7 +244,7 @@ export class App {
 	/** The shown project was deleted: show the first one left, or none. */
 	async forgetProject() {
 
-		this.landmarks.load( this.landmarks.state.layout || 'dutreve21' ); // nothing left to save
+		this.landmarks.load( this.landmarks.state.layout || DEFAULT_LAYOUT ); // nothing left to save
 		this.closeProject();
 		this.projectId = null;
 		await this.refreshProjects();

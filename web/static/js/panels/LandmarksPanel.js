@@ -3,7 +3,7 @@ import { ask } from './ask.js';
 import { $, guarded, option } from './dom.js';
 import { LayoutGuide } from './LayoutGuide.js';
 
-const DEFAULT_LAYOUT = 'dutreve22'; // Dutreve's points and the chin: the jaw follows the mouth, one more click
+export const DEFAULT_LAYOUT = 'dutreve22'; // Dutreve's points and the chin: the jaw follows the mouth, one more click
 const LAST_LAYOUT_KEY = 'retarget.layout';
 
 /** Where a point of the face's side is in the guide, which shows the face as you see it. */
