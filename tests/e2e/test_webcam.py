@@ -208,6 +208,11 @@ def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page
     page.wait_for_function("() => window.log.messages.some(m => m.type === 'recording')", timeout=scaled_ms(10_000))
     assert page.inner_text("#record").startswith("■")
     page.wait_for_timeout(RECORD_S * 1000)
+    # and at least 3 tracked frames: a loaded machine tracks about one frame a second
+    page.wait_for_function("() => { const s = window.log.sent;"
+                           " const start = s.findLastIndex(m => m.control === 'record');"
+                           " return s.slice(start).filter(m => 'index' in m).length >= 3; }",
+                           timeout=scaled_ms(30_000))
     press(page, "#record")
     page.wait_for_selector("#take-list li:has-text('webcam e2e')", timeout=scaled_ms(20_000))
     # a tracked frame after the recording stopped bounds its end (below)
