@@ -58,7 +58,7 @@ export class LivePanel {
 			if ( stream !== this.stream || ! app.face ) return;
 			const frame = event.detail;
 			app.face.setDisplacements( frame.displacements );
-			this._turnHead( frame.headRotation );
+			app.face.setHeadRotation( frame.headRotation ); // a source's head pose, when the conditioning applies it
 			app.picker.setDisplacements( frame.displacements );
 			stream.markApplied( frame );
 			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
@@ -206,27 +206,10 @@ export class LivePanel {
 		if ( ! on ) {
 
 			$( 'fps' ).textContent = '–';
-			this._turnHead( null );
+			this.app.face?.setHeadRotation( null );
 			this.app.sources.onStopped();
 
 		}
-
-	}
-
-	/**
-	 * Turn the face by the performer's head rotation (a source's head pose, when the
-	 * conditioning applies it), about the centre of its rest bounding sphere.
-	 * @param {Float32Array|null} q - quaternion x, y, z, w; null puts the face back.
-	 */
-	_turnHead( q ) {
-
-		const mesh = this.app.face?.mesh;
-		if ( ! mesh ) return;
-		if ( q ) mesh.quaternion.set( q[ 0 ], q[ 1 ], q[ 2 ], q[ 3 ] );
-		else mesh.quaternion.identity();
-		if ( ! mesh.geometry.boundingSphere ) mesh.geometry.computeBoundingSphere();
-		const centre = mesh.geometry.boundingSphere.center;
-		mesh.position.copy( centre ).applyQuaternion( mesh.quaternion ).negate().add( centre );
 
 	}
 

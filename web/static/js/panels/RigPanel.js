@@ -2,9 +2,12 @@ import { ApiError, api } from '../net/api.js';
 import { $, guarded, option } from './dom.js';
 import { HeatmapLegend } from './HeatmapLegend.js';
 
+// the bar's share of the server's job; the rest is loading the rig onto the face
+const SERVER_SHARE = 0.95;
+
 /**
  * The Rig panel (index.html #rig-panel): the deformer and *Compute* (a server job, its
- * progress in the bar), the rig's badge, and the heat map of one feature's weights with
+ * progress in the bar, full once the rig is on the face), the rig's badge, and the heat map of one feature's weights with
  * its legend (HeatmapLegend).
  * Weight painting is its own panel (PaintPanel) inside it.
  */
@@ -125,7 +128,7 @@ export class RigPanel {
 
 				job = await api.waitJob( started.id, ( { progress, detail } ) => {
 
-					bar.value = progress;
+					bar.value = SERVER_SHARE * progress;
 					message.textContent = `${ Math.round( progress * 100 ) }% · ${ detail || method }`;
 
 				}, { what: `Rig (${ method })`, signal: follow.signal } );
@@ -140,11 +143,12 @@ export class RigPanel {
 			}
 
 			if ( ! current() ) return;
-			bar.value = 1;
-			message.textContent = `${ job.detail || 'done' } · ${ ( ( performance.now() - t0 ) / 1000 ).toFixed( 1 ) } s`;
 			app.project = await api.project( id );
 			await this.load( current );
 			app.live.update();
+			// full only now: a full bar means the rig is on the face and plays
+			bar.value = 1;
+			message.textContent = `${ job.detail || 'done' } · ${ ( ( performance.now() - t0 ) / 1000 ).toFixed( 1 ) } s`;
 
 		} finally {
 

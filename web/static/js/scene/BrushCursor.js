@@ -1,5 +1,7 @@
 import { DoubleSide, Mesh, MeshBasicMaterial, RingGeometry, Triangle, Vector3 } from 'three';
 
+import { redraw } from './Viewer.js';
+
 const RING_INNER = 0.94; // the ring's inner radius, in brush radii
 
 /**
@@ -41,6 +43,7 @@ export class BrushCursor {
 		const [ ring, mirrored ] = this._rings;
 		this._place( ring, surface, radius, at );
 		this._place( mirrored, surface, radius, image );
+		redraw( this.scene );
 
 	}
 
@@ -48,6 +51,7 @@ export class BrushCursor {
 	hide() {
 
 		for ( const ring of this._rings ) ring.visible = false;
+		redraw( this.scene );
 
 	}
 

@@ -1,6 +1,7 @@
 import { Color, Group, Mesh, MeshStandardMaterial, SphereGeometry, Vector3 } from 'three';
 
 import { regionColor } from './palette.js';
+import { redraw } from './Viewer.js';
 
 const MARKER_SCALE = 0.0085; // marker radius as a fraction of the mesh's bounding-sphere radius
 const GRAB_SLOP = 1.5; // CSS px beyond a marker's drawn radius that still grab it (close neighbours stay clickable)
@@ -49,6 +50,7 @@ export class LandmarkMarkers {
 
 			group.visible = false;
 			this.scene.remove( group );
+			redraw( this.scene );
 			return;
 
 		}
@@ -71,6 +73,7 @@ export class LandmarkMarkers {
 			marker.renderOrder = 1;
 
 		} );
+		redraw( this.scene );
 
 	}
 
@@ -82,6 +85,7 @@ export class LandmarkMarkers {
 
 		this.shown = Boolean( shown );
 		if ( this.group.parent ) this.group.visible = this.shown;
+		redraw( this.scene );
 
 	}
 

@@ -17,6 +17,7 @@ import {
 import { GPUSkinWeights } from './GPUSkinWeights.js';
 import { ShaderLoader } from './ShaderLoader.js';
 import { VertexPasses, exactTexture } from './VertexPasses.js';
+import { redraw } from './Viewer.js';
 
 const MAX_JOINTS = 4096; // the displacement texture is one row
 const MAX_VERTICES = 2 ** 24; // vertex indices are stored in float32 textures, exact up to 2^24
@@ -177,6 +178,7 @@ export class SkinnedFace {
 			this.nJoints = this.nInfluences = 0;
 			this._setDefine( null );
 			this._version ++;
+			redraw( this.mesh );
 			return;
 
 		}
@@ -220,6 +222,7 @@ export class SkinnedFace {
 		this.nInfluences = k;
 		this._rigUploaded = false;
 		this._version ++;
+		redraw( this.mesh );
 
 	}
 
@@ -258,6 +261,7 @@ export class SkinnedFace {
 		// before the rig's first upload a partial range would leave the rest uninitialised
 		this._weights.update( vertices, indices, weights, k, this._rigUploaded );
 		this._version ++;
+		redraw( this.mesh );
 
 	}
 
@@ -296,6 +300,7 @@ export class SkinnedFace {
 
 		this._skinUniforms.displacementTexture.value.needsUpdate = true;
 		this._version ++;
+		redraw( this.mesh );
 
 	}
 
@@ -312,6 +317,7 @@ export class SkinnedFace {
 		}
 
 		this.mesh.material.uniforms.heatJoint.value = joint === null ? - 1 : joint;
+		redraw( this.mesh );
 
 	}
 
@@ -346,6 +352,7 @@ export class SkinnedFace {
 		}
 
 		uniforms.textured.value = uniforms.textured.value && this.hasTexture;
+		redraw( this.mesh );
 
 	}
 
@@ -357,6 +364,22 @@ export class SkinnedFace {
 	setTextured( on ) {
 
 		this.mesh.material.uniforms.textured.value = Boolean( on ) && this.hasTexture;
+		redraw( this.mesh );
+
+	}
+
+	/**
+	 * Turn the face about the centre of its rest bounding sphere, as a performer's head turns.
+	 * @param {Float32Array|number[]|null} q - quaternion x, y, z, w; null puts the face back.
+	 */
+	setHeadRotation( q ) {
+
+		const mesh = this.mesh;
+		if ( q ) mesh.quaternion.set( q[ 0 ], q[ 1 ], q[ 2 ], q[ 3 ] );
+		else mesh.quaternion.identity();
+		const centre = mesh.geometry.boundingSphere.center; // computed by the constructor
+		mesh.position.copy( centre ).applyQuaternion( mesh.quaternion ).negate().add( centre );
+		redraw( this.mesh );
 
 	}
 
@@ -364,6 +387,7 @@ export class SkinnedFace {
 	setWireframe( on ) {
 
 		this.mesh.material.wireframe = Boolean( on );
+		redraw( this.mesh );
 
 	}
 

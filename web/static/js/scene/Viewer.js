@@ -24,7 +24,12 @@ const FRAME_MARGIN = 1.05;
 
 /**
  * The 3D view: a WebGL2 renderer filling its container, a perspective camera with orbit
- * controls, lights that read facial detail, and a render loop.
+ * controls and lights that read facial detail, drawn on demand.
+ *
+ * A frame is drawn only after something visible changed: the camera (orbit controls,
+ * framing, resize), the displayed object, or a scene object that says so with
+ * `redraw( object )`. An idle view then costs nothing, where a loop drawing every
+ * animation frame keeps a core busy under software WebGL (and a laptop's GPU awake).
  *
  * The lights ride with the camera (a studio rig around the viewer, not around the face),
  * so a face seen from any side is lit the same way: a cool hemisphere for soft fill from
@@ -88,20 +93,19 @@ export class Viewer {
 		this.controls = new OrbitControls( this.camera, canvas );
 		this.controls.enableDamping = true;
 		this.controls.zoomToCursor = true;
+		this.controls.addEventListener( 'change', () => this.invalidate() );
+		this.scene.addEventListener( 'change', () => this.invalidate() );
 
 		/** The displayed object (null: none). */
 		this.object = null;
 		this.wireframe = false;
 		this._bounds = new Sphere( new Vector3(), 1 );
-		this._tickers = new Set();
-		this._lastTime = null;
+		this._frameRequest = null; // the pending requestAnimationFrame id
 		this._width = this._height = 0; // container size, CSS pixels
 
 		this._resizeObserver = new ResizeObserver( () => this._resize() );
 		this._resizeObserver.observe( container );
 		this._resize();
-
-		this.renderer.setAnimationLoop( ( time ) => this._tick( time ) );
 
 	}
 
@@ -113,6 +117,7 @@ export class Viewer {
 
 		if ( this.object !== null ) this.scene.remove( this.object );
 		this.object = object;
+		this.invalidate();
 		if ( object !== null ) {
 
 			this.scene.add( object );
@@ -156,6 +161,7 @@ export class Viewer {
 		this.controls.minDistance = MIN_DISTANCE * radius;
 		this.controls.maxDistance = MAX_DISTANCE * radius;
 		this.controls.update();
+		this.invalidate();
 
 	}
 
@@ -176,6 +182,7 @@ export class Viewer {
 			}
 
 		} );
+		this.invalidate();
 
 	}
 
@@ -197,19 +204,14 @@ export class Viewer {
 
 	}
 
-	/**
-	 * Call `fn` every animation frame, before rendering.
-	 * @param {function(number): void} fn - receives the seconds since the previous frame.
-	 * @returns {function(): void} removes `fn`.
-	 */
-	onTick( fn ) {
+	/** Draw a frame at the next animation frame (once, however often it is asked). */
+	invalidate() {
 
-		this._tickers.add( fn );
-		return () => this._tickers.delete( fn );
+		this._frameRequest ??= requestAnimationFrame( () => this._frame() );
 
 	}
 
-	/** Render now (the animation loop also renders every frame). */
+	/** Render now. */
 	render() {
 
 		this._resize( false );
@@ -217,10 +219,11 @@ export class Viewer {
 
 	}
 
-	/** Stop the loop and free the renderer, the controls and the resize observer. */
+	/** Cancel the pending frame and free the renderer, the controls and the resize observer. */
 	dispose() {
 
-		this.renderer.setAnimationLoop( null );
+		if ( this._frameRequest !== null ) cancelAnimationFrame( this._frameRequest );
+		this._frameRequest = null;
 		this._resizeObserver.disconnect();
 		this.controls.dispose();
 		this.renderer.dispose();
@@ -228,17 +231,20 @@ export class Viewer {
 
 	}
 
-	_tick( time ) {
+	_frame() {
 
-		const dt = this._lastTime === null ? 0 : ( time - this._lastTime ) / 1000;
-		this._lastTime = time;
-		this.controls.update( dt );
-		for ( const fn of this._tickers ) fn( dt );
+		this._frameRequest = null;
+		// damping glides the camera on after the pointer lets go; while it moves, the
+		// controls' 'change' asks for the next frame
+		this.controls.update();
 		this.render();
 
 	}
 
-	/** Match the drawing buffer and the camera to the container; render if it changed. */
+	/**
+	 * Match the drawing buffer and the camera to the container; if it changed, render now
+	 * (`render`) or at the next frame.
+	 */
 	_resize( render = true ) {
 
 		const width = Math.max( 1, this.container.clientWidth );
@@ -250,7 +256,24 @@ export class Viewer {
 		this.camera.aspect = width / height;
 		this.camera.updateProjectionMatrix();
 		if ( render ) this.render();
+		else this.invalidate();
 
 	}
 
 }
+
+/**
+ * Tell the viewer whose scene holds `object` that it looks different, so its next frame
+ * is drawn: scene objects call this after each visible change (an object outside any
+ * viewer's scene is drawn when it is added).
+ * @param {import('three').Object3D} object
+ */
+export function redraw( object ) {
+
+	let root = object;
+	while ( root.parent !== null ) root = root.parent;
+	root.dispatchEvent( CHANGE );
+
+}
+
+const CHANGE = { type: 'change' };
