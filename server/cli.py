@@ -2,7 +2,7 @@
 
 The library's command line never imports the web stack; this one adds ``serve`` (the web
 app on a real port, `server.serve`) to the library's parser and tells ``track --method
-markerless`` where the web app's face tracker is (`server.web.WEB_DIR`). ``python -m
+markerless`` where the web app's face tracker is (`server.WEB_DIR`). ``python -m
 server.cli`` runs it from a checkout.
 """
 
@@ -14,7 +14,7 @@ from pathlib import Path
 from retarget.cli import build_parser as library_parser, main as run
 from retarget.cli.parser import PROG, positive_float, positive_int
 from retarget.errors import RetargetError
-from server.web import WEB_DIR
+from server import WEB_DIR
 
 __all__ = ["build_parser", "main"]
 

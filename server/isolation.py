@@ -45,9 +45,10 @@ from retarget.errors import RetargetError
 
 __all__ = ["Isolation", "IsolationBusy", "IsolationLimits", "PRELOAD"]
 
-PRELOAD = ("ezc3d", "server.readers")
+PRELOAD = ("ezc3d", "server.readers", "server.cli")
 """Modules the forkserver imports once, so each child starts with them loaded (the
-readers import the library, numpy, trimesh and OpenCV)."""
+readers import the library, numpy, trimesh and OpenCV; `server.cli` is the main module of
+``retarget serve``, which multiprocessing re-runs in every child)."""
 
 _CRASH_SIGNALS = {signal.SIGSEGV, signal.SIGBUS, signal.SIGILL, signal.SIGFPE, signal.SIGABRT}
 

@@ -21,9 +21,10 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
+from server import WEB_DIR
+
 __all__ = ["VENDORED", "WEB_DIR", "app_csp", "mount_web"]
 
-WEB_DIR = Path(__file__).resolve().parent.parent / "web"
 VENDORED = ("three", "three-mesh-bvh", "swagger-ui-dist", "@mediapipe/face_mesh")
 
 def app_csp(page: str) -> str:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import ctypes
 import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -13,7 +15,7 @@ import numpy as np
 import pytest
 
 from retarget.errors import RetargetError
-from server.isolation import Isolation, IsolationBusy, IsolationLimits
+from server.isolation import PRELOAD, Isolation, IsolationBusy, IsolationLimits
 
 
 # -- what the children run (module level: they are pickled by name) ------------------------
@@ -124,3 +126,14 @@ def test_calls_wait_for_a_free_slot_and_are_refused_as_busy_after_the_queue_time
     assert iso.call(sleep, 0, what="x") == "slept"
     # jobs have slots of their own: a job does not wait behind reads
     assert iso.call(sleep, 0, what="x", job=True) == "slept"
+
+
+def test_the_serve_command_s_module_imports_no_web_stack_for_the_children_to_repeat():
+    # multiprocessing re-runs the main module (`server.cli` under `retarget serve`) in every
+    # child; had it imported FastAPI, each upload would pay ~0.3 s of imports in its reader
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import sys, server.cli; print(' '.join(sorted(sys.modules)))"],
+        capture_output=True, text=True, check=True).stdout.split()
+    web = sorted({m.split(".")[0] for m in loaded} & {"fastapi", "starlette", "pydantic", "uvicorn", "anyio"})
+    assert web == [], f"server.cli imports {web}"
+    assert "server.cli" in PRELOAD
