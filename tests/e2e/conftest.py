@@ -25,7 +25,11 @@ from playwright.sync_api import sync_playwright
 from tests.waits import scaled, scaled_ms
 
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
+# WebGL without multisampling, as on a GPU that has none: SwiftShader draws on the CPU, where
+# 4x MSAA doubled every frame's cost (a test playing a stream kept both cores busy), and
+# no test judges edge smoothing
+CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist",
+                 "--webgl-antialiasing-mode=none"]
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "e2e"
 _STARTUP_S = 60.0
 
