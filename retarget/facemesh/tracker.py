@@ -1,0 +1,122 @@
+"""MediaPipe's legacy face-mesh graph (``face_landmark_front_cpu``), re-implemented around
+the two LiteRT models: 468 points a frame, at about a millisecond a frame on one core.
+
+A frame is searched by the face detector (`retarget.facemesh.detector`) only while no face
+is being tracked; otherwise the region of interest (ROI) comes from the previous frame's
+points. Each ROI is a rotated square, as MediaPipe builds it: centred on the bounding
+box of the detection (or of the previous points), turned so that the eye line is level
+(detector keypoints 0 -> 1, or points 33 -> 263), its side 1.5 times the box's longer
+side. The square is resampled to the landmark model's 192 x 192 input (values 0..1,
+edges replicated); the model gives 468 points in that square and a face-presence logit,
+and the points are carried back into the frame. When presence drops below 0.5, the frame
+has no face and the next frame is searched again.
+
+Coordinates: the project's convention for tracked points (`retarget.sources.markerless`
+and the page's FaceMeshTracker.js): pixels, x right, y up from the frame's bottom edge, z
+toward the camera in the same pixel scale; continuous coordinates (pixel i spans i..i+1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from retarget.facemesh.assets import model_bytes
+from retarget.facemesh.detector import Detection, FaceDetector
+
+__all__ = ["FaceMeshTracker", "Roi", "N_POINTS"]
+
+N_POINTS = 468
+INPUT = 192
+ROI_SCALE = 1.5
+MIN_PRESENCE = 0.5
+EYE_LINE = (33, 263)  # the outer corners of the person's right and left eye
+
+
+@dataclass(frozen=True)
+class Roi:
+    """A rotated square of the frame (pixels, y down): centre (2,), side, and the angle
+    (radians) of its x axis from the frame's x axis, toward +y."""
+
+    centre: np.ndarray
+    side: float
+    angle: float
+
+    @classmethod
+    def around(cls, lo: np.ndarray, hi: np.ndarray, start: np.ndarray, end: np.ndarray) -> "Roi":
+        """MediaPipe's DetectionsToRects + RectTransformation: the box lo..hi (2,) each,
+        levelled along start -> end, scaled by `ROI_SCALE` about its centre, squared on its
+        longer side."""
+        direction = end - start
+        return cls(centre=(lo + hi) / 2, side=float(ROI_SCALE * np.max(hi - lo)),
+                   angle=float(np.arctan2(direction[1], direction[0])))
+
+    def axes(self) -> np.ndarray:
+        """(2, 2): the square's x and y axes as columns, frame pixels per unit side."""
+        c, s = np.cos(self.angle), np.sin(self.angle)
+        return self.side * np.array([[c, -s], [s, c]])
+
+
+class FaceMeshTracker:
+    """`track(rgb) -> (468, 3) float32 or None`, frame after frame of one video."""
+
+    def __init__(self, threads: int = 1):
+        from ai_edge_litert.interpreter import Interpreter
+
+        self.detector = FaceDetector(threads=threads)
+        self._interpreter = Interpreter(model_content=model_bytes("face_landmark.tflite"),
+                                        num_threads=threads)
+        self._interpreter.allocate_tensors()
+        self._input = self._interpreter.get_input_details()[0]["index"]
+        outputs = {d["name"]: d["index"] for d in self._interpreter.get_output_details()}
+        self._points, self._presence = outputs["conv2d_21"], outputs["conv2d_31"]
+        self._roi: Roi | None = None
+
+    def reset(self) -> None:
+        """Forget the tracked face: the next frame is searched by the detector."""
+        self._roi = None
+
+    def track(self, rgb: np.ndarray) -> np.ndarray | None:
+        """The 468 points of the face in `rgb` ((H, W, 3) uint8, RGB), (468, 3) float32 in
+        the project's convention (module docstring); None when there is no face."""
+        roi = self._roi
+        if roi is None:
+            faces = self.detector.detect(rgb)
+            if not faces:
+                return None
+            roi = roi_from_detection(faces[0])
+        points, presence = self.landmarks(rgb, roi)
+        if presence < MIN_PRESENCE:
+            self._roi = None
+            return None
+        self._roi = Roi.around(points[:, :2].min(0), points[:, :2].max(0),
+                               points[EYE_LINE[0], :2], points[EYE_LINE[1], :2])
+        height = rgb.shape[0]
+        return np.column_stack([points[:, 0], height - points[:, 1], -points[:, 2]]).astype(np.float32)
+
+    def landmarks(self, rgb: np.ndarray, roi: Roi) -> tuple[np.ndarray, float]:
+        """((468, 3) float64 points in frame pixels, y down, z away from the camera as
+        MediaPipe gives it; face presence 0..1) of the landmark model on `roi`."""
+        axes = roi.axes()
+        # the model input's pixel u (centre u + 0.5 of 192) samples the frame at
+        # centre + axes @ ((u + 0.5) / 192 - 0.5); OpenCV's pixel centres are at integers
+        linear = axes / INPUT
+        offset = roi.centre + axes @ np.full(2, 0.5 / INPUT - 0.5) - 0.5
+        warp = np.column_stack([linear, offset])
+        crop = cv2.warpAffine(rgb, warp, (INPUT, INPUT), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_REPLICATE)
+        self._interpreter.set_tensor(self._input, crop[None].astype(np.float32) / 255.0)
+        self._interpreter.invoke()
+        raw = self._interpreter.get_tensor(self._points).reshape(N_POINTS, 3).astype(np.float64)
+        logit = float(self._interpreter.get_tensor(self._presence).ravel()[0])
+        presence = 1.0 / (1.0 + np.exp(-np.clip(logit, -100.0, 100.0)))
+        xy = roi.centre + (raw[:, :2] / INPUT - 0.5) @ axes.T
+        z = raw[:, 2] / INPUT * roi.side
+        return np.column_stack([xy, z]), presence
+
+
+def roi_from_detection(face: Detection) -> Roi:
+    """The landmark model's ROI for a detected face: its box, levelled along the eyes."""
+    return Roi.around(face.box[:2], face.box[2:], face.keypoints[0], face.keypoints[1])
