@@ -1,0 +1,124 @@
+"""Native face-mesh tracking (`retarget.facemesh`, LiteRT) on a real video, against the
+browser's tracker.
+
+    python bench/facemesh.py [--video V] [--frames N] [--repeats 3] [--agree 150]
+
+Prints, for --video (default ../shared/data/video/face_expressions_480.mp4, 480 x 480
+H.264, 30 fps, 1008 frames; the first --frames, default all):
+
+    decode      OpenCV alone (`VideoReader`): frames per second
+    tracking    `FaceMeshTracker.track` alone: ms a frame (median frame of the median run)
+                and frames per second, and the share of frames with a face
+    whole       start-up (models loaded, interpreters built) plus decoding plus tracking
+                of every frame: frames per second, start-up included, as a command sees it
+    agreement   the first --agree frames tracked by the browser's tracker as well
+                (`track_video_markerless`, headless Chromium, the mediapipe68 points):
+                median, p95 and mean offset of the native points from the page's, px
+
+Medians over --repeats; one core (LiteRT with one thread). The machine's load is printed
+first: the figures move with it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from bench.stream import machine  # noqa: E402
+from retarget.layouts import get_layout  # noqa: E402
+from retarget.sources.video import VideoReader  # noqa: E402
+
+VIDEO = ROOT.parent / "shared" / "data" / "video" / "face_expressions_480.mp4"
+
+
+def decode(video: Path, frames: int | None) -> list[np.ndarray]:
+    """The first `frames` frames of `video`, RGB."""
+    out = []
+    with VideoReader(video) as reader:
+        for _, frame in reader:
+            out.append(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+            if frames and len(out) == frames:
+                break
+    return out
+
+
+def whole_run(video: Path, frames: int | None) -> tuple[float, int, list[float], int]:
+    """(seconds of start-up + decode + track, frames, per-frame tracking seconds, frames with a face)."""
+    start = time.perf_counter()
+    from retarget.facemesh.tracker import FaceMeshTracker
+
+    tracker = FaceMeshTracker()
+    per_frame, found, count = [], 0, 0
+    with VideoReader(video) as reader:
+        for _, frame in reader:
+            rgb = cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+            t = time.perf_counter()
+            points = tracker.track(rgb)
+            per_frame.append(time.perf_counter() - t)
+            found += points is not None
+            count += 1
+            if frames and count == frames:
+                break
+    return time.perf_counter() - start, count, per_frame, found
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--video", type=Path, default=VIDEO)
+    parser.add_argument("--frames", type=int, default=None)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--agree", type=int, default=150, help="frames compared with the browser (0: none)")
+    args = parser.parse_args()
+    if not args.video.is_file():
+        raise SystemExit(f"no video at {args.video} (the shared data set lies beside the checkout)")
+    print(machine())
+
+    t = time.perf_counter()
+    rgb = decode(args.video, args.frames)
+    print(f"decode      {len(rgb) / (time.perf_counter() - t):8.0f} frames/s  ({len(rgb)} frames)")
+
+    runs = [whole_run(args.video, args.frames) for _ in tqdm(range(args.repeats), desc="whole runs")]
+    runs.sort(key=lambda run: run[0])
+    seconds, count, per_frame, found = runs[len(runs) // 2]
+    ms = 1000 * statistics.median(per_frame)
+    print(f"tracking    {ms:8.2f} ms a frame, {1000 / ms:.0f} frames/s; face in {found}/{count} frames")
+    print(f"whole       {count / seconds:8.0f} frames/s, start-up, decoding and tracking included "
+          f"({seconds:.2f} s for {count} frames)")
+
+    if args.agree:
+        from retarget.facemesh.tracker import FaceMeshTracker
+        from retarget.sources.markerless import track_video_markerless
+        from server import WEB_DIR
+
+        layout = get_layout("mediapipe68")
+        n = min(args.agree, len(rgb))
+        page = np.asarray(track_video_markerless(args.video, layout=layout, web_root=WEB_DIR,
+                                                 max_frames=n).points)[:, :, :2]
+        tracker = FaceMeshTracker()
+        ours = np.full_like(page, np.nan)
+        for i in range(n):
+            points = tracker.track(rgb[i])
+            if points is not None:
+                ours[i] = points[list(layout.mediapipe468), :2]
+        difference = (ours - page).reshape(-1, 2)
+        both = np.isfinite(difference).all(axis=1)
+        distance = np.linalg.norm(difference[both], axis=1)
+        print(f"agreement   median {np.median(distance):.2f} px, p95 {np.percentile(distance, 95):.2f} px, "
+              f"mean offset ({difference[both, 0].mean():+.2f}, {difference[both, 1].mean():+.2f}) px "
+              f"over {n} frames; face found by both in {int(both.reshape(n, -1).all(axis=1).sum())}, "
+              f"by one only in {int((np.isfinite(ours[:, 0, 0]) != np.isfinite(page[:, 0, 0])).sum())}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
