@@ -1,9 +1,9 @@
 """The installed ``retarget`` command: the library's commands (`retarget.cli`) and ``serve``.
 
 The library's command line never imports the web stack; this one adds ``serve`` (the web
-app on a real port, `server.serve`) to the library's parser and tells ``track --method
-markerless`` where the web app's face tracker is (`server.WEB_DIR`). ``python -m
-server.cli`` runs it from a checkout.
+app on a real port, `server.serve`) to the library's parser. ``python -m server.cli`` runs
+it from a checkout. It imports no web stack itself either: multiprocessing re-runs it in
+every isolated child (`server.isolation`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from pathlib import Path
 from retarget.cli import build_parser as library_parser, main as run
 from retarget.cli.parser import PROG, positive_float, positive_int
 from retarget.errors import RetargetError
-from server import WEB_DIR
 
 __all__ = ["build_parser", "main"]
 
@@ -22,8 +21,8 @@ SERVE_DATA_DIR = "retarget-data"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The library's parser, the web app's folder given, with ``serve`` added."""
-    parser = library_parser(web_root=WEB_DIR)
+    """The library's parser with ``serve`` added."""
+    parser = library_parser()
     p = parser.commands.add_parser(
         "serve", help="run the web server",
         description="Serve the web app and its REST API (docs at /docs); projects are kept in "

@@ -52,7 +52,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from pathlib import Path
 
 from retarget import __version__
 from retarget.cli import layouts, mouth, retargeting, sources
@@ -62,14 +61,9 @@ from retarget.errors import RetargetError
 __all__ = ["PROG", "build_parser", "main"]
 
 
-def build_parser(*, web_root: str | os.PathLike | None = None) -> Parser:
+def build_parser() -> Parser:
     """The ``retarget`` argument parser (refusals raise `UsageError`, see `main`); its
-    ``commands`` take more subcommands.
-
-    web_root : the web app's folder, whose face tracker ``track --method markerless`` runs
-        (`retarget.sources.markerless`); None refuses that method, saying so. The installed
-        command (`server.cli`) gives `server.web.WEB_DIR`.
-    """
+    ``commands`` take more subcommands."""
     quiet = [quiet_option()]
     parser = Parser(
         prog=PROG,
@@ -83,7 +77,7 @@ def build_parser(*, web_root: str | os.PathLike | None = None) -> Parser:
     retargeting.add_transfer(commands, quiet)
     retargeting.add_rig(commands, quiet)
     retargeting.add_demo(commands, quiet)
-    sources.add_track(commands, quiet, None if web_root is None else Path(web_root))
+    sources.add_track(commands, quiet)
     sources.add_condition(commands, quiet)
     sources.add_calibrate(commands, quiet)
     retargeting.add_export_gltf(commands, quiet)

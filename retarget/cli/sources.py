@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from retarget.cli.parser import PROG, positive_float, positive_int
+from retarget.cli.parser import positive_float, positive_int
 from retarget.errors import RetargetError
 from retarget.files import progress_bar, require_file, require_parent, write_file, write_npy
 from retarget.layouts import LAYOUTS
@@ -26,9 +26,7 @@ __all__ = ["add_calibrate", "add_condition", "add_track"]
 # track
 
 
-def add_track(commands, parents, web_root) -> None:
-    """web_root : the web app's folder, where ``--method markerless`` finds the tracker
-    page and its npm package (`retarget.sources.markerless`); None refuses that method."""
+def add_track(commands, parents) -> None:
     p = commands.add_parser(
         "track", parents=parents, help="track a performance video into source points",
         description="Track a video into (F, N, 3) float32 source points in a layout's order "
@@ -36,8 +34,7 @@ def add_track(commands, parents, web_root) -> None:
         "the frames per second.")
     p.add_argument("video", metavar="VIDEO", help="the video (the left one for stereo)")
     p.add_argument("--method", choices=["markerless", "markers", "stereo"], required=True,
-                   help="markerless: face-mesh tracking (needs the 'markerless' extra and "
-                   "Chromium); markers: white dots with a black ring, one camera; stereo: "
+                   help="markerless: MediaPipe's face mesh (run natively, no browser); markers: white dots with a black ring, one camera; stereo: "
                    "coloured markers seen by a calibrated pair")
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
                    help="points to produce (default: dutreve21 for markers and stereo, ibug68 for markerless)")
@@ -48,7 +45,7 @@ def add_track(commands, parents, web_root) -> None:
     p.add_argument("--out", required=True, metavar="FRAMES.npy", help="(F, N, 3) float32 points")
     p.add_argument("--take", metavar="TAKE.npz",
                    help="also write the take (points, times, names) for upload to the web app")
-    p.set_defaults(run=_track, web_root=web_root)
+    p.set_defaults(run=_track)
 
 
 def _track(args) -> int:
@@ -66,10 +63,6 @@ def _track(args) -> int:
         require_file(args.calibration, "stereo calibration")
     elif args.right or args.calibration:
         raise RetargetError(f"--right and --calibration are for --method stereo, not {args.method}")
-    if args.method == "markerless" and args.web_root is None:
-        raise RetargetError(f"--method markerless runs the web app's face tracker, whose files "
-                            f"this command line was not given: use the installed '{PROG}' "
-                            "command (server.cli), which finds them in the web app's folder")
     start = time.perf_counter()
     with progress_bar(100, f"tracking ({args.method})", "%", args.quiet) as advance:
         def progress(done: int, total: int) -> None:  # the trackers count frames
@@ -80,9 +73,9 @@ def _track(args) -> int:
             from retarget.sources.markers import track_marker_video
             take = track_marker_video(args.video, layout=layout, progress=progress)
         elif args.method == "markerless":
-            from retarget.sources.markerless import track_video_markerless
-            take = track_video_markerless(args.video, layout=layout, web_root=args.web_root,
-                                          progress=progress, max_frames=args.max_frames)
+            from retarget.sources.facemesh_video import track_video_facemesh
+            take = track_video_facemesh(args.video, layout=layout, progress=progress,
+                                        max_frames=args.max_frames)
         else:
             from retarget.sources.calibration import StereoCalibration
             from retarget.sources.stereo import track_stereo_videos

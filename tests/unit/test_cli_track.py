@@ -125,3 +125,38 @@ def test_condition_a_motion_capture_file_then_transfer_it(tmp_path, capsys):
     assert main(["condition", str(tmp_path / "perf.c3d"), "--layout", "ibug68", "--neutral-out",
                  str(tmp_path / "x.npy"), "--out", str(tmp_path / "y.npy"), "-q"]) == 2
     assert "none of the take's 68 labels (M00, M01" in capsys.readouterr().err
+
+
+def test_track_markerless_follows_a_rendered_face_with_the_native_face_mesh(tmp_path, capsys):
+    import cv2
+
+    from retarget.sample_face import sample_face
+    from retarget.testing.camera import look_at
+    from retarget.testing.render import render_face
+
+    face = sample_face(1, identity=np.array([0.2, -0.3, 0.4, 0.1, -0.5]))
+    centre = face.vertices.mean(0)
+    size, n_frames = 320, 10
+    video = tmp_path / "face.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25, (size, size))
+    truth = []
+    for i in range(n_frames):  # the face drifts right and up by half a centimetre a frame
+        target = centre - np.array([0.5 * i, 0.5 * i, 0.0])
+        camera = look_at(target + np.array([0.0, 0.0, 45.0]), target, size=(size, size), fov_deg=30)
+        writer.write(render_face(camera, face.vertices, face.faces).image)
+        points = camera.R @ face.vertices[face.landmarks68].T + camera.t[:, None]
+        pixels = ((camera.K @ points)[:2] / points[2]).T + 0.5
+        truth.append(np.column_stack([pixels[:, 0], size - pixels[:, 1]]))
+    writer.release()
+    out = tmp_path / "frames.npy"
+    assert main(["track", str(video), "--method", "markerless", "--layout", "ibug68", "--out", str(out), "-q"]) == 0
+    assert f"tracked {n_frames} frames of 68 points (ibug68)" in capsys.readouterr().out
+    frames = np.load(out)
+    assert frames.shape == (n_frames, 68, 3) and np.isfinite(frames).all()
+    truth = np.asarray(truth)
+    inter_ocular = np.linalg.norm(truth[:, 36:42].mean(1) - truth[:, 42:48].mean(1), axis=1)
+    error = np.linalg.norm(frames[:, 17:, :2] - truth[:, 17:], axis=2) / inter_ocular[:, None]
+    assert np.median(error) < 0.08
+    # the camera moves left and down, so the face moves right and up (y up): so do the points
+    drift = frames[-1, 17:, :2].mean(0) - frames[0, 17:, :2].mean(0)
+    assert drift[0] > 20 and drift[1] > 20
