@@ -19,7 +19,7 @@ from pathlib import Path
 
 from retarget.errors import RetargetError
 
-__all__ = ["MODEL_DIR", "MODELS", "extract_models", "model_bytes"]
+__all__ = ["MODEL_DIR", "MODELS", "extract_models", "model_bytes", "model_interpreter"]
 
 MODEL_DIR = Path(__file__).resolve().parent / "models"
 MODELS = {
@@ -72,6 +72,16 @@ def model_bytes(name: str, model_dir: Path = MODEL_DIR) -> bytes:
         raise RetargetError(f"the face-mesh model {model_dir / name} is damaged: its SHA-256 is not "
                             f"the one MODELS.json names; reinstall the package")
     return data
+
+
+def model_interpreter(name: str, threads: int = 1):
+    """A LiteRT interpreter of model `name`, tensors allocated, and its output tensor
+    indices by name."""
+    from ai_edge_litert.interpreter import Interpreter
+
+    interpreter = Interpreter(model_content=model_bytes(name), num_threads=threads)
+    interpreter.allocate_tensors()
+    return interpreter, {d["name"]: d["index"] for d in interpreter.get_output_details()}
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from retarget.facemesh.assets import model_bytes
+from retarget.facemesh.assets import model_interpreter
 
 __all__ = ["Detection", "FaceDetector", "ssd_anchors"]
 
@@ -66,13 +66,8 @@ class FaceDetector:
     """Faces in a frame: `detect(rgb) -> list[Detection]`, best first."""
 
     def __init__(self, threads: int = 1):
-        from ai_edge_litert.interpreter import Interpreter
-
-        self._interpreter = Interpreter(model_content=model_bytes("face_detection_short_range.tflite"),
-                                        num_threads=threads)
-        self._interpreter.allocate_tensors()
+        self._interpreter, outputs = model_interpreter("face_detection_short_range.tflite", threads)
         self._input = self._interpreter.get_input_details()[0]["index"]
-        outputs = {d["name"]: d["index"] for d in self._interpreter.get_output_details()}
         self._regressors, self._scores = outputs["regressors"], outputs["classificators"]
         self._anchors = ssd_anchors()
 
@@ -129,5 +124,6 @@ def _weighted_nms(boxes: np.ndarray, keypoints: np.ndarray, scores: np.ndarray) 
         faces.append(Detection(box=(w[:, None] * boxes[cluster]).sum(0),
                                keypoints=(w[:, None, None] * keypoints[cluster]).sum(0),
                                score=float(scores[best])))
-        remaining = [i for i in remaining if i not in set(cluster.tolist())]
+        merged = set(cluster.tolist())
+        remaining = [i for i in remaining if i not in merged]
     return faces

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from retarget.facemesh.assets import model_bytes
+from retarget.facemesh.assets import model_interpreter
 from retarget.facemesh.detector import Detection, FaceDetector
 
 __all__ = ["FaceMeshTracker", "Roi", "N_POINTS"]
@@ -63,14 +63,9 @@ class FaceMeshTracker:
     """`track(rgb) -> (468, 3) float32 or None`, frame after frame of one video."""
 
     def __init__(self, threads: int = 1):
-        from ai_edge_litert.interpreter import Interpreter
-
         self.detector = FaceDetector(threads=threads)
-        self._interpreter = Interpreter(model_content=model_bytes("face_landmark.tflite"),
-                                        num_threads=threads)
-        self._interpreter.allocate_tensors()
+        self._interpreter, outputs = model_interpreter("face_landmark.tflite", threads)
         self._input = self._interpreter.get_input_details()[0]["index"]
-        outputs = {d["name"]: d["index"] for d in self._interpreter.get_output_details()}
         self._points, self._presence = outputs["conv2d_21"], outputs["conv2d_31"]
         self._roi: Roi | None = None
 

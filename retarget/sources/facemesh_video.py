@@ -20,7 +20,7 @@ from retarget.errors import RetargetError
 from retarget.layouts import LAYOUTS, Layout, get_layout
 from retarget.sources.take import Take
 
-__all__ = ["track_video_facemesh", "TRACKER"]
+__all__ = ["track_video_facemesh", "TRACKER", "check_max_frames", "face_mesh_take"]
 
 TRACKER = "MediaPipe face mesh (legacy, 468 points) on LiteRT, models of @mediapipe/face_mesh 0.4.1633559619"
 
@@ -43,9 +43,7 @@ def track_video_facemesh(path, *, layout: str | Layout, progress=None, max_frame
     Raises `RetargetError` for a missing or undecodable video or a bad `max_frames`.
     """
     lay = layout if isinstance(layout, Layout) else get_layout(layout)
-    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
-                                   or max_frames < 1):
-        raise RetargetError(f"max_frames must be a positive integer or None, got {max_frames!r}")
+    check_max_frames(max_frames)
     from retarget.facemesh.tracker import FaceMeshTracker
     from retarget.sources.video import VideoReader
 
@@ -72,22 +70,40 @@ def track_video_facemesh(path, *, layout: str | Layout, progress=None, max_frame
         truncated = bool(getattr(reader, "truncated", False))
     if not frames:
         raise RetargetError(f"{str(path)!r}: no frame could be decoded")
-    points = np.stack(frames)
+    return face_mesh_take(path, np.stack(frames), lay, size=(width, height), fps=fps, fps_known=fps_known,
+                          tracker=TRACKER, seconds=seconds, startup=startup, truncated=truncated)
+
+
+def check_max_frames(max_frames) -> None:
+    """Refuse a `max_frames` that is not None or a positive integer."""
+    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
+                                   or max_frames < 1):
+        raise RetargetError(f"max_frames must be a positive integer or None, got {max_frames!r}")
+
+
+def face_mesh_take(path, points: np.ndarray, layout: Layout, *, size: tuple[int, int], fps: float,
+                   fps_known: bool, tracker: str, seconds: float, startup: float, truncated: bool) -> Take:
+    """The take of a face-mesh tracker (this one or the browser's) with its meta.
+
+    points : (F, N, 3) float32, a frame without a face all NaN (a `RuntimeWarning` when
+        every frame is); size : (width, height) of the video; seconds : decoding and
+        tracking; startup : before the first frame (models, browser)."""
+    count = len(points)
     faces = int(np.isfinite(points[:, 0, 0]).sum())
     if faces == 0:
-        warnings.warn(f"markerless: no face found in any of the {len(frames)} frames of {str(path)!r}",
-                      RuntimeWarning, stacklevel=2)
+        warnings.warn(f"markerless: no face found in any of the {count} frames of {str(path)!r}",
+                      RuntimeWarning, stacklevel=3)
     meta = {
-        "width": int(width), "height": int(height),
+        "width": int(size[0]), "height": int(size[1]),
         "units": "px; x right, y up (origin bottom-left), z toward the camera in the scale of x",
-        "tracker": TRACKER,
+        "tracker": tracker,
         "frames_with_face": faces,
-        "face_share": faces / len(frames),
-        "fps_tracked": len(frames) / seconds if seconds > 0 else None,
+        "face_share": faces / count,
+        "fps_tracked": count / seconds if seconds > 0 else None,
         "startup_s": round(startup, 3),
         "truncated": truncated,
         "fps_from_header": fps_known,
     }
-    return Take(points=points, names=lay.point_names, fps=fps,
-                layout=lay.name if LAYOUTS.get(lay.name) == lay else None,
+    return Take(points=points, names=layout.point_names, fps=fps,
+                layout=layout.name if LAYOUTS.get(layout.name) == layout else None,
                 source="markerless", meta=meta)

@@ -38,14 +38,14 @@ from __future__ import annotations
 import mimetypes
 import re
 import time
-import warnings
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.layouts import LAYOUTS, Layout, get_layout
+from retarget.layouts import Layout, get_layout
+from retarget.sources.facemesh_video import check_max_frames, face_mesh_take
 from retarget.sources.take import Take
 
 __all__ = ["track_video_markerless", "TRACKER"]
@@ -99,9 +99,7 @@ def track_video_markerless(
     Uses Playwright's sync API: call it from a thread without a running asyncio loop.
     """
     lay = layout if isinstance(layout, Layout) else get_layout(layout)
-    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
-                                   or max_frames < 1):
-        raise RetargetError(f"max_frames must be a positive integer or None, got {max_frames!r}")
+    check_max_frames(max_frames)
     web = Path(web_root)
     _check_web_files(web)
     sync_playwright, playwright_error = _playwright()
@@ -152,25 +150,8 @@ def track_video_markerless(
         feed.raise_failure()
         truncated = bool(getattr(reader, "truncated", False))
 
-    points = feed.points[:count]
-    faces = int(np.isfinite(points[:, 0, 0]).sum())
-    if faces == 0:
-        warnings.warn(f"markerless: no face found in any of the {count} frames of {str(path)!r}",
-                      RuntimeWarning, stacklevel=2)
-    meta = {
-        "width": int(width), "height": int(height),
-        "units": "px; x right, y up (origin bottom-left), z toward the camera in the scale of x",
-        "tracker": TRACKER,
-        "frames_with_face": faces,
-        "face_share": faces / count,
-        "fps_tracked": count / seconds if seconds > 0 else None,
-        "startup_s": round(startup, 3),
-        "truncated": truncated,
-        "fps_from_header": fps_known,
-    }
-    return Take(points=points, names=lay.point_names, fps=fps,
-                layout=lay.name if LAYOUTS.get(lay.name) == lay else None,
-                source="markerless", meta=meta)
+    return face_mesh_take(path, feed.points[:count], lay, size=(width, height), fps=fps, fps_known=fps_known,
+                          tracker=TRACKER, seconds=seconds, startup=startup, truncated=truncated)
 
 
 class _FrameFeed:

@@ -7,8 +7,8 @@ const SERVER_SHARE = 0.95;
 
 /**
  * The Rig panel (index.html #rig-panel): the deformer and *Compute* (a server job, its
- * progress in the bar, full once the rig is on the face), the rig's badge, and the heat map of one feature's weights with
- * its legend (HeatmapLegend).
+ * progress in the bar, full once the rig is on the face), the rig's badge, and the heat
+ * map of one feature's weights with its legend (HeatmapLegend).
  * Weight painting is its own panel (PaintPanel) inside it.
  */
 export class RigPanel {
