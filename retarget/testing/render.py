@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.raster import rasterise
 from retarget.testing.camera import Camera
 
 __all__ = [
@@ -145,7 +146,8 @@ def render_face(
         raise RetargetError(f"need 0 < dot_radius < marker_radius, got {dot_radius} and {marker_radius}")
     normals = vertex_normals(v, f)
     w, h = camera.size
-    tri, bary, depth = _rasterised(camera, v, f)
+    raster = rasterise(camera.project(v), camera.depth(v), f, camera.size)
+    tri, bary, depth = raster.triangle, raster.barycentric, raster.depth
     image = np.full((h, w, 3), float(background))
     hit = tri >= 0
     n = np.einsum("pk,pkc->pc", bary[hit], normals[f[tri[hit]]])
@@ -250,51 +252,6 @@ def _box_overlap(lo, hi, a, b):
 def _shade(normals: np.ndarray) -> np.ndarray:
     """(...,) Lambert factor of unit normals (..., 3) under the fixed key light."""
     return _AMBIENT + _DIFFUSE * np.clip(normals @ _LIGHT, 0.0, None)
-
-
-def _rasterised(camera: Camera, v: np.ndarray, f: np.ndarray):
-    """Z-buffer of the mesh: (h, w) int triangle per pixel (-1 none), (h, w, 3) float64
-    perspective-correct barycentrics, (h, w) float64 depth (inf off the mesh)."""
-    w, h = camera.size
-    uv = camera.project(v)
-    z = camera.depth(v)
-    a, b, c = uv[f[:, 0]], uv[f[:, 1]], uv[f[:, 2]]
-    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-    # Counter-clockwise in the world (y up) turns clockwise in the image (y down).
-    keep = np.all(z[f] > 1e-6, axis=1) & (area < -1e-12)
-    tri_ids = np.flatnonzero(keep)
-    corners = uv[f[tri_ids]]                                   # (T', 3, 2)
-    lo = np.clip(np.ceil(corners.min(1) - 1e-9), 0, [w - 1, h - 1]).astype(np.int64)
-    hi = np.clip(np.floor(corners.max(1) + 1e-9), [-1, -1], [w - 1, h - 1]).astype(np.int64)
-    span = np.maximum(hi - lo + 1, 0)
-    count = span[:, 0] * span[:, 1]
-    k = np.repeat(np.arange(len(tri_ids)), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    px = lo[k, 0] + local % span[k, 0]
-    py = lo[k, 1] + local // span[k, 0]
-    ca, cb, cc = corners[k, 0], corners[k, 1], corners[k, 2]
-    dx, dy = px - ca[:, 0], py - ca[:, 1]
-    denom = area[tri_ids][k]
-    lb = (dx * (cc[:, 1] - ca[:, 1]) - dy * (cc[:, 0] - ca[:, 0])) / denom
-    lc = ((cb[:, 0] - ca[:, 0]) * dy - (cb[:, 1] - ca[:, 1]) * dx) / denom
-    la = 1.0 - lb - lc
-    screen = np.stack([la, lb, lc], 1)
-    inside = np.all(screen >= -1e-9, axis=1)
-    k, px, py, screen = k[inside], px[inside], py[inside], screen[inside]
-    # 1/z is affine in screen space: interpolate it, and attributes as attribute / z.
-    over_z = screen / z[f[tri_ids[k]]]
-    inv_z = over_z.sum(1)
-    pixel = py * w + px
-    best = np.zeros(h * w)
-    np.maximum.at(best, pixel, inv_z)
-    win = inv_z >= best[pixel]
-    tri = np.full(h * w, -1, dtype=np.int64)
-    bary = np.zeros((h * w, 3))
-    tri[pixel[win]] = tri_ids[k[win]]
-    bary[pixel[win]] = over_z[win] / inv_z[win, None]
-    with np.errstate(divide="ignore"):
-        depth = np.where(best > 0, 1.0 / best, np.inf)
-    return tri.reshape(h, w), bary.reshape(h, w, 3), depth.reshape(h, w)
 
 
 def _draw_markers(image, depth, camera, centres, normals, style, radius, dot_radius,
