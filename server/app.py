@@ -31,10 +31,12 @@ from server.sample import ensure_sample_project
 from server.store import ProjectStore
 from server.web import mount_web
 
-__all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "UVICORN_OPTIONS", "create_app"]
+__all__ = ["DEFAULT_MAX_UPLOAD_BYTES", "DEFAULT_MAX_VERTICES", "DEFAULT_MAX_VIDEO_FRAMES",
+           "UVICORN_OPTIONS", "create_app"]
 
 DEFAULT_MAX_UPLOAD_BYTES = 64 * 2**20
 DEFAULT_MAX_VERTICES = 500_000
+DEFAULT_MAX_VIDEO_FRAMES = 18_000  # 10 min at 30 fps
 UVICORN_OPTIONS = {
     # stream frames are float32 noise to deflate, which cost two thirds of the server's
     # streaming CPU with 50 viewers (bench/viewers.py)
@@ -47,12 +49,15 @@ UVICORN_OPTIONS = {
 
 
 def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
-               max_vertices: int = DEFAULT_MAX_VERTICES, sample: bool = True,
+               max_vertices: int = DEFAULT_MAX_VERTICES,
+               max_video_frames: int = DEFAULT_MAX_VIDEO_FRAMES, sample: bool = True,
                access: Access = Access(), isolation: IsolationLimits = IsolationLimits()) -> FastAPI:
     """The app serving the projects under `data_dir` (created if missing).
 
     max_upload_bytes : uploaded files longer than this are refused with 413.
     max_vertices : meshes with more vertices are refused with 422.
+    max_video_frames : videos with more frames are not tracked markerless (422, or a
+        failed job when the header did not say).
     sample : create the built-in sample project when the data dir is new (see
         `server.sample`).
     access : the Host names, origin rule and token requests must meet (`server.access`);
@@ -75,7 +80,8 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     app.state.jobs = JobRegistry()
     app.state.hub = StreamHub()  # live streams: viewers, sources, regions per project
     app.state.limits = Limits(max_upload_bytes=int(max_upload_bytes),
-                              max_vertices=int(max_vertices))
+                              max_vertices=int(max_vertices),
+                              max_video_frames=int(max_video_frames))
     app.state.isolation = Isolation(isolation)
     app.state.access = access
     if sample:

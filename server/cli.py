@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="largest uploaded file (mesh, take, video, .glb), MiB (default: 64)")
     p.add_argument("--max-vertices", type=positive_int, metavar="V",
                    help="most vertices an uploaded mesh may have (default: 500000)")
+    p.add_argument("--max-video-frames", type=positive_int, metavar="F",
+                   help="most frames of a video tracked markerless (default: 18000, 10 min at "
+                   "30 fps)")
     p.set_defaults(run=_serve, quiet=True)
     return parser
 
@@ -64,6 +67,8 @@ def _serve(args) -> int:
         limits["max_upload_bytes"] = int(args.max_upload_mb * 2**20)
     if args.max_vertices is not None:
         limits["max_vertices"] = args.max_vertices
+    if args.max_video_frames is not None:
+        limits["max_video_frames"] = args.max_video_frames
     serve(Path(args.data_dir), host=args.host, port=args.port,
           allowed_hosts=tuple(args.allowed_host), token=args.token, **limits)
     return 0

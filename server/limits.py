@@ -30,12 +30,15 @@ class Limits:
 
     max_upload_bytes : one uploaded file (mesh, take, video, .glb, weight edit).
     max_vertices : vertices of a mesh.
+    max_video_frames : frames of a video tracked markerless (a take holds each frame's
+        points: 18,000 frames of all 468 face-mesh points are 100 MB).
     max_json_bytes : a JSON (or other small) request body.
     max_settings_bytes : a project's ``settings`` object, serialised.
     """
 
     max_upload_bytes: int
     max_vertices: int
+    max_video_frames: int
     max_json_bytes: int = 1 << 20
     max_settings_bytes: int = 64 * 1024
 

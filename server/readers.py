@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,12 +27,13 @@ from retarget.skin import SkinWeights
 from retarget.sources.files import read_take
 from retarget.sources.markers import track_marker_video
 from retarget.sources.calibration import StereoCalibration
+from retarget.sources.facemesh_video import track_video_facemesh
 from retarget.sources.stereo import stereo_pair_calibration, track_stereo_videos
 from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
 from retarget.weights import METHODS, compute_weights
 
-__all__ = ["ImportedProject", "OpenedMesh", "imported_project", "marker_take",
+__all__ = ["ImportedProject", "OpenedMesh", "face_mesh_take", "imported_project", "marker_take",
            "mesh_counts", "opened_mesh", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
            "video_opens"]
 
@@ -157,10 +159,27 @@ def _naming(names: dict[Path, str]):
         raise RetargetError(message) from None
 
 
-def video_opens(path: Path, names: dict[Path, str]) -> None:
-    """Nothing, once the video at `path` opens and states its size (refused otherwise)."""
+def video_opens(path: Path, names: dict[Path, str], max_frames: int | None = None) -> None:
+    """Nothing, once the video at `path` opens and states its size, and its header claims
+    at most `max_frames` frames (refused otherwise)."""
     with _naming(names):
-        VideoReader(path).close()
+        reader = VideoReader(path)
+        reader.close()
+    if max_frames is not None and reader.n_frames > max_frames:
+        raise RetargetError(_too_long(names[path], max_frames, reader.fps, reader.n_frames))
+
+
+def _too_long(shown: str, max_frames: int, fps: float, frames: int | None = None) -> str:
+    """Why a video with more than `max_frames` frames (`frames` when its header says) is
+    refused."""
+    def span(n: int) -> str:
+        seconds = n / fps
+        return f"{seconds:.3g} s" if seconds < 120 else f"{seconds / 60:.3g} min"
+
+    length = (f"has {frames} frames ({span(frames)} at {fps:g} fps)" if frames is not None
+              else f"runs past {max_frames} frames")
+    return (f"video {shown!r} {length}; the server tracks at most {max_frames} frames "
+            f"({span(max_frames)}) of a video: cut it into shorter takes")
 
 
 def marker_take(path: Path, layout: str, names: dict[Path, str], progress) -> Take:
@@ -173,6 +192,25 @@ def marker_take(path: Path, layout: str, names: dict[Path, str], progress) -> Ta
         if repr(shown) in str(exc):
             raise
         raise RetargetError(f"video {shown!r}: {exc}") from None
+
+
+def face_mesh_take(path: Path, layout: str, max_frames: int, names: dict[Path, str],
+                   progress) -> Take:
+    """The face tracked through a video by the native face mesh (`track_video_facemesh`),
+    labelled with the video's name. Refused when no frame holds a face (a take of NaN
+    frames drives nothing) and when the video runs past `max_frames`, which its header
+    may not have said."""
+    shown = names[path]
+    with _naming(names), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # no face: refused below, in words
+        take = track_video_facemesh(path, layout=layout, progress=progress, max_frames=max_frames + 1)
+    if take.n_frames > max_frames:
+        raise RetargetError(_too_long(shown, max_frames, take.fps))
+    if take.meta["frames_with_face"] == 0:
+        raise RetargetError(f"no face was found in any of the {take.n_frames} frames of "
+                            f"{shown!r}: nothing to keep")
+    take.source = f"video: {shown}"[:200]  # the take list says where it came from
+    return take
 
 
 def stereo_calibration(videos: list[Path], calibration: Path | None, boards: list[Path] | None,

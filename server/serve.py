@@ -39,7 +39,7 @@ def serve(data_dir: Path, *, host: str = "127.0.0.1", port: int = 8000,
 
     allowed_hosts : more Host names to answer to (a DNS name the machine is reached by).
     token : require the access token on loopback too (it is always required elsewhere).
-    app_options : `create_app` limits (max_upload_bytes, max_vertices).
+    app_options : `create_app` limits (max_upload_bytes, max_vertices, max_video_frames).
     """
     import uvicorn
 

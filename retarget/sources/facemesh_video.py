@@ -38,7 +38,8 @@ def track_video_facemesh(path, *, layout: str | Layout, progress=None, max_frame
     edge, z toward the camera in the scale of x), a frame without a face all NaN; source
     "markerless"; meta: width, height, units, tracker, frames_with_face, face_share,
     fps_tracked (decoding and tracking; model loading is startup_s), truncated,
-    fps_from_header. A video with no face in any frame warns (`RuntimeWarning`).
+    fps_from_header, frames_claimed (the header's frame count, 0 when it states none). A
+    video with no face in any frame warns (`RuntimeWarning`).
 
     Raises `RetargetError` for a missing or undecodable video or a bad `max_frames`.
     """
@@ -54,7 +55,8 @@ def track_video_facemesh(path, *, layout: str | Layout, progress=None, max_frame
     frames = []
     with VideoReader(path) as reader:
         width, height = reader.size
-        expected = reader.n_frames or None
+        claimed = reader.n_frames
+        expected = claimed or None
         if max_frames is not None:
             expected = min(expected, int(max_frames)) if expected else int(max_frames)
         tracking = time.perf_counter()
@@ -70,8 +72,10 @@ def track_video_facemesh(path, *, layout: str | Layout, progress=None, max_frame
         truncated = bool(getattr(reader, "truncated", False))
     if not frames:
         raise RetargetError(f"{str(path)!r}: no frame could be decoded")
-    return face_mesh_take(path, np.stack(frames), lay, size=(width, height), fps=fps, fps_known=fps_known,
+    take = face_mesh_take(path, np.stack(frames), lay, size=(width, height), fps=fps, fps_known=fps_known,
                           tracker=TRACKER, seconds=seconds, startup=startup, truncated=truncated)
+    take.meta["frames_claimed"] = claimed
+    return take
 
 
 def check_max_frames(max_frames) -> None:

@@ -3,7 +3,8 @@
     GET    /api/projects/{id}/takes                 list, oldest first
     POST   /api/projects/{id}/takes                 upload a landmark / motion-capture /
                                                     animated-face file (multipart)
-    POST   /api/projects/{id}/takes/track           upload a marker video, or a stereo pair of
+    POST   /api/projects/{id}/takes/track           upload a video of a face (markerless) or of
+                                                    ring markers, or a stereo pair of
                                                     colour-marker videos with their calibration;
                                                     a job tracks it into a take (poll
                                                     GET /api/jobs/{job})
@@ -16,7 +17,8 @@
 A take's info is ``{id, name, created, source, layout, fps, n_frames, n_points, dims,
 duration, trim: [start, stop]}``. Takes keep the source's own point names; playing one
 maps them to the project's layout by name (`retarget.performance`). Files are parsed by
-`retarget.sources.files.read_take`, videos tracked by `retarget.sources.markers` and
+`retarget.sources.files.read_take`, videos tracked by `retarget.sources.facemesh_video`
+(markerless: MediaPipe's face mesh, run natively), `retarget.sources.markers` and
 `retarget.sources.stereo`, all in child processes (`server.readers` through
 `server.isolation`: no file can crash the server); the server only moves bytes and
 schedules. An upload sent with an ``Idempotency-Key`` header is stored once however
@@ -51,7 +53,8 @@ from server.deps import IsolationDep, JobsDep, LimitsDep, Number, ProjectDep, St
 from server.errors import responses
 from server.jobs import JobBusy
 from server.limits import body_limit
-from server.readers import marker_take, stereo_calibration, stereo_take, take_from_upload, video_opens
+from server.readers import (face_mesh_take, marker_take, stereo_calibration, stereo_take,
+                            take_from_upload, video_opens)
 from server.routers.meshes import read_capped, upload_extension
 
 router = APIRouter(prefix="/api/projects/{project_id}/takes", tags=["takes"],
@@ -60,10 +63,13 @@ router = APIRouter(prefix="/api/projects/{project_id}/takes", tags=["takes"],
 TAKE_EXTENSIONS = ("csv", "json", "npy", "trc", "c3d", "glb", "gltf", "zip")
 """Files a take is read from (`retarget.sources.files.read_take`)."""
 VIDEO_EXTENSIONS = ("mp4", "m4v", "mov", "avi", "mkv", "webm")
-"""Videos the marker tracker reads (through OpenCV's FFmpeg)."""
-TRACK_METHODS = ("markers", "stereo")
-"""Server-side trackers. Markerless tracking runs in the browser (web/static/js/tracking),
-which uploads its result as a take file."""
+"""Videos the trackers read (through OpenCV's FFmpeg)."""
+TRACK_METHODS = ("markerless", "markers", "stereo")
+"""The trackers: markerless, any face (the layout's points picked out of the face mesh's
+468); markers, white dots with a black ring (Dutreve §5); stereo, colour markers seen by
+a calibrated pair (Woodward §5)."""
+JOB_META = ("truncated", "frames_claimed", "frames_with_face")
+"""What a tracking job's result repeats of its take's meta, for the page to say."""
 CALIBRATION_EXTENSIONS = ("npz",)
 """A stereo calibration as `StereoCalibration.save` writes it."""
 STEREO_FIELDS = ("right", "calibration", "calibration_left", "calibration_right")
@@ -132,8 +138,10 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                     default=None, description="the video; for stereo the left camera's: "
                     + ", ".join(f".{e}" for e in VIDEO_EXTENSIONS)),
                 method: str = Form(default="markers", description=" | ".join(TRACK_METHODS)),
-                layout: str = Form(default="dutreve21",
-                                   description="the layout whose points the markers are"),
+                layout: str | None = Form(
+                    default=None, description="the layout whose points the take holds: for "
+                    "markers and stereo the markers' (default dutreve21); markerless, any "
+                    "(default the project's landmarks', else ibug68)"),
                 name: str | None = Form(default=None, max_length=200),
                 right: UploadFile | None = File(default=None,
                                                 description="stereo: the right camera's video"),
@@ -155,17 +163,24 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                 square: float | None = Form(default=None, gt=0, le=1000,
                                             description="square side (circle spacing), mm: the "
                                             "unit of the take's points")) -> dict:
-    """Track a marker video, or a stereo pair of colour-marker videos, into a take in the
-    background; answers the job (poll ``GET /api/jobs/{job_id}``; its result names the
-    take when done). A stereo answer also has the calibration it uses,
+    """Track a video of a face (markerless), a ring-marker video, or a stereo pair of
+    colour-marker videos into a take in the background; answers the job (poll
+    ``GET /api/jobs/{job_id}``; its result names the take when done, with its frame
+    count, ``truncated`` and ``frames_claimed`` for a cut-off file, and markerless
+    ``frames_with_face``). What can be refused before tracking is (422): a file that is
+    not a video, a markerless video whose header claims more frames than the server's
+    limit. A stereo answer also has the calibration it uses,
     ``calibration: {source, rms, baseline, size, views}`` (rms px, baseline mm)."""
     if method not in TRACK_METHODS:
         raise RetargetError(f"unknown tracking method {method!r}; the server tracks "
-                            f"{', '.join(TRACK_METHODS)} (markerless tracking runs in the browser)")
+                            f"{', '.join(TRACK_METHODS)}")
     if file is None:
         raise RetargetError("no video: upload it as 'file'" if method != "stereo" else
                             "method 'stereo' needs two videos: the left camera's as 'file', "
                             "which is missing, and the right camera's as 'right'")
+    if layout is None:
+        saved = project["landmarks"] and project["landmarks"]["layout"]
+        layout = (saved or "ibug68") if method == "markerless" else "dutreve21"
     get_layout(layout)
     scratch = _Scratch(store, limits.max_upload_bytes)
     try:
@@ -178,7 +193,11 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                                                        calibration_right)) if v is not None]
             if stray:
                 raise RetargetError(f"{', '.join(stray)}: for method 'stereo', not {method!r}")
-            run, answer = _marker_tracker(scratch, isolation, file, layout), {}
+            if method == "markers":
+                run, answer = _marker_tracker(scratch, isolation, file, layout), {}
+            else:
+                run, answer = _face_mesh_tracker(scratch, isolation, file, layout,
+                                                 limits.max_video_frames), {}
         take_name = name or _default_name(file.filename, method)
 
         def work(job) -> tuple[str, dict]:
@@ -187,12 +206,12 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
             finally:
                 scratch.remove()
             info = store.put_take(project["id"], take, name=take_name)
+            meta = {k: take.meta[k] for k in JOB_META if k in take.meta}
             # a cut-off video still gives the frames up to the cut: the page says so
-            cut = {k: take.meta[k] for k in ("truncated", "frames_claimed") if k in take.meta}
-            cut_note = (f" (the video ends early: {info['n_frames']} of {cut['frames_claimed']} "
-                        "frames)" if "frames_claimed" in cut else "")
+            cut_note = (f" (the video ends early: {info['n_frames']} of {meta['frames_claimed']} "
+                        "frames)" if meta.get("truncated") else "")
             return (f"tracked {info['n_frames']} frames into take {info['name']!r}{cut_note}",
-                    {"take": info["id"], "frames": info["n_frames"], **cut})
+                    {"take": info["id"], "frames": info["n_frames"], **meta})
 
         job = jobs.start(project["id"], "track", work)
     except JobBusy as exc:
@@ -239,6 +258,22 @@ def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str
 
     def run(progress) -> Take:
         return isolation.call(marker_take, path, layout, scratch.names, what=what,
+                              progress=progress, job=True)
+
+    return run
+
+
+def _face_mesh_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str,
+                       max_frames: int):
+    """The markerless job's work, ``run(progress) -> Take``, once the video opens and its
+    header claims at most `max_frames` frames (`Limits.max_video_frames`); as for markers,
+    FFmpeg decodes it in a child process."""
+    path = scratch.save(video, VIDEO_EXTENSIONS, "video")
+    what = f"video {scratch.names[path]!r} refused: not a readable video"
+    isolation.call(video_opens, path, scratch.names, max_frames, what=what)
+
+    def run(progress) -> Take:
+        return isolation.call(face_mesh_take, path, layout, max_frames, scratch.names, what=what,
                               progress=progress, job=True)
 
     return run
