@@ -29,6 +29,10 @@ Subcommands (``retarget <command> --help`` for the details):
     The target mesh rigged (feature points as joints of a glTF skin, or morph targets
     for rigs with negative weights) and, given a source, the retargeted take animated,
     as one glTF 2.0 binary (`retarget.gltf`).
+``landmarks``
+    A face mesh's feature points in a layout found with no clicks (`retarget.facemesh`:
+    MediaPipe's face mesh on pictures of the mesh, carried back onto the surface), with a
+    confidence per point.
 ``open-mouth``
     A mesh whose lips are joined (most scans and sculpts) cut open along the lip contact
     line (`retarget.lips`), original vertices first, the cut's duplicates appended.
@@ -38,7 +42,7 @@ command and adds it to this parser, so the library never imports the web stack; 
 retarget.cli`` runs the library's commands alone.
 
 One module per command family: `retargeting` (transfer, rig, export-gltf, demo), `sources`
-(track, condition, calibrate), `mouth` (open-mouth), `layouts`; `parser` holds what their parsers share. The
+(track, condition, calibrate), `mouth` (open-mouth), `landmarks`, `layouts`; `parser` holds what their parsers share. The
 work is the library's (`retarget.files` reads, checks and writes the files).
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
@@ -54,7 +58,7 @@ import os
 import sys
 
 from retarget import __version__
-from retarget.cli import layouts, mouth, retargeting, sources
+from retarget.cli import landmarks, layouts, mouth, retargeting, sources
 from retarget.cli.parser import PROG, Parser, UsageError, quiet_option
 from retarget.errors import RetargetError
 
@@ -82,6 +86,7 @@ def build_parser() -> Parser:
     sources.add_calibrate(commands, quiet)
     retargeting.add_export_gltf(commands, quiet)
     mouth.add_open_mouth(commands)
+    landmarks.add_landmarks(commands)
     layouts.add_layouts(commands)
     return parser
 

@@ -1,0 +1,245 @@
+"""Zero-click landmarks: the 468 face-mesh points found on any face mesh, with how much
+to trust each one.
+
+The mesh is pictured (`retarget.facemesh.views`), the face mesh runs on the picture, and
+each point's ray is followed back onto the surface. In steps:
+
+1. **Find the face.** The front view first (the face toward +z, +y up, the convention
+   of glTF, ICT and MediaPipe's canonical model); when the detector finds no face
+   there, the six axis directions x four in-plane turns, keeping the best-scored face.
+2. **Face it.** The 468 points on that view give a face frame (eye line, forehead to
+   chin), and the mesh is pictured again looking straight at the face, zoomed on it;
+   the landmark model runs twice there, the second time on the region its first points
+   give, as the tracker does from frame to frame.
+3. **Back to the surface.** Points whose pixel sees a front face are followed exactly;
+   a point in a hole (an eye or mouth opening reads dark) snaps to the nearest
+   front-facing pixel.
+4. **The face oval** (jaw line, temples, hairline) is the silhouette of a frontal face,
+   where a ray grazes the surface and lands anywhere along it. Those points are placed
+   with the model's own depth instead: the similarity that carries the model's 3D
+   points onto the surface hits of the inner points carries the oval too, which is then
+   snapped to the closest surface point.
+
+Confidence per point (0..1) says which points a user should check: exact hits on a
+surface that faces the viewer score high; points that had to snap, that sit on grazing
+surface, or on the oval (moved by a fit, not observed) score lower.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from retarget.errors import RetargetError
+from retarget.facemesh.detector import Detection
+from retarget.facemesh.tracker import N_POINTS, FaceMeshTracker, Roi, roi_from_detection
+from retarget.facemesh.views import (Picture, View, look_from, picture, surface_hits, texture_rgb,
+                                     vertex_normals)
+from retarget.landmarks import SurfacePoints
+from retarget.layouts import Layout
+from retarget.mesh import Mesh
+
+__all__ = ["FACE_OVAL", "FaceOnMesh", "find_face_mesh", "layout_landmarks", "landmark_offsets"]
+
+FACE_OVAL = (10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379, 378, 400,
+             377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127, 162, 21, 54, 103, 67, 109)
+"""The face-mesh vertices on the face's outline (MediaPipe's FACEMESH_FACE_OVAL ring)."""
+
+EYE_CORNERS = (33, 263)   # outer corners of the subject's right and left eye
+FOREHEAD, CHIN = 10, 152
+SEARCH_SIZE = 256         # pixels of the views searched for a face
+FACE_SIZE = 512           # pixels of the view looking straight at the face
+FACE_MARGIN = 1.6         # the straight view's width over the face's width
+CHECK_BELOW = 0.6         # confidence under which a point is flagged for checking
+SPREAD_SCALE = 0.08       # eye widths of offset spread that cut a point's confidence by e
+_FRONT_SCORE = 0.75       # a frontal detection this sure ends the search
+OFFSETS = Path(__file__).resolve().parent / "landmark_offsets.json"
+
+
+@dataclass(frozen=True, eq=False)
+class FaceOnMesh:
+    """The face mesh's 468 points on a mesh.
+
+    points : SurfacePoints of the 468 points, in MediaPipe's order.
+    confidence : (468,) float64 in 0..1; under `CHECK_BELOW` asks to be checked.
+    view : the straight-on view the points were found in.
+    presence : the landmark model's face presence in that view, 0..1.
+    """
+
+    points: SurfacePoints
+    confidence: np.ndarray
+    view: View
+    presence: float
+
+
+def find_face_mesh(mesh: Mesh, tracker: FaceMeshTracker | None = None) -> FaceOnMesh:
+    """The 468 face-mesh points on `mesh` (module docstring); RetargetError when no view
+    shows a face. `tracker` lends its models (one is made when None)."""
+    tracker = FaceMeshTracker() if tracker is None else tracker
+    normals = vertex_normals(mesh)
+    texture = texture_rgb(mesh)
+    pic, face = _search(mesh, normals, texture, tracker)
+    image, _ = _landmarks_twice(tracker, pic, roi_from_detection(face))
+    # ray-cast the first guess only to set up the straight view: its points need not be final
+    tri, bary, _ = surface_hits(pic, mesh, image[:, :2])
+    hits = SurfacePoints(mesh.faces[tri], bary).positions(mesh.vertices)
+    view = _straight_view(hits, image, pic.view)
+    pic = picture(mesh, view, normals, texture)
+    projected = view.to_image(hits)[:, :2]
+    roi = Roi.around(projected.min(0), projected.max(0), projected[EYE_CORNERS[0]], projected[EYE_CORNERS[1]])
+    image, presence = _landmarks_twice(tracker, pic, roi)
+    tri, bary, snap = surface_hits(pic, mesh, image[:, :2])
+    oval = np.zeros(N_POINTS, dtype=bool)
+    oval[list(FACE_OVAL)] = True
+    points = _oval_from_depth(mesh, pic, image, SurfacePoints(mesh.faces[tri], bary), snap, oval)
+    confidence = _confidence(mesh, normals, points, view, snap, oval, presence)
+    return FaceOnMesh(points, confidence, view, presence)
+
+
+def layout_landmarks(found: FaceOnMesh, layout: Layout, mesh: Mesh, *,
+                     corrected: bool = True) -> tuple[SurfacePoints, np.ndarray]:
+    """The layout's points on `mesh` and their confidence (N,) 0..1.
+
+    Each point starts at its face-mesh vertex (the layout's ``mediapipe468`` column).
+    Where the layout's point means something else than that vertex (iBUG's brows sit on
+    the brow's lower edge, its jaw on the jaw bone rather than the face's outline),
+    `corrected` moves it by the point's offset in `OFFSETS`, measured in the face's own
+    frame and eye width, and snaps it back onto the surface; the offset's spread over the
+    faces it was measured on lowers the point's confidence.
+    """
+    rows = np.asarray(layout.mediapipe468, dtype=np.int64)
+    tri, bary = found.points.vertex_indices[rows], found.points.barycentric[rows]
+    confidence = found.confidence[rows].copy()
+    if corrected:
+        offsets, spread = landmark_offsets()
+        ibug = np.asarray(layout.ibug68, dtype=np.int64)
+        everywhere = found.points.positions(mesh.vertices)
+        eye_width = np.linalg.norm(everywhere[EYE_CORNERS[1]] - everywhere[EYE_CORNERS[0]])
+        moved = everywhere[rows] + eye_width * offsets[ibug] @ found.view.rotation
+        tri, bary = _closest_surface_points(mesh, moved)
+        confidence *= np.exp(-spread[ibug] / SPREAD_SCALE)
+    return SurfacePoints(tri, bary, layout.name), confidence
+
+
+@lru_cache(maxsize=1)
+def landmark_offsets() -> tuple[np.ndarray, np.ndarray]:
+    """(68, 3) float64 offsets from each iBUG point's face-mesh vertex to the point, in
+    eye widths along the straight view's axes (image x, image y down, viewing
+    direction), and (68,) their RMS spread in eye widths; from ``OFFSETS``, which
+    ``bench/landmark_offsets.py`` measures on the ICT face model's identities."""
+    table = json.loads(OFFSETS.read_text())
+    return np.asarray(table["offsets"], dtype=np.float64), np.asarray(table["spread"], dtype=np.float64)
+
+
+def _search(mesh: Mesh, normals, texture, tracker: FaceMeshTracker) -> tuple[Picture, Detection]:
+    """The picture and detection of the best-scored face over the search views."""
+    lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
+    centre, width = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) * 1.05
+    best: tuple[Picture, Detection] | None = None
+    for i, (facing, up) in enumerate(_search_directions()):
+        pic = picture(mesh, look_from(-facing, up, centre, width, SEARCH_SIZE), normals, texture)
+        faces = tracker.detector.detect(pic.rgb)
+        if faces and (best is None or faces[0].score > best[1].score):
+            best = (pic, faces[0])
+        if i == 0 and best is not None and best[1].score >= _FRONT_SCORE:
+            break
+    if best is None:
+        raise RetargetError("no face found on the mesh: none of 24 views (6 directions x 4 turns) "
+                            "shows one to the face detector; place the points by hand")
+    return best
+
+
+def _search_directions() -> list[tuple[np.ndarray, np.ndarray]]:
+    """(direction the face looks toward, up) pairs: +z with +y up first, then every axis
+    direction with each of its four perpendicular axes as up."""
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    front = (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    pairs = [front]
+    for facing in axes:
+        for up in axes:
+            if abs(facing @ up) < 0.5 and not (np.array_equal(facing, front[0]) and np.array_equal(up, front[1])):
+                pairs.append((facing, up))
+    return pairs
+
+
+def _landmarks_twice(tracker: FaceMeshTracker, pic: Picture, roi: Roi) -> tuple[np.ndarray, float]:
+    """(468, 3) image points (x, y pixels down, z the model's depth in pixels, away from
+    the viewer) and presence, from the model run on `roi` and again on the region its
+    points give."""
+    points, _ = tracker.landmarks(pic.rgb, roi)
+    roi = Roi.around(points[:, :2].min(0), points[:, :2].max(0),
+                     points[EYE_CORNERS[0], :2], points[EYE_CORNERS[1], :2])
+    return tracker.landmarks(pic.rgb, roi)
+
+
+def _straight_view(hits: np.ndarray, image: np.ndarray, seen_from: View) -> View:
+    """The view looking straight at the face whose points are `hits` (468, 3) world:
+    x along the eye line, up from chin to forehead, zoomed to the face."""
+    inner = np.ones(N_POINTS, dtype=bool)
+    inner[list(FACE_OVAL)] = False
+    across = hits[EYE_CORNERS[1]] - hits[EYE_CORNERS[0]]           # toward the subject's left
+    up = hits[FOREHEAD] - hits[CHIN]
+    across /= np.linalg.norm(across)
+    up -= (up @ across) * across
+    up /= np.linalg.norm(up)
+    facing = np.cross(across, up)
+    # the face's extent from the model's points in the view they were found in
+    # (its oval outlines the face; the hits of oval points may lie anywhere on the side)
+    span = (image[:, :2].max(0) - image[:, :2].min(0)).max() / seen_from.scale
+    centre = hits[inner].mean(0)
+    return look_from(-facing, up, centre, FACE_MARGIN * span, FACE_SIZE)
+
+
+def _oval_from_depth(mesh: Mesh, pic: Picture, image: np.ndarray, hits: SurfacePoints,
+                     snap: np.ndarray, oval: np.ndarray) -> SurfacePoints:
+    """`hits` with the oval points re-placed from the model's 3D points `image` (468, 3)
+    (module docstring, step 4)."""
+    view = pic.view
+    model = view.to_world(np.column_stack([image[:, :2], image[:, 2] / view.scale]))
+    at = hits.positions(mesh.vertices)
+    fit = ~oval & (snap == 0)
+    if fit.sum() < 10:
+        return hits
+    scale, rotation, shift = _similarity(model[fit], at[fit])
+    corners, weights = _closest_surface_points(mesh, scale * model[oval] @ rotation.T + shift)
+    tri, bary = hits.vertex_indices.copy(), hits.barycentric.copy()
+    tri[oval], bary[oval] = corners, weights
+    return SurfacePoints(tri, bary)
+
+
+def _closest_surface_points(mesh: Mesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 3) triangle vertex indices and (K, 3) barycentric weights of the surface points
+    closest to points (K, 3)."""
+    surface = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    closest, _, triangle = trimesh.proximity.closest_point(surface, points)
+    corners = mesh.faces[triangle]
+    weights = np.clip(trimesh.triangles.points_to_barycentric(mesh.vertices[corners], closest), 0.0, None)
+    return corners, weights / weights.sum(1, keepdims=True)
+
+
+def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Umeyama's least-squares similarity dst ~ s R src + t: (s, R (3, 3), t (3,))."""
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    a, b = src - mu_s, dst - mu_d
+    u, sigma, vt = np.linalg.svd(b.T @ a / len(src))
+    d = np.ones(3)
+    d[2] = np.sign(np.linalg.det(u @ vt)) or 1.0
+    rotation = (u * d) @ vt
+    scale = float((sigma * d).sum() / (a ** 2).sum(1).mean())
+    return scale, rotation, mu_d - scale * rotation @ mu_s
+
+
+def _confidence(mesh: Mesh, normals: np.ndarray, points: SurfacePoints, view: View,
+                snap: np.ndarray, oval: np.ndarray, presence: float) -> np.ndarray:
+    """(468,) 0..1: the presence, lowered for points that snapped (halved per 4 pixels),
+    on grazing surface (by the cosine to the viewer) and on the oval (at most 0.5)."""
+    n = points.positions(normals)
+    facing = np.clip(-(n @ view.rotation[2]) / np.maximum(np.linalg.norm(n, axis=1), 1e-12), 0.0, 1.0)
+    confidence = presence * 0.5 ** (snap / 4.0) * np.sqrt(facing)
+    confidence[oval] = np.minimum(confidence[oval], 0.5)
+    return confidence
