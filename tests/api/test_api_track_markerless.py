@@ -3,9 +3,9 @@ markerless): a job tracks a rendered face video whose points are known into a ta
 project's layout; a file that is not a video, a video without a face and one longer than
 the server's frame limit are refused with the reason, and nothing is stored.
 
-The face video is the built-in face rendered by `retarget.testing.render` with its jaw
-opening over 10 frames (lossless FFV1, so decoding adds no error); its truth is its 68
-landmarks projected by the same camera.
+The face video is the built-in face with its jaw opening over 10 frames
+(`retarget.testing.face_video`, lossless FFV1, so decoding adds no error); its truth is its
+68 landmarks projected by the same camera.
 """
 
 from __future__ import annotations
@@ -20,9 +20,7 @@ from fastapi.testclient import TestClient
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
-from retarget.sample_face import EXPRESSION_NAMES, posed_vertices, sample_face
-from retarget.testing.camera import look_at
-from retarget.testing.render import render_face
+from retarget.testing.face_video import render_face_video
 from server.app import create_app
 from server.readers import face_mesh_take
 from tests.waits import wait_job
@@ -42,22 +40,10 @@ def write_video(path, frames, fps=FPS):
 
 @pytest.fixture(scope="module")
 def face_video(tmp_path_factory):
-    """(path, truth): the face opening its jaw from rest to 0.8 of jawOpen over N_FRAMES
-    frames, and (F, 68, 2) its iBUG landmarks in pixels (x right, y up from the bottom
-    edge, the take's convention)."""
-    face = sample_face(1, identity=np.array([-0.3, 0.5, 0.2, -0.4, 0.1]))
-    centre = face.vertices.mean(0)
-    camera = look_at(centre + np.array([0.0, 0.0, 45.0]), centre, size=(SIZE, SIZE), fov_deg=30)
-    weights = np.zeros((N_FRAMES, len(EXPRESSION_NAMES)))
-    weights[:, list(EXPRESSION_NAMES).index("jawOpen")] = np.linspace(0.0, 0.8, N_FRAMES)
-    frames, truth = [], []
-    for vertices in posed_vertices(face, weights):
-        frames.append(render_face(camera, vertices, face.faces).image)
-        points = camera.R @ vertices[face.landmarks68].T + camera.t[:, None]
-        pixels = ((camera.K @ points)[:2] / points[2]).T + 0.5  # OpenCV's centres -> continuous
-        truth.append(np.column_stack([pixels[:, 0], SIZE - pixels[:, 1]]))
-    path = write_video(tmp_path_factory.mktemp("face") / "performer.mkv", frames)
-    return path, np.array(truth)
+    """(path, truth): the face opening its jaw over N_FRAMES frames (FFV1), and (F, 68, 2)
+    its iBUG landmarks in pixels (x right, y up from the bottom edge, the take's)."""
+    path = tmp_path_factory.mktemp("face") / "performer.mkv"
+    return path, render_face_video(path, N_FRAMES, size=SIZE, fps=FPS)
 
 
 @pytest.fixture(scope="module")
