@@ -1,9 +1,10 @@
 """Markerless face tracking of a video file: MediaPipe's 468-point face mesh, run by the
 browser client's own tracker (the web app's ``static/js/tracking/``) in a headless Chromium.
 
-One tracker serves the web app's webcam and video files and this module, so the command
-line and the browser find the same landmarks; and the Python environment needs no
-MediaPipe wheel (the PyPI one pins numpy < 2 and brings a second OpenCV).
+One tracker serves the web app's webcam and this module, which makes it the reference the
+native face mesh (`retarget.sources.facemesh_video`: the command line and the server's
+video tracking) is checked against (``bench/facemesh.py``); the Python environment needs
+no MediaPipe wheel (the PyPI one pins numpy < 2 and brings a second OpenCV).
 
 How a video is tracked
 ----------------------
@@ -24,8 +25,7 @@ broken. And for speed: a <video> has no frame-exact stepping (a seek decodes fro
 frame: 54 ms a frame over the first 150 frames of a 480 x 480 H.264 file with a key frame
 every 250 frames; pausing playback on each frame waits about a frame period, 28 ms at
 30 fps), while OpenCV decodes a frame in under 1 ms and the JPEG hand-over costs about
-10 ms (``bench/markerless.py``). The web app's own video path
-(``static/js/tracking/videoTake.js``) decodes in the page, on the user's file.
+10 ms (``bench/markerless.py``).
 
 Points are in pixels, **x right, y up, z toward the camera**, origin at the image's
 bottom-left corner, z in the same pixel scale as x (MediaPipe's normalised landmarks times

@@ -43,8 +43,9 @@ _RECORD = """() => {
     window.app.stream.addEventListener('message', (e) => window.messages.push(e.detail));
 }"""
 
-# Every (hidden, value) state the source progress bar is put in, from now on.
-_WATCH_PROGRESS = """() => {
+# Every (hidden, value) state the source progress bar is put in, from now on
+# (window.progress; `bar_runs` reads it).
+WATCH_PROGRESS = """() => {
     const bar = document.getElementById('source-progress');
     window.progress = [];
     const properties = [[HTMLElement.prototype, 'hidden'], [HTMLProgressElement.prototype, 'value']];
@@ -54,6 +55,20 @@ _WATCH_PROGRESS = """() => {
             set(v) { property.set.call(this, v); window.progress.push([this.hidden, this.value]); }});
     }
 }"""
+
+
+def bar_runs(progress: list) -> list[list[float]]:
+    """The values of each stretch the source progress bar was shown, from the (hidden,
+    value) states `WATCH_PROGRESS` collected."""
+    runs, run = [], None
+    for hidden, value in progress:
+        if hidden:
+            run = None
+        elif run is None:
+            runs.append(run := [value])
+        else:
+            run.append(value)
+    return runs
 
 
 def jaw_weight(t: np.ndarray) -> np.ndarray:
@@ -272,7 +287,7 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
                                                                               marker_video):
     before = takes(server, page)
     page.select_option("#video-method", "markers")
-    page.evaluate(_WATCH_PROGRESS)
+    page.evaluate(WATCH_PROGRESS)
     page.set_input_files("#video-file", str(marker_video))
     page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1,
                            timeout=scaled_ms(30_000))
@@ -286,14 +301,7 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     # the bar showed the upload, then the job from 0 to done, never going back, and it
     # is hidden at the end
     progress = page.evaluate("() => window.progress")
-    runs, run = [], None  # the values of each stretch the bar was shown
-    for hidden, value in progress:
-        if hidden:
-            run = None
-        elif run is None:
-            runs.append(run := [value])
-        else:
-            run.append(value)
+    runs = bar_runs(progress)
     assert len(runs) == 2 and progress[-1][0] is True, progress
     job = runs[1]
     assert job[0] == 0 and job[-1] == 1 and job == sorted(job), job
@@ -362,7 +370,7 @@ def _plain_video(tmp_path, marker_video):
 
 
 def _faceless_video(tmp_path, marker_video):
-    """A second of noise, VP8 WebM (a video the page can decode, without a face)."""
+    """A second of noise, VP8 WebM: a video without a face."""
     path = tmp_path / "noise.webm"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"VP80"), FPS, (96, 96))
     rng = np.random.default_rng(4)
@@ -416,7 +424,8 @@ BAD = {
     "empty take": (_empty_take, "#take-file", None, r"empty\.csv.* is empty"),
     "garbage take": (_garbage_take, "#take-file", None,
                      r"garbage\.c3d' refused: 'garbage\.c3d' is not a C3D file"),
-    "no face": (_faceless_video, "#video-file", "markerless", r"no face was found in noise\.webm"),
+    "no face": (_faceless_video, "#video-file", "markerless",
+                rf"Face tracking failed: no face was found in any of the {int(FPS)} frames of 'noise\.webm'"),
 }
 
 

@@ -1,7 +1,7 @@
-"""Markerless tracking: `track_video_markerless` (the command line's path: OpenCV decoding,
-the browser's face-mesh tracker in headless Chromium) on a real face video and on a
-generated one without a face, its refusals, and the web app's own video path
-(`trackVideo`, the page decoding the video) against it.
+"""The browser's face-mesh tracker on video files: `track_video_markerless` (OpenCV
+decoding, the web app's tracker in headless Chromium: the reference the native face mesh
+is checked against) on a real face video and on a generated one without a face, and its
+refusals.
 
 The real video is ``../shared/data/video/face_expressions_480.mp4``; the tests that need it
 skip only when ../shared is absent. Its first 60 frames were labelled by eye: the mouth is
@@ -22,11 +22,8 @@ from retarget.layouts import get_layout
 from retarget.sources.markerless import track_video_markerless
 from server.web import WEB_DIR
 
-ROOT = Path(__file__).resolve().parents[2]
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
 CLIP = 60
 CLOSED, OPEN = range(0, 48), range(50, 60)
 
@@ -35,7 +32,7 @@ needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared is abse
 
 @pytest.fixture(scope="module")
 def clip():
-    """The first 60 frames of the real video through the command line's path, ibug68,
+    """The first 60 frames of the real video through the browser's tracker, ibug68,
     and the progress calls it made."""
     if not SHARED.is_dir():
         pytest.skip("../shared is absent")
@@ -150,82 +147,3 @@ def test_missing_playwright_or_chromium_says_how_to_get_them(tmp_path, monkeypat
     monkeypatch.setitem(sys.modules, "playwright.sync_api", None)  # import fails as if absent
     with pytest.raises(RetargetError, match=r"pip install 'retarget\[markerless\]'"):
         track_video_markerless(noise_video, layout="ibug68", web_root=WEB_DIR)
-
-
-# -- the web app's video path: the page decodes and steps the <video> itself -------------
-
-_ORIGIN = "http://tracking.localhost"
-_PACKAGE = ROOT / "web" / "node_modules" / "@mediapipe" / "face_mesh"
-_TYPES = {".js": "text/javascript", ".html": "text/html", ".wasm": "application/wasm",
-          ".mp4": "video/mp4", ".webm": "video/webm"}
-
-
-@pytest.fixture(scope="module")
-def tracking_page():
-    """web/static/track.html in Chromium, its files and /video/<name> (set
-    `page.videos[name] = path`) answered by request interception."""
-    from playwright.sync_api import sync_playwright
-
-    videos: dict[str, Path] = {}
-
-    def answer(route):
-        path = route.request.url[len(_ORIGIN):]
-        if path.startswith("/video/"):
-            file = videos.get(path[len("/video/"):])
-        elif path.startswith("/vendor/@mediapipe/face_mesh/"):
-            file = _PACKAGE / path[len("/vendor/@mediapipe/face_mesh/"):]
-        else:
-            file = ROOT / "web" / path.lstrip("/")
-        if file is None or not file.is_file():
-            return route.fulfill(status=404)
-        route.fulfill(body=file.read_bytes(), content_type=_TYPES.get(file.suffix, "application/octet-stream"))
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        page = browser.new_page()
-        errors = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.route(f"{_ORIGIN}/**", answer)
-        page.goto(f"{_ORIGIN}/static/track.html")
-        page.wait_for_function("() => window.retargetTracking")
-        page.videos = videos
-        yield page
-        browser.close()
-    assert not errors, errors
-
-
-_TRACK_VIDEO = """async ([url, indices, maxFrames]) => {
-    const { trackVideo, tracker } = window.retargetTracking;  // one model load for the module
-    const out = await trackVideo(url, { layoutIndices: indices, maxFrames: maxFrames ?? Infinity, tracker });
-    return { ...out, times: Array.from(out.times),
-             points: Array.from(out.points, (v) => (Number.isNaN(v) ? null : v)) };
-}"""
-
-
-def _track_in_page(page, name, path, layout, max_frames=None):
-    page.videos[name] = path
-    result = page.evaluate(_TRACK_VIDEO, [f"/video/{name}", list(get_layout(layout).mediapipe468), max_frames])
-    points = np.array([np.nan if v is None else v for v in result["points"]], dtype=np.float32)
-    return result, points.reshape(result["n_frames"], result["n_points"], 3)
-
-
-@needs_shared
-def test_the_page_decoding_finds_the_command_lines_frames_and_rate(clip, tracking_page):
-    """The browser's <video> decoding (H.264 in Chromium) and OpenCV's reach the same
-    frames: the landmarks agree to a fraction of a pixel. The frame rate, which a <video>
-    does not state, is measured from playback."""
-    take, _ = clip
-    result, points = _track_in_page(tracking_page, "face.mp4", VIDEO, "ibug68", max_frames=12)
-    assert result["fps"] == 30 and result["n_frames"] == 12 and result["faces"] == 12
-    assert np.allclose(result["times"], np.arange(12) / 30, atol=1e-3)
-    assert (result["width"], result["height"]) == (480, 480)
-    gap = np.linalg.norm(points[..., :2] - take.points[:12, :, :2], axis=-1)
-    assert np.median(gap) < 0.75 and gap.max() < 5
-
-
-def test_the_page_decoding_reads_a_video_to_its_end(tracking_page, noise_video):
-    result, points = _track_in_page(tracking_page, "noise.webm", noise_video, "dutreve21")
-    assert result["n_frames"] == 8 and result["faces"] == 0 and result["fps"] == 30
-    # WebM times are whole milliseconds
-    assert np.allclose(result["times"], np.arange(8) / 30, atol=1e-3)
-    assert points.shape == (8, 21, 3) and np.isnan(points).all()

@@ -73,7 +73,6 @@ export class PerformancePanel {
 
 		this.stopWebcam();
 		this.recorder.set( false ); // its source went with the old project's stream
-		this.imports.stop();
 		this.list.clear();
 		this.status.note( '' ); // "Recorded ...", "Imported ...": news of the old project
 		$( 'record-name' ).value = '';

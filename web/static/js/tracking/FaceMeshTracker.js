@@ -2,9 +2,10 @@
  * Markerless face tracking in the page: MediaPipe's 468-point face mesh (the npm package
  * `@mediapipe/face_mesh`, served by the app under /vendor, model and wasm included).
  *
- * One tracker serves the webcam (webcam.js), video files in the page (videoTake.js) and
- * the command line (track.html driven by `retarget.sources.markerless`), so all three see
- * the same landmarks. Frames never leave the page.
+ * It tracks the live webcam (webcam.js), where frames never leave the page, and is the
+ * reference the native face mesh is checked against (track.html, driven headless by
+ * `retarget.sources.markerless`; bench/facemesh.py): video files are tracked by the
+ * native one, on the server or by `retarget track`.
  *
  * Landmarks are returned in **pixel units of the frame width**, x right, y UP, z toward the
  * camera, origin at the image's bottom-left corner: MediaPipe's normalised (x, y, z) with y
