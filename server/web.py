@@ -5,7 +5,8 @@ packages installed by ``npm ci --prefix web`` (served from here, never from a CD
     /static/...            web/static/
     /shaders/...           web/shaders/
     /vendor/<package>/...  web/node_modules/<package>/  (only the packages in VENDORED;
-                           @mediapipe/face_mesh is the browser's markerless face tracker)
+                           @mediapipe/face_mesh tracks the live webcam in the page; video
+                           files are tracked on the server, `retarget.facemesh`)
     /docs                  the OpenAPI docs, Swagger UI from the npm package swagger-ui-dist
 """
 
@@ -42,7 +43,7 @@ def app_csp(page: str) -> str:
         f"script-src 'self' 'wasm-unsafe-eval' 'unsafe-eval' {hashes}".strip(),
         "style-src 'self' 'unsafe-inline'",
         "img-src 'self' data: blob:",
-        "media-src 'self' blob: mediastream:",
+        "media-src 'self' mediastream:",  # the webcam's stream: videos are tracked on the server
         "connect-src 'self' data: blob:",
         "worker-src 'self' blob:",
         "object-src 'none'",
