@@ -288,8 +288,8 @@ export const api = {
 	},
 
 	/**
-	 * Upload a marker video; the server tracks it in a job.
-	 * @param {Object<string, string>} fields - method ('markers'), layout, name.
+	 * Upload a video of a face or of ring markers; the server tracks it in a job.
+	 * @param {Object<string, string>} fields - method ('markerless' or 'markers'), layout, name.
 	 * @returns {Promise<object>} the job
 	 */
 	trackVideo: ( id, file, fields, onProgress ) => upload( 'POST', `/api/projects/${ id }/takes/track`, file, fields, onProgress ),

@@ -14,7 +14,7 @@ import { TakeList } from './TakeList.js';
  * recording (Recorder) and the conditioning (ConditioningForm, a view of the page's
  * ConditioningSettings, which every start carries).
  *
- * Markerless tracking runs here, in the page (tracking/). Its neutral is captured after a
+ * The webcam is tracked here, in the page (tracking/). Its neutral is captured after a
  * countdown (NeutralCapture): no points go out before it ends, so the performer's rest
  * pose is what the server captures, and a capture the server refuses (the performer
  * moved) says so and takes none. The panel holds no maths: the
