@@ -1,4 +1,6 @@
-"""Background jobs: one thread per job, at most one running job per project.
+"""Background jobs: one thread per job, at most one running job per project, except jobs
+started as not exclusive (finding landmarks), which run beside the others and only one at
+a time of their kind.
 
 Jobs live in memory only (a restart forgets them; what a finished job produced is in the
 store). A job's `progress` is fed by the library's ``progress(fraction)`` callback; a
@@ -36,6 +38,7 @@ class Job:
     result: dict | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _thread: threading.Thread | None = field(default=None, repr=False)
+    _slot: str = field(default="", repr=False)  # its key among the registry's running jobs
 
     def report(self, fraction: float) -> None:
         """The library's progress callback: keeps the largest fraction seen, in [0, 1]."""
@@ -54,26 +57,30 @@ class JobRegistry:
 
     def __init__(self):
         self._jobs: dict[str, Job] = {}
-        self._running: dict[str, str] = {}  # project id -> running job id
+        self._running: dict[str, str] = {}  # project id (or "id/kind") -> running job id
         self._lock = threading.Lock()
 
-    def start(self, project_id: str, kind: str, work) -> Job:
+    def start(self, project_id: str, kind: str, work, *, exclusive: bool = True) -> Job:
         """Run ``work(job)`` in a thread; on success it returns (detail sentence, result
         object).
 
         A `RetargetError` (or `ValueError`) fails the job with its message; any other
         exception fails it as an internal error. Raises `JobBusy` when the project has a
-        running job.
+        running job (with `exclusive` False: a running job of the same kind). A job that
+        is not exclusive must check what it stores against the project's revision, as
+        finding landmarks does: a rig may be computed while it runs, and the other way round.
         """
+        slot = project_id if exclusive else f"{project_id}/{kind}"
         with self._lock:
-            if project_id in self._running:
+            if slot in self._running:
                 raise JobBusy(
-                    f"project {project_id!r} already has a running job "
-                    f"{self._running[project_id]!r}; wait for it to finish"
+                    f"project {project_id!r} already has a running {'' if exclusive else kind + ' '}"
+                    f"job {self._running[slot]!r}; wait for it to finish"
                 )
             job = Job(secrets.token_urlsafe(12), project_id, kind)
+            job._slot = slot
             self._jobs[job.id] = job
-            self._running[project_id] = job.id
+            self._running[slot] = job.id
         job._thread = threading.Thread(target=self._run, args=(job, work), daemon=True,
                                        name=f"job-{kind}-{job.id}")
         job._thread.start()
@@ -93,7 +100,7 @@ class JobRegistry:
             if state == "done":
                 job.progress = 1.0
         with self._lock:
-            self._running.pop(job.project_id, None)
+            self._running.pop(job._slot, None)
 
     def get(self, job_id: str) -> Job | None:
         with self._lock:

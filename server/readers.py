@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from retarget.errors import RetargetError
+from retarget.facemesh.placement import CHECK_BELOW, find_face_mesh, layout_landmarks
 from retarget.gltf import export_mesh_gltf, read_gltf
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
@@ -33,8 +34,8 @@ from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
 from retarget.weights import METHODS, compute_weights
 
-__all__ = ["ImportedProject", "OpenedMesh", "face_mesh_take", "imported_project", "marker_take",
-           "mesh_counts", "opened_mesh", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
+__all__ = ["FoundLandmarks", "ImportedProject", "OpenedMesh", "face_mesh_take", "found_landmarks",
+           "imported_project", "marker_take", "mesh_counts", "opened_mesh", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
            "video_opens"]
 
 def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
@@ -95,6 +96,40 @@ def rig(mesh: Mesh, points: SurfacePoints, method: str, options: dict, progress)
         options = {**options, "progress": progress}
     layout = get_layout(points.layout) if points.layout else None
     return compute_weights(method, mesh.vertices, mesh.faces, points, layout, **options)
+
+
+@dataclass(frozen=True)
+class FoundLandmarks:
+    """A layout's points found on a mesh with no clicks, as a project stores them.
+
+    landmarks : `SurfacePoints.to_json` with ``"layout"``, ``"confidence"`` (N,) 0..1
+        (3 decimals) and ``"check_below"``, the confidence under which a point asks to
+        be checked (`retarget.facemesh.placement.CHECK_BELOW`).
+    n_points : N.
+    check : the names of the points to check, in layout order.
+    presence : the face model's face presence in the view the points were found in, 0..1.
+    """
+
+    landmarks: dict
+    n_points: int
+    check: list[str]
+    presence: float
+
+
+def found_landmarks(mesh: Mesh, layout: str, progress) -> FoundLandmarks:
+    """The points of `layout` found on a stored mesh (`find_face_mesh`, then
+    `layout_landmarks`); not an upload, but the face model (LiteRT) and the rasteriser
+    are native code run on user geometry. Raises the library's `RetargetError` when no
+    view of the mesh shows a face."""
+    chosen = get_layout(layout)
+    progress(0.05)
+    found = find_face_mesh(mesh)
+    progress(0.9)  # finding the face is nearly all of the work
+    points, confidence = layout_landmarks(found, chosen, mesh)
+    landmarks = {**points.to_json(), "layout": chosen.name,
+                 "confidence": [round(float(c), 3) for c in confidence], "check_below": CHECK_BELOW}
+    check = [chosen.point_names[i] for i, c in enumerate(confidence) if c < CHECK_BELOW]
+    return FoundLandmarks(landmarks, chosen.n_points, check, float(found.presence))
 
 
 def _json_form(value: str | None, what: str):

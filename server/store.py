@@ -550,6 +550,39 @@ class ProjectStore:
         self._sweep(project_id)
         return self.get(project_id)
 
+    def put_found_landmarks(self, project_id: str, landmarks: dict, *, n_points: int,
+                            layout: str, revision: int, replace: bool = False) -> str | None:
+        """Store landmarks found with no clicks for the mesh of `revision`, unless that
+        would overwrite someone's work; None when stored, else why not (a sentence).
+
+        Never stored over: a mesh or landmarks changed since `revision`; unless `replace`
+        (the user asked for it), landmarks saved by hand (found ones carry their
+        ``"confidence"``) or the page's unsaved points for this mesh (the project's
+        settings ``"draft"``: ``{revision, layout, points}``). Checked in the transaction
+        that stores, so an edit saved meanwhile always wins."""
+        folder = self.folder(project_id)
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["revision"] != revision:
+                return "the mesh or its landmarks changed while the points were being found"
+            if not replace:
+                if row["n_landmarks"] is not None and "confidence" not in json.loads(
+                        (folder / row["landmarks_file"]).read_text()):
+                    return "the project has landmarks placed by hand"
+                draft = json.loads(row["settings"]).get("draft")
+                if isinstance(draft, dict) and draft.get("revision") == revision:
+                    return "points are being placed by hand on this mesh"
+            name = f"landmarks-r{revision + 1}.json"
+            write_atomic(folder / name, json.dumps(landmarks).encode())
+            db.execute(
+                "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
+                "landmarks_file = ?, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
+                "revision = revision + 1, updated = ? WHERE id = ?",
+                (layout, n_points, name, _now(), project_id),
+            )
+        self._sweep(project_id)
+        return None
+
     def landmarks(self, project_id: str) -> dict | None:
         with self._lock:
             row = self._row(project_id)

@@ -10,6 +10,14 @@ checked against the stored mesh; with a layout the point count must be the layou
 What is stored and answered by ``GET`` is `SurfacePoints.to_json` (positions are
 snapped to the surface, so they come back as triangles and barycentric weights).
 Setting landmarks drops the rig, which was made for the previous ones.
+
+``POST .../landmarks/find`` finds a layout's points with no clicks
+(`retarget.facemesh.placement`, in a child process: `server.readers.found_landmarks`) as a
+job. Found landmarks are stored with ``"confidence"`` (N,) 0..1 and ``"check_below"``
+beside the points (GET answers them; a point under ``check_below`` asks to be checked);
+landmarks saved with PUT are the user's and have neither. The job stores what it found
+unless that would overwrite the user's work (`ProjectStore.put_found_landmarks`): then it
+ends done with ``saved: false`` and the reason.
 """
 
 from __future__ import annotations
@@ -17,15 +25,22 @@ from __future__ import annotations
 from typing import Any
 
 from fastapi import APIRouter, Body, HTTPException, status
+from pydantic import BaseModel, Field, StrictBool
 
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
-from retarget.layouts import get_layout
-from server.deps import MeshDep, ProjectDep, StoreDep
+from retarget.layouts import LAYOUTS, get_layout
+from server.deps import IsolationDep, JobsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
+from server.jobs import JobBusy
+from server.readers import found_landmarks
 
 router = APIRouter(prefix="/api/projects/{project_id}/landmarks", tags=["landmarks"],
                    responses=responses(404))
+
+FIND_LAYOUT = "dutreve22"
+"""The layout found for a project that has none yet: the page's default for a new project
+(Dutreve's points and the chin)."""
 
 
 @router.put("", responses=responses(404, 409))
@@ -62,3 +77,48 @@ def get_landmarks(project: ProjectDep, store: StoreDep) -> dict:
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             f"project {project['id']!r} has no landmarks yet")
     return landmarks
+
+
+class FindRequest(BaseModel):
+    layout: str | None = Field(default=None, description="one of " + ", ".join(LAYOUTS) + "; default: "
+                               f"the project's landmarks' layout, else {FIND_LAYOUT}")
+    replace: StrictBool = Field(default=False, description="store the points found even over "
+                                "landmarks or unsaved points placed by hand on this mesh")
+
+
+@router.post("/find", status_code=status.HTTP_202_ACCEPTED, responses=responses(404, 409))
+def find_landmarks(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep,
+                   isolation: IsolationDep, body: FindRequest) -> dict:
+    """Start finding the layout's points on the stored mesh with no clicks, in a child
+    process; answers the job (poll ``GET /api/jobs/{job_id}``). Its result:
+    ``{saved, layout, n_points, check: [point names], presence, reason}``; with ``saved``
+    the points are the project's landmarks, with their confidence. No face on the mesh
+    fails the job, saying so; the project keeps what it had. 409 when the project has
+    landmarks placed by hand (unless ``replace``) or is already finding points. It runs
+    beside a rig or tracking job of the project."""
+    current = project["landmarks"]
+    layout = get_layout(body.layout or (current["layout"] if current and current["layout"] else FIND_LAYOUT))
+    if current is not None and not body.replace and "confidence" not in store.landmarks(project["id"]):
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"project {project['id']!r} has landmarks placed by hand: find "
+                            "points with replace: true to replace them")
+    revision = project["revision"]
+
+    def work(job) -> tuple[str, dict]:
+        found = isolation.call(found_landmarks, mesh, layout.name, job=True, progress=job.report,
+                               what="finding the landmarks")
+        why_not = store.put_found_landmarks(project["id"], found.landmarks, n_points=found.n_points,
+                                            layout=layout.name, revision=revision,
+                                            replace=body.replace)
+        check = f"; check {len(found.check)}: {', '.join(found.check)}" if found.check else ""
+        kept = "" if why_not is None else f"; not saved: {why_not}"
+        return (f"found {found.n_points} {layout.name} points (face presence "
+                f"{found.presence:.2f}){check}{kept}",
+                {"saved": why_not is None, "layout": layout.name, "n_points": found.n_points,
+                 "check": found.check, "presence": round(found.presence, 3), "reason": why_not})
+
+    try:
+        job = jobs.start(project["id"], "landmarks", work, exclusive=False)
+    except JobBusy as exc:
+        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from exc
+    return job.as_json()

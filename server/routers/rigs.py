@@ -84,7 +84,8 @@ def start_rig(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: JobsDep
 def get_job(job_id: str, jobs: JobsDep) -> dict:
     """``{id, project_id, kind, state: running|done|failed, progress: 0..1, detail, result}``:
     detail a sentence, result what a done job made (a rig ``{method, n_joints,
-    n_influences}``, a tracked take ``{take, frames[, truncated, frames_claimed]}``)."""
+    n_influences}``, a tracked take ``{take, frames[, truncated, frames_claimed]}``, found
+    landmarks ``{saved, layout, n_points, check, presence, reason}``)."""
     job = jobs.get(job_id)
     if job is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no job with id {job_id!r}")
