@@ -8,7 +8,8 @@ expression weights. Source conditions: "same" (A's 3D points in the target's fra
 "foreign" (A under another scale, rotation and translation), "2d" (A's points as pixels
 of a frontal camera, z = 0). The first row, "paper", is Dutreve 2008 as written: adaptive
 multiquadric transfer and ellipsoid LBS. "true" rows feed the deformer the true target
-feature motion, to separate deformer error from transfer error.
+feature motion, to separate deformer error from transfer error. --dense adds the
+dense-source rows (`dense_rows`): MediaPipe's 468 points found on A and B with no clicks.
 
 Figures: relative error = sum of per-vertex error norms / sum of true displacement norms
 over the face area (ICT vertices [0, 9409)) and all expressions; mean and 95th-percentile
@@ -108,6 +109,54 @@ def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: fl
     return rows
 
 
+def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: float | None) -> list[dict]:
+    """The dense-source scenario (issue 14, section 3): all 468 face-mesh points, found with
+    no clicks (`find_face_mesh`) on A's and on B's neutral, drive B from A's surface points.
+
+    Rows: "found" (each identity's own placement: what a user gets), "matched" (B's points
+    at A's surface locations, which ICT's shared topology allows: placement made perfectly
+    consistent, so the row separates the placement's cost from the transfer's), "true"
+    (B's own points' true motion: the deformer's floor with 468 joints).
+    """
+    from retarget.facemesh.placement import find_face_mesh
+    from retarget.facemesh.tracker import FaceMeshTracker
+    from retarget.mesh import mesh_from_arrays
+
+    model = load_model()
+    rng = np.random.default_rng(seed)
+    a, b = rng.standard_normal(100), rng.standard_normal(100)
+    src0, tgt0 = model.identity_face(a), model.identity_face(b)
+    weights_x, _ = expression_weights(model.names, n_random, rng)
+    offsets = model.expression_offsets(weights_x)
+    report, _ = vertex_regions(tgt0, model.faces, model.feature_vertices(), benchmark_layout(), model.face_count)
+    truth = tgt0 + offsets
+    tracker = FaceMeshTracker()
+    on_a = find_face_mesh(mesh_from_arrays(src0, model.faces), tracker).points
+    on_b = find_face_mesh(mesh_from_arrays(tgt0, model.faces), tracker).points
+    s0, s = on_a.positions(src0), on_a.positions(src0 + offsets)
+    rows = []
+    for label, target in (("found", on_b), ("matched", on_a)):
+        t = time.perf_counter()
+        matrix = compute_weights(method, tgt0, model.faces, target, None).matrix()
+        rig_s = time.perf_counter() - t
+        t0 = target.positions(tgt0)
+        rt = Retargeter(kernel, smoothing=smoothing).fit(s0, t0)
+        frame_ms = median_ms(lambda: skin_displacements(matrix, rt.displacements(s[0])), 50)
+        transfer_ms = median_ms(lambda: rt.displacements(s[0]), 200)
+        pred = tgt0 + skin_displacements(matrix, rt.displacements(s))
+        rows.append({"setup": f"468 {label}", "kernel": kernel, "condition": "same", "rig_s": rig_s,
+                     "fit_ms": median_ms(lambda: Retargeter(kernel, smoothing=smoothing).fit(s0, t0), 20),
+                     "frame_ms": frame_ms, "transfer_ms": transfer_ms,
+                     "leak_upper": float("nan"), "leak_lower": float("nan"),
+                     **error_figures(pred, truth, tgt0, report)})
+        if label == "found":
+            pred = tgt0 + skin_displacements(matrix, target.positions(truth) - t0)
+            rows.append({**rows[-1], "kernel": "-", "condition": "true", "fit_ms": float("nan"),
+                         "frame_ms": float("nan"), "transfer_ms": float("nan"),
+                         **error_figures(pred, truth, tgt0, report)})
+    return rows
+
+
 def print_rows(rows: list[dict]) -> None:
     head = (f"{'setup':<12}{'kernel':<22}{'cond':<8}{'rel%':>6}{'mean':>7}{'p95':>7}"
             + "".join(f"{r:>7}" for r in REPORT_REGIONS) + f"{'leakU%':>8}{'leakL%':>8}{'rig s':>7}{'fit ms':>8}{'frame ms':>9}")
@@ -118,6 +167,10 @@ def print_rows(rows: list[dict]) -> None:
               f"{r['mean']:>7.2f}{r['p95']:>7.2f}" + "".join(f"{r[g]:>7.2f}" for g in REPORT_REGIONS)
               + f"{100 * r['leak_upper']:>8.1f}{100 * r['leak_lower']:>8.1f}{r['rig_s']:>7.2f}"
               + f"{r['fit_ms']:>8.3f}{r['frame_ms']:>9.3f}")
+    for r in rows:
+        if "transfer_ms" in r and np.isfinite(r["transfer_ms"]):
+            print(f"{r['setup']}: the space transform alone (the server's per-frame work; the browser "
+                  f"skins): {r['transfer_ms']:.3f} ms a frame")
     print("errors in mm over the ICT face area; rel% = sum |error| / sum |true displacement|;\n"
           "rig s: weights for the 11k-vertex face; fit ms: the space transform; frame ms: transform\n"
           "+ skinning of one frame (medians of 50; run bench/speed.py on an idle core for speed figures)")
@@ -131,6 +184,9 @@ def main(argv=None) -> int:
     p.add_argument("--kernel", default=DEFAULT_KERNEL)
     p.add_argument("--smoothing", type=float, default=None, help="default: the pipeline's per-dimension default")
     p.add_argument("--no-true", action="store_true", help="skip the true-feature-motion rows")
+    p.add_argument("--dense", action="store_true",
+                   help="also the dense-source rows: 468 face-mesh points found on A and B (deformer: --dense-method)")
+    p.add_argument("--dense-method", default=DEFAULT_METHOD, choices=list(METHODS))
     args = p.parse_args(argv)
     if not DATA.exists():
         print(f"ICT data not found at {DATA}", file=sys.stderr)
@@ -140,6 +196,8 @@ def main(argv=None) -> int:
           f"58 feature points; transfer: kernel {args.kernel!r}, smoothing "
           f"{args.smoothing if args.smoothing is not None else DEFAULT_SMOOTHING} "
           f"(paper row: adaptive_multiquadric, 0); default deformer {DEFAULT_METHOD!r}")
+    if args.dense:
+        rows += dense_rows(args.seed, args.random, args.dense_method, args.kernel, args.smoothing)
     print_rows(rows)
     return 0
 
