@@ -95,8 +95,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from retarget.errors import RetargetError
+from retarget.similarity import similarity_transform
 from retarget.sample_face import sample_face
 
 __all__ = [
@@ -119,12 +121,15 @@ REGIONS: tuple[str, ...] = (
     "lower_lip",
     "mouth_corners",
     "jaw",
+    "cheeks",
+    "forehead",
 )
-"""The fixed region vocabulary; every point belongs to exactly one region."""
+"""The fixed region vocabulary; every point belongs to exactly one region. Only the dense
+``mediapipe468`` layout has points on the cheeks and forehead."""
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "mouth": ("upper_lip", "lower_lip", "mouth_corners"),
-    "upper_face": ("brows", "eyes"),
+    "upper_face": ("brows", "eyes", "forehead"),
     "lower_face": ("upper_lip", "lower_lip", "mouth_corners", "jaw"),
     "all": REGIONS,
 }
@@ -230,7 +235,8 @@ class Layout:
     regions : (N,) each point's region, from `REGIONS`.
     sides : (N,) each point's side, from `SIDES` (subject's right = -x).
     mirror : (N,) index of each point's left/right partner; its own index on the midline.
-    ibug68 : (N,) index of each point in the 68-point iBUG / Multi-PIE order.
+    ibug68 : (N,) index of each point in the 68-point iBUG / Multi-PIE order, -1 for a
+        point that has none (the dense layout's cheeks, forehead, ...; `has_ibug68`).
     mediapipe468 : (N,) index of the matching vertex of MediaPipe's 468-vertex face mesh.
 
     Construction checks the structure (lengths, vocabularies, index ranges, that
@@ -278,11 +284,11 @@ class Layout:
                     raise RetargetError(
                         f"Layout {self.name!r}: {field} value {value!r} is not one of {vocabulary}"
                     )
-        for field, size in (("mirror", n), ("ibug68", 68), ("mediapipe468", 468)):
+        for field, low, size in (("mirror", 0, n), ("ibug68", -1, 68), ("mediapipe468", 0, 468)):
             for value in getattr(self, field):
-                if not 0 <= value < size:
+                if not low <= value < size:
                     raise RetargetError(
-                        f"Layout {self.name!r}: {field} index {value} is outside [0, {size})"
+                        f"Layout {self.name!r}: {field} index {value} is outside [{low}, {size})"
                     )
         for i, j in enumerate(self.mirror):
             if self.mirror[j] != i:
@@ -336,6 +342,11 @@ class Layout:
                 )
         return mask
 
+    @property
+    def has_ibug68(self) -> bool:
+        """Every point is one of the 68 iBUG points (a 68-point source can drive it)."""
+        return min(self.ibug68) >= 0
+
     def reference_points(self) -> np.ndarray:
         """(N, 3) float64, read-only: this layout's points on the built-in sample face
         (`retarget.sample_face.sample_face`, resolution 1, the default identity), cm, with
@@ -345,7 +356,7 @@ class Layout:
         marker tracker identifies its markers against. The face is built once per process
         (about a second), then this is a cached lookup.
         """
-        return _reference_points(self.ibug68)
+        return _reference_points(self.ibug68, self.mediapipe468)
 
     def mirrored(self, points: np.ndarray) -> np.ndarray:
         """Mirror a placement of this layout's points about the plane x = 0.
@@ -423,10 +434,23 @@ class Layout:
 
 
 @lru_cache(maxsize=None)
-def _reference_points(ibug68: tuple[int, ...]) -> np.ndarray:
-    out = _sample_landmarks68()[list(ibug68)]
+def _reference_points(ibug68: tuple[int, ...], mediapipe468: tuple[int, ...]) -> np.ndarray:
+    ibug = np.asarray(ibug68)
+    out = _sample_landmarks68()[np.maximum(ibug, 0)]
+    if (ibug < 0).any():
+        # points with no iBUG counterpart: MediaPipe's canonical face carried onto the sample
+        # face by the similarity that best fits its inner 51 iBUG points to the sample's
+        from retarget.facemesh.canonical import canonical_face
+
+        canonical = canonical_face().vertices
+        inner = list(range(17, 68))
+        scale, rotation, shift = similarity_transform(canonical[list(np.asarray(IBUG68_TO_MEDIAPIPE468)[inner])],
+                                             _sample_landmarks68()[inner])
+        placed = scale * canonical[np.asarray(mediapipe468)[ibug < 0]] @ rotation.T + shift
+        out[ibug < 0] = placed
     out.flags.writeable = False
     return out
+
 
 
 @lru_cache(maxsize=1)
@@ -481,6 +505,93 @@ def _ibug_layout(name: str, description: str, ibug_indices: Iterable[int]) -> La
     )
 
 
+def _dense_layout() -> Layout:
+    """All 468 face-mesh vertices (`_dense_regions`): the iBUG ones with their iBUG names and
+    regions, the others named ``<region>_<side>_<k>`` (k counts the region's pairs, 0-padded;
+    a pair's two points share k); partners from the canonical model's exact symmetry."""
+    from retarget.facemesh.canonical import canonical_face
+
+    vertices = canonical_face().vertices
+    mirror = cKDTree(vertices).query(vertices * [-1.0, 1.0, 1.0])[1]
+    regions = _dense_regions(vertices[:, :2])
+    regions = [regions[j] if vertices[i, 0] > 0 else regions[i] for i, j in enumerate(mirror)]
+    ibug_of = {v: i for i, v in enumerate(IBUG68_TO_MEDIAPIPE468)}
+    names: list[str | None] = [None] * len(vertices)
+    counts: dict[str, int] = {}
+    for i in range(len(vertices)):
+        if i in ibug_of:
+            names[i] = _IBUG68_ROWS[ibug_of[i]][0]
+        elif names[i] is None:
+            k = counts[regions[i]] = counts.get(regions[i], 0) + 1
+            if mirror[i] == i:
+                names[i] = f"{regions[i]}_center_{k:03d}"
+            else:
+                right, left = (i, mirror[i]) if vertices[i, 0] < 0 else (mirror[i], i)
+                names[right] = f"{regions[i]}_right_{k:03d}"
+                names[left] = f"{regions[i]}_left_{k:03d}"
+    names_t = tuple(names)
+    return Layout(
+        name="mediapipe468",
+        description="All 468 points of MediaPipe's face mesh: lips, eyes, brows, nose, jaw, cheeks and forehead",
+        point_names=names_t,
+        regions=tuple(regions),
+        sides=tuple(_side(n) for n in names_t),
+        mirror=tuple(int(j) for j in mirror),
+        ibug68=tuple(ibug_of.get(i, -1) for i in range(len(vertices))),
+        mediapipe468=tuple(range(len(vertices))),
+    )
+
+
+def _dense_regions(xy: np.ndarray) -> list[str]:
+    """(468,) region of each canonical face-mesh vertex from its frontal position xy (468, 2)
+    cm, by where it lies among the iBUG points: the philtrum (under the nose's base, above
+    the lip's top, within 30% of the mouth's half-width) and the lip outline grown by 12% (above or below
+    the inner-lip line; within 4.5 mm of a corner: the corner), the eye outlines grown by
+    45%, within 7.5 mm of a brow point, inside the nose's outline (root to alae); else by
+    height: above the eyes the forehead, more than a cm below the mouth the jaw, between
+    them the cheeks. iBUG points keep their own region; a vertex and its mirror image get
+    the same one (their positions mirror exactly)."""
+    at = lambda *ibug: xy[[IBUG68_TO_MEDIAPIPE468[i] for i in ibug]]  # noqa: E731
+    region = np.full(len(xy), "cheeks", dtype=object)
+    region[xy[:, 1] > at(36, 39, 42, 45)[:, 1].mean()] = "forehead"
+    region[xy[:, 1] < at(48, 54)[:, 1].mean() - 1.0] = "jaw"
+    root, ala_r, base, ala_l = at(27)[0], at(31)[0], at(33)[0], at(35)[0]
+    nose = np.array([root - [0.9, 0.0], ala_r - [0.3, 0.0], base - [0.0, 0.2], ala_l + [0.3, 0.0], root + [0.9, 0.0]])
+    region[_inside(nose, xy)] = "nose"
+    # the philtrum: skin between the nose's base and the lip that moves with the upper lip
+    span = 0.3 * np.abs(at(48, 54)[:, 0]).max()
+    philtrum = (np.abs(xy[:, 0]) < span) & (xy[:, 1] < base[1]) & (xy[:, 1] > at(51)[0, 1])
+    region[philtrum] = "upper_lip"
+    for brow in ((17, 18, 19, 20, 21), (22, 23, 24, 25, 26)):
+        near = np.linalg.norm(xy[:, None] - at(*brow)[None], axis=2).min(1) < 0.75
+        region[near] = "brows"
+    for eye in ((36, 37, 38, 39, 40, 41), (42, 43, 44, 45, 46, 47)):
+        region[_inside(at(*eye), xy, grow=1.45)] = "eyes"
+    lips = _inside(at(*range(48, 60)), xy, grow=1.12)
+    line = np.vstack([at(60), (at(62) + at(66)) / 2, at(64)])
+    above = xy[:, 1] >= np.interp(xy[:, 0], line[:, 0], line[:, 1])
+    region[lips & above] = "upper_lip"
+    region[lips & ~above] = "lower_lip"
+    corner = np.linalg.norm(xy[:, None] - at(48, 54)[None], axis=2).min(1) < 0.45
+    region[lips & corner] = "mouth_corners"
+    for name, row_region, vertex in _IBUG68_ROWS:
+        region[vertex] = row_region
+    return [str(r) for r in region]
+
+
+def _inside(polygon: np.ndarray, points: np.ndarray, grow: float = 1.0) -> np.ndarray:
+    """(K,) bool: points (K, 2) inside `polygon` (M, 2) scaled by `grow` about its centroid
+    (even-odd rule)."""
+    centre = polygon.mean(0)
+    q = centre + (polygon - centre) * grow
+    x, y = points[:, 0, None], points[:, 1, None]
+    x0, y0 = q[:, 0], q[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    crossing = (y0 > y) != (y1 > y)
+    at_x = (x1 - x0) * (y - y0) / np.where(y1 != y0, y1 - y0, 1.0) + x0
+    return (crossing & (x < at_x)).sum(1) % 2 == 1
+
+
 _DUTREVE21_IBUG = (
     17, 19, 21, 22, 24, 26,  # brows: right outer, middle, inner; left inner, middle, outer
     38, 40, 43, 47,  # eyes: right upper/lower lid, left upper/lower lid
@@ -518,6 +629,7 @@ LAYOUTS: dict[str, Layout] = {
             "The 68 iBUG points read from MediaPipe's 468-vertex face mesh",
             range(68),
         ),
+        _dense_layout(),
     )
 }
 """The built-in layouts by name."""
@@ -549,6 +661,9 @@ def from_ibug68(points68: np.ndarray, layout: Layout | str) -> np.ndarray:
     Returns (..., N, D), a copy (integer input becomes float64).
     """
     layout = _resolve(layout)
+    if not layout.has_ibug68:
+        raise RetargetError(f"layout {layout.name!r} has points that are none of the 68 iBUG points; "
+                            "read it from a 468-point face mesh (from_mediapipe468)")
     p = _as_float_array(points68, "points68")
     if p.ndim < 2 or p.shape[-2] != 68:
         raise RetargetError(f"points68 must have shape (..., 68, D), got {p.shape}")

@@ -432,6 +432,41 @@ def demo_performance(fps: float = 30.0, n_frames: int | None = None) -> tuple[np
     return neutral, neutral + np.tensordot(weights, expressions, axes=1)
 
 
+def demo_points(layout, fps: float = 30.0, n_frames: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The built-in performance in a layout's points: (N, 3) at rest and (F, N, 3) frames,
+    float64 cm, as `demo_performance`.
+
+    layout : a `retarget.layouts.Layout`. A layout of iBUG points picks the performer's
+    landmarks; the dense ``mediapipe468`` finds the face mesh's points on the performer
+    with no clicks (`retarget.facemesh.placement`, once per process, about a second), as a
+    user's own face would be tracked.
+    """
+    if layout.has_ibug68:
+        neutral, frames = demo_performance(fps, n_frames)
+        rows = list(layout.ibug68)
+        return neutral[rows], frames[:, rows]
+    if not np.isfinite(fps) or fps <= 0:
+        raise RetargetError(f"fps must be a positive number, got {fps!r}")
+    points, expressions = _demo_performer468()
+    rows = list(layout.mediapipe468)
+    weights = demo_weights(int(round(_LOOP_S * fps)) if n_frames is None else n_frames, fps)
+    neutral = points[rows]
+    return neutral, neutral + np.tensordot(weights, expressions[:, rows], axes=1)
+
+
+@lru_cache(maxsize=1)
+def _demo_performer468() -> tuple[np.ndarray, np.ndarray]:
+    """`DEMO_PERFORMER`'s 468 face-mesh points: neutral (468, 3) and expressions (E, 468, 3)."""
+    from retarget.facemesh.placement import find_face_mesh
+    from retarget.mesh import mesh_from_arrays
+
+    performer = sample_face(identity=np.asarray(DEMO_PERFORMER))
+    points = find_face_mesh(mesh_from_arrays(performer.vertices, performer.faces)).points
+    neutral, expressions = points.positions(performer.vertices), points.positions(performer.expressions)
+    neutral.flags.writeable = expressions.flags.writeable = False
+    return neutral, expressions
+
+
 @lru_cache(maxsize=1)
 def _demo_performer68() -> tuple[np.ndarray, np.ndarray]:
     """`DEMO_PERFORMER`'s landmarks: neutral (68, 3) and expressions (E, 68, 3), read-only."""

@@ -4,7 +4,7 @@ Each player holds one `retarget.performance.Performance` (conditioning, retarget
 regions' mask, recording: all the library's) and only decides which frame is due when,
 encodes it (`server.wire`) and publishes it to the project's viewers (`server.hub`):
 
-- `DemoPlayer`: the built-in performance (`retarget.sample_face.demo_performance`, another
+- `DemoPlayer`: the built-in performance (`retarget.sample_face.demo_points`, another
   identity performing a looping expression track), so a rigged project moves without a
   webcam or a file;
 - `TakePlayer`: a stored take replayed at its own frame times (looping or not);
@@ -23,7 +23,7 @@ import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.performance import Performance, PerformanceFrame
-from retarget.sample_face import demo_performance
+from retarget.sample_face import demo_points
 from retarget.sources.conditioning import ConditionSettings
 from retarget.sources.take import Take
 from server.hub import StreamHub
@@ -77,10 +77,8 @@ class DemoPlayer(_Player):
     def __init__(self, target_points: np.ndarray, layout: str, fps: float = 60.0):
         performance = Performance(target_points, layout or "ibug68")
         super().__init__(performance, fps)
-        neutral68, frames68 = demo_performance(float(fps))
-        ibug = list(performance.layout.ibug68)
-        self.frames = frames68[:, ibug]
-        performance.set_neutral(neutral68[ibug])
+        neutral, self.frames = demo_points(performance.layout, float(fps))
+        performance.set_neutral(neutral)
 
     def displacements(self, index: int) -> np.ndarray:
         """(N, 3) float32 target feature displacements of frame `index` (looping)."""

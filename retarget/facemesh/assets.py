@@ -4,7 +4,8 @@ package ``@mediapipe/face_mesh`` (the one the web app serves to the browser).
 The package packs its files into one ``face_mesh_solution_packed_assets.data``; its
 loader script lists each file's byte range. ``python -m retarget.facemesh.assets
 web/node_modules/@mediapipe/face_mesh`` writes the two models this project runs (the
-legacy 468-point landmark model and the short-range face detector) and ``MODELS.json``
+legacy 468-point landmark model and the short-range face detector), the canonical face
+model's geometry and ``MODELS.json``
 (their SHA-256 and the package version), which `model_bytes` checks on every load, so a
 damaged or swapped file is refused by name rather than run.
 """
@@ -26,8 +27,11 @@ MODELS = {
     "face_landmark.tflite": "/third_party/mediapipe/modules/face_landmark/face_landmark.tflite",
     "face_detection_short_range.tflite":
         "/third_party/mediapipe/modules/face_detection/face_detection_short_range.tflite",
+    "geometry_pipeline_metadata_landmarks.binarypb":
+        "/third_party/mediapipe/modules/face_geometry/data/geometry_pipeline_metadata_landmarks.binarypb",
 }
-"""File name here -> path inside the npm package's packed assets."""
+"""File name here -> path inside the npm package's packed assets: the two models and the
+face geometry's metadata, which holds the canonical face mesh (`retarget.facemesh.canonical`)."""
 
 _PACKED = "face_mesh_solution_packed_assets.data"
 _LOADER = "face_mesh_solution_packed_assets_loader.js"

@@ -43,6 +43,7 @@ from retarget.facemesh.views import (Picture, View, look_from, picture, surface_
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import Layout
 from retarget.mesh import Mesh
+from retarget.similarity import similarity_transform
 
 __all__ = ["FACE_OVAL", "FaceOnMesh", "find_face_mesh", "layout_landmarks", "landmark_offsets"]
 
@@ -110,12 +111,14 @@ def layout_landmarks(found: FaceOnMesh, layout: Layout, mesh: Mesh, *,
     the brow's lower edge, its jaw on the jaw bone rather than the face's outline),
     `corrected` moves it by the point's offset in `OFFSETS`, measured in the face's own
     frame and eye width, and snaps it back onto the surface; the offset's spread over the
-    faces it was measured on lowers the point's confidence.
+    faces it was measured on lowers the point's confidence. A layout with points beyond
+    the iBUG 68 (``mediapipe468``) is the face mesh's own vertices, as a face-mesh source
+    gives them, and is never moved.
     """
     rows = np.asarray(layout.mediapipe468, dtype=np.int64)
     tri, bary = found.points.vertex_indices[rows], found.points.barycentric[rows]
     confidence = found.confidence[rows].copy()
-    if corrected:
+    if corrected and layout.has_ibug68:
         offsets, spread = landmark_offsets()
         ibug = np.asarray(layout.ibug68, dtype=np.int64)
         everywhere = found.points.positions(mesh.vertices)
@@ -205,7 +208,7 @@ def _oval_from_depth(mesh: Mesh, pic: Picture, image: np.ndarray, hits: SurfaceP
     fit = ~oval & (snap == 0)
     if fit.sum() < 10:
         return hits
-    scale, rotation, shift = _similarity(model[fit], at[fit])
+    scale, rotation, shift = similarity_transform(model[fit], at[fit])
     corners, weights = _closest_surface_points(mesh, scale * model[oval] @ rotation.T + shift)
     tri, bary = hits.vertex_indices.copy(), hits.barycentric.copy()
     tri[oval], bary[oval] = corners, weights
@@ -220,18 +223,6 @@ def _closest_surface_points(mesh: Mesh, points: np.ndarray) -> tuple[np.ndarray,
     corners = mesh.faces[triangle]
     weights = np.clip(trimesh.triangles.points_to_barycentric(mesh.vertices[corners], closest), 0.0, None)
     return corners, weights / weights.sum(1, keepdims=True)
-
-
-def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Umeyama's least-squares similarity dst ~ s R src + t: (s, R (3, 3), t (3,))."""
-    mu_s, mu_d = src.mean(0), dst.mean(0)
-    a, b = src - mu_s, dst - mu_d
-    u, sigma, vt = np.linalg.svd(b.T @ a / len(src))
-    d = np.ones(3)
-    d[2] = np.sign(np.linalg.det(u @ vt)) or 1.0
-    rotation = (u * d) @ vt
-    scale = float((sigma * d).sum() / (a ** 2).sum(1).mean())
-    return scale, rotation, mu_d - scale * rotation @ mu_s
 
 
 def _confidence(mesh: Mesh, normals: np.ndarray, points: SurfacePoints, view: View,

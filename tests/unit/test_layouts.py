@@ -119,6 +119,12 @@ def layout(request) -> Layout:
     return LAYOUTS[request.param]
 
 
+@pytest.fixture(params=sorted(name for name, lay in LAYOUTS.items() if lay.has_ibug68))
+def ibug_layout(request) -> Layout:
+    """The layouts made of iBUG points (all but the dense mediapipe468)."""
+    return LAYOUTS[request.param]
+
+
 @pytest.fixture(scope="module")
 def ict_landmarks() -> np.ndarray:
     """(68, 3) float64, cm: the ICT generic neutral face at its 68 landmark vertices."""
@@ -174,7 +180,8 @@ def test_mirror_is_an_involution_between_opposite_sides(layout):
         assert layout.point_names[j] == swapped
 
 
-def test_source_indices_in_range_and_distinct(layout):
+def test_source_indices_in_range_and_distinct(ibug_layout):
+    layout = ibug_layout
     ibug = np.asarray(layout.ibug68)
     mp = np.asarray(layout.mediapipe468)
     assert ibug.min() >= 0 and ibug.max() < 68
@@ -185,7 +192,8 @@ def test_source_indices_in_range_and_distinct(layout):
     assert layout.mediapipe468 == tuple(IBUG68_TO_MEDIAPIPE468[i] for i in layout.ibug68)
 
 
-def test_points_agree_with_ibug68(layout):
+def test_points_agree_with_ibug68(ibug_layout):
+    layout = ibug_layout
     ibug68 = LAYOUTS["ibug68"]
     for i, k in enumerate(layout.ibug68):
         assert layout.point_names[i] == ibug68.point_names[k]
@@ -328,8 +336,8 @@ def test_region_mask():
     assert lay.region_mask([]).sum() == 0
     assert LAYOUTS["dutreve21"].region_mask("jaw").sum() == 0
     assert LAYOUTS["dutreve21"].region_mask("all").all()
-    with pytest.raises(RetargetError, match="cheeks"):
-        lay.region_mask(["brows", "cheeks"])
+    with pytest.raises(RetargetError, match="cheek'"):
+        lay.region_mask(["brows", "cheek"])
     with pytest.raises(RetargetError, match="'eye'"):
         lay.region_mask("eye")
 
@@ -440,6 +448,10 @@ def test_from_ibug68():
     rng = np.random.default_rng(1)
     p68 = rng.standard_normal((68, 3))
     for name, lay in LAYOUTS.items():
+        if not lay.has_ibug68:
+            with pytest.raises(RetargetError, match="from_mediapipe468"):
+                from_ibug68(p68, lay)
+            continue
         out = from_ibug68(p68, lay)
         assert out.shape == (lay.n_points, 3)
         assert np.array_equal(out, p68[list(lay.ibug68)])
@@ -505,7 +517,8 @@ def test_mirrored_ict_landmarks_land_on_partners(ict_landmarks):
         assert np.linalg.norm(sub.mirrored(p) - p, axis=1).max() < 0.5
 
 
-def test_ict_sides_agree_with_x(ict_landmarks, layout):
+def test_ict_sides_agree_with_x(ict_landmarks, ibug_layout):
+    layout = ibug_layout
     x = from_ibug68(ict_landmarks, layout)[:, 0]
     sides = np.asarray(layout.sides)
     assert (x[sides == "right"] < -0.3).all()
@@ -513,7 +526,8 @@ def test_ict_sides_agree_with_x(ict_landmarks, layout):
     assert (np.abs(x[sides == "center"]) < 0.05).all()
 
 
-def test_ict_vertical_order(ict_landmarks, layout):
+def test_ict_vertical_order(ict_landmarks, ibug_layout):
+    layout = ibug_layout
     y = from_ibug68(ict_landmarks, layout)[:, 1]
     regions = np.asarray(layout.regions)
     assert y[regions == "upper_lip"].min() > y[regions == "lower_lip"].max()
@@ -527,3 +541,67 @@ def test_ict_vertical_order(ict_landmarks, layout):
         lower = np.flatnonzero(regions == "lower_lip")
         j = lower[np.argmin(np.abs(x[lower] - x[i]))]
         assert y[i] > y[j], (layout.point_names[i], layout.point_names[j])
+
+
+# ---------------------------------------------------------------- the dense layout
+
+
+def test_dense_layout_is_every_face_mesh_point_with_its_symmetry():
+    from retarget.facemesh.canonical import canonical_face
+
+    lay = LAYOUTS["mediapipe468"]
+    canonical = canonical_face().vertices
+    assert lay.n_points == 468 and lay.mediapipe468 == tuple(range(468))
+    assert not lay.has_ibug68 and all(LAYOUTS[n].has_ibug68 for n in LAYOUTS if n != "mediapipe468")
+    # the iBUG vertices carry their iBUG names, regions and indices
+    ibug68 = LAYOUTS["ibug68"]
+    for k, vertex in enumerate(IBUG68_TO_MEDIAPIPE468):
+        assert lay.point_names[vertex] == ibug68.point_names[k]
+        assert lay.regions[vertex] == ibug68.regions[k] and lay.ibug68[vertex] == k
+    assert sum(i >= 0 for i in lay.ibug68) == 68
+    # partners are mirror images on the canonical face; sides follow x
+    mirror = np.asarray(lay.mirror)
+    assert np.allclose(canonical[mirror], canonical * [-1, 1, 1], atol=1e-5)
+    x, sides = canonical[:, 0], np.asarray(lay.sides)
+    assert (x[sides == "right"] < 0).all() and (x[sides == "left"] > 0).all()
+    assert np.allclose(x[sides == "center"], 0, atol=1e-5)
+    # every region holds points, the cheeks and forehead only here
+    counts = {r: lay.regions.count(r) for r in REGIONS}
+    assert min(counts.values()) >= 10, counts
+    assert all(r not in LAYOUTS[n].regions for n in LAYOUTS if n != "mediapipe468" for r in ("cheeks", "forehead"))
+    assert np.array_equal(from_mediapipe468(canonical, lay), canonical)
+
+
+def test_dense_regions_lie_where_their_names_say():
+    from retarget.facemesh.canonical import canonical_face
+
+    lay = LAYOUTS["mediapipe468"]
+    x, y = canonical_face().vertices[:, :2].T
+    r = np.asarray(lay.regions)
+    eye_corners = y[[IBUG68_TO_MEDIAPIPE468[i] for i in (36, 39, 42, 45)]].mean()
+    assert y[r == "forehead"].max() == y.max() and y[r == "forehead"].min() > eye_corners
+    assert y[r == "brows"].mean() > y[r == "eyes"].mean() > y[r == "upper_lip"].mean()
+    assert y[r == "jaw"].mean() < y[r == "lower_lip"].mean()
+    # each upper-lip point lies above the lower-lip point nearest it in x
+    lower = np.flatnonzero(r == "lower_lip")
+    for i in np.flatnonzero(r == "upper_lip"):
+        assert y[i] > y[lower[np.argmin(np.abs(x[lower] - x[i]))]], lay.point_names[i]
+    # cheeks are off the midline, beside the nose and mouth
+    assert np.abs(x[r == "cheeks"]).min() > 1.0
+
+
+def test_dense_reference_points_lie_on_the_sample_face():
+    from scipy.spatial import cKDTree
+
+    from retarget.sample_face import sample_face
+
+    face = sample_face(1)
+    lay = LAYOUTS["mediapipe468"]
+    ref = lay.reference_points()
+    assert ref.shape == (468, 3) and not ref.flags.writeable
+    rows = [i for i, k in enumerate(lay.ibug68) if k >= 0]
+    assert np.allclose(ref[rows], face.vertices[face.landmarks68[[lay.ibug68[i] for i in rows]]])
+    # the others: the canonical face carried onto the sample face, near its surface
+    others = [i for i, k in enumerate(lay.ibug68) if k < 0]
+    distance = cKDTree(face.vertices).query(ref[others])[0]
+    assert np.median(distance) < 0.5, np.median(distance)
