@@ -115,6 +115,7 @@ def test_joined_lips_open_in_the_browser_and_undo(server, page, tmp_path):
     assert page.input_value("#layout-select") == "dutreve22"
     assert page.is_hidden("#mouth-box")  # no landmarks yet: nothing to tell
     rest = np.array(page.evaluate("() => Array.from(window.app.face.mesh.geometry.attributes.position.array)"))
+    page.evaluate("() => window.app.animation")  # the page's own found points and rig come first
 
     # the welded face's landmarks, its rig and a take that opens the mouth
     server.api("PUT", f"/api/projects/{pid}/landmarks",

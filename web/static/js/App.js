@@ -14,7 +14,7 @@ import { SkinnedFace } from './scene/SkinnedFace.js';
  * (`projectSettings`).
  *
  * One App per page, `window.app` for the end-to-end tests: {viewer, face, stream,
- * projectId, picker, paint, sources, errors, ready}.
+ * projectId, picker, paint, sources, errors, ready, animation}.
  */
 export class App {
 
@@ -46,6 +46,8 @@ export class App {
 		this.info = null; // GET /api/info: upload limits, mesh formats, rig methods
 		/** Settles once the page (or the project being opened) is shown. */
 		this.ready = Promise.resolve();
+		/** Settles once what follows the last upload (`animateUpload`) has ended, however. */
+		this.animation = Promise.resolve();
 		this._open = 0; // bumps on every project switch: late answers for an old project are dropped
 
 	}
@@ -259,6 +261,31 @@ export class App {
 			this.live.update();
 
 		}
+
+	}
+
+	/**
+	 * A mesh was uploaded into the shown project: its points are found, the face rigged and
+	 * the built-in demo played, with no click (each step only while the user has not taken
+	 * over: placed, moved or chosen anything, or started a source). A failure shows in the
+	 * error banner (no face on the mesh is only a note in the Landmarks panel).
+	 * @returns {Promise<void>} `animation`, which never rejects.
+	 */
+	animateUpload() {
+
+		this.animation = this._animateUpload().catch( ( error ) => this.errors.show( error ) );
+		return this.animation;
+
+	}
+
+	async _animateUpload() {
+
+		const current = this.ticket();
+		if ( ! await this.marks.find( { auto: true } ) || ! current() ) return;
+		const found = this.landmarks.state;
+		await this.rig.compute();
+		if ( ! current() || this.landmarks.state !== found || this.streaming || ! this.project?.rig ) return;
+		if ( $( 'source-select' ).value === 'demo' ) await this.live.play();
 
 	}
 

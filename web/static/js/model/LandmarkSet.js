@@ -10,13 +10,18 @@ import { History } from './History.js';
  * @typedef {{name: string, n_points: number, regions: string[],
  *   points: Array<{name: string, region: string, side: string, mirror: number}>}} Layout
  *   A layout as GET /api/layouts gives it.
+ * @typedef {{state: PickState, confidence: number[], checkBelow: number}} Found
+ *   Points the server found with no clicks and how much to trust each (0..1); a point
+ *   under `checkBelow` asks to be checked.
  */
 
 /**
  * The feature points being placed on a face: one surface point (or none yet) per point
  * of a layout, which one is selected, which comes next, the last saved state, and undo
  * and redo of every edit. It knows nothing of the mesh's geometry: the picker (or a
- * restored draft) hands it surface points.
+ * restored draft) hands it surface points. Points found by the server come with their
+ * confidence: those under its threshold are `flagged` for checking until they are moved
+ * (or saved by the user).
  *
  * Dispatches 'change' after any edit, selection, load or save.
  */
@@ -33,6 +38,9 @@ export class LandmarkSet extends EventTarget {
 		this.selected = - 1;
 
 		this._saved = this.state;
+		/** @type {Found|null} */
+		this._found = null;
+		this._flags = { state: null, found: null, flagged: [] }; // `flagged` of the last state asked about
 		/** @type {History<{before: PickState, after: PickState}>} */
 		this._history = new History();
 		this._chosenNext = - 1;
@@ -65,7 +73,8 @@ export class LandmarkSet extends EventTarget {
 	 * Start over with a layout and its points (from the server), forgetting the history.
 	 * @param {string} layoutName
 	 * @param {{triangles: number[][], barycentric: number[][]}|{vertex_indices: number[]}|null} landmarks -
-	 *   the server's landmark JSON (points on vertices come as vertex indices).
+	 *   the server's landmark JSON (points on vertices come as vertex indices; found
+	 *   points with their `confidence` and `check_below`).
 	 */
 	load( layoutName, landmarks = null ) {
 
@@ -84,6 +93,7 @@ export class LandmarkSet extends EventTarget {
 
 		this.state = { layout: layoutName, points };
 		this._saved = landmarks ? this.state : { layout: layoutName, points: new Array( layout.n_points ).fill( null ) };
+		this._found = landmarks ? foundOf( this.state, landmarks ) : null;
 		this._history.clear();
 		this.selected = - 1;
 		this._resetCursor();
@@ -94,11 +104,32 @@ export class LandmarkSet extends EventTarget {
 	/**
 	 * Remember points as saved (the 'unsaved' mark clears until the next edit).
 	 * @param {PickState} [state] - what was sent, when edits may have followed it.
+	 * @param {object|null} [landmarks] - the server's landmark JSON of `state` when it
+	 *   was found with no clicks (its confidence flags points); null: saved by the user,
+	 *   who has seen them all.
 	 */
-	markSaved( state = this.state ) {
+	markSaved( state = this.state, landmarks = null ) {
 
 		this._saved = state;
+		this._found = landmarks ? foundOf( state, landmarks ) : null;
 		this._changed();
+
+	}
+
+	/**
+	 * Per point, whether it was found with a confidence under the threshold and has not
+	 * been moved since: the points to check.
+	 * @returns {boolean[]} one per layout point.
+	 */
+	get flagged() {
+
+		const found = this._found, state = this.state, flags = this._flags;
+		if ( flags.state === state && flags.found === found ) return flags.flagged; // markers ask on every stream frame
+		const matches = found && found.state.layout === state.layout;
+		flags.flagged = state.points.map( ( p, i ) => Boolean( matches && p !== null && found.confidence[ i ] < found.checkBelow && samePoint( p, found.state.points[ i ] ) ) );
+		flags.state = state;
+		flags.found = found;
+		return flags.flagged;
 
 	}
 
@@ -370,6 +401,20 @@ export class LandmarkSet extends EventTarget {
 		this.dispatchEvent( new Event( 'change' ) );
 
 	}
+
+}
+
+/**
+ * The found points of a state, when the server's JSON of it has a confidence per point.
+ * @param {PickState} state
+ * @param {{confidence?: number[], check_below?: number}} landmarks
+ * @returns {Found|null}
+ */
+function foundOf( state, landmarks ) {
+
+	const confidence = landmarks.confidence;
+	if ( ! Array.isArray( confidence ) || confidence.length !== state.points.length || typeof landmarks.check_below !== 'number' ) return null;
+	return { state, confidence: confidence.slice(), checkBelow: landmarks.check_below };
 
 }
 

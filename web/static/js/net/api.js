@@ -161,6 +161,13 @@ export const api = {
 	/** @param {{layout: string, triangles: number[][], barycentric: number[][]}} landmarks */
 	putLandmarks: ( id, landmarks ) => request( 'PUT', `/api/projects/${ id }/landmarks`, { json: landmarks } ),
 
+	/**
+	 * Find the layout's points on the mesh with no clicks (a server job).
+	 * @param {{layout?: string, replace?: boolean}} options - replace: even over points placed by hand.
+	 * @returns {Promise<object>} the job; its result {saved, layout, n_points, check, presence, reason}
+	 */
+	findLandmarks: ( id, options ) => request( 'POST', `/api/projects/${ id }/landmarks/find`, { json: options } ),
+
 	/** @returns {Promise<object>} the job {id, state, progress, detail, result} */
 	startRig: ( id, method ) => request( 'POST', `/api/projects/${ id }/rig`, { json: { method } } ),
 

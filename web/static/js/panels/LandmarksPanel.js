@@ -1,3 +1,4 @@
+import { surfacePoints } from '../model/LandmarkSet.js';
 import { ApiError, api } from '../net/api.js';
 import { ask } from './ask.js';
 import { $, guarded, option } from './dom.js';
@@ -15,6 +16,13 @@ const SIDE_WORDS = { right: '· on your left', left: '· on your right' };
  * *Save landmarks*, over the page's LandmarkSet (`app.landmarks`) that the picker edits.
  * Unsaved points are kept with the project as a draft (its settings' `draft` key: layout,
  * points, the mesh revision they were placed on), restored on the next visit.
+ *
+ * *Find points* (and every upload, through `App.animateUpload`) has the server find the
+ * layout's points with no clicks (POST .../landmarks/find, a job); the points it is unsure
+ * of are ringed on the face and named by region under the button ("Check 3 points: jaw,
+ * brows") until they are moved or saved. Whatever the user does to the points while they
+ * are being found wins: the found ones are then neither shown over the user's nor, once
+ * the draft reaches the server, saved there.
  */
 export class LandmarksPanel {
 
@@ -25,6 +33,10 @@ export class LandmarksPanel {
 
 		this.app = app;
 		this.guide = new LayoutGuide( $( 'guide' ) );
+		/** Whether points are being found for the shown project. */
+		this.finding = false;
+		this._find = null; // {follow: AbortController, before: PickState, touched: boolean} while finding
+		this._findNote = ''; // the last find's news when no point is flagged
 		this._events = new AbortController();
 		this._bind();
 
@@ -88,10 +100,127 @@ export class LandmarksPanel {
 
 	}
 
-	/** Forget an old project's note. */
+	/** Forget an old project's notes and stop following its find. */
 	clear() {
 
+		this._find?.follow.abort();
+		this._find = null;
+		this.finding = false;
+		this._findNote = '';
+		$( 'find-progress' ).hidden = true;
 		$( 'landmarks-note' ).textContent = '';
+
+	}
+
+	/**
+	 * Have the server find the layout's points on the mesh and show them once saved as the
+	 * project's landmarks, unless the user placed, moved or chose anything meanwhile.
+	 * @param {{auto?: boolean}} [options] - auto: after an upload; nothing is asked and
+	 *   nothing happens when the project already has points, saved or drafted.
+	 * @returns {Promise<boolean>} whether the found points are the ones shown now.
+	 */
+	async find( { auto = false } = {} ) {
+
+		const app = this.app, landmarks = app.landmarks, project = app.project;
+		if ( ! project?.mesh || ! app.face ) throw new ApiError( 0, 'Upload a mesh first.' );
+		if ( this._find ) return false;
+		if ( auto && ( project.landmarks || landmarks.placedCount > 0 ) ) return false;
+		const placed = landmarks.placedCount;
+		if ( ! auto && placed > 0 && ( landmarks.dirty || ! landmarks.flagged.some( Boolean ) ) ) {
+
+			const answer = await ask( `Replace the ${ placed } placed point${ placed > 1 ? 's' : '' } with points found on the mesh? Undo brings yours back.`, { ok: 'Find points' } );
+			if ( answer !== 'ok' ) return false;
+
+		}
+
+		const id = app.projectId, current = app.ticket();
+		const find = this._find = { follow: new AbortController(), before: landmarks.state, touched: false };
+		const bar = $( 'find-progress' );
+		this.finding = true;
+		this._findNote = '';
+		bar.value = 0;
+		bar.hidden = false;
+		this._showFinding( 'Finding the points on the mesh…' );
+		let job;
+		try {
+
+			const started = await api.findLandmarks( id, { layout: landmarks.state.layout, replace: ! auto } );
+			job = await api.waitJob( started.id, ( { progress } ) => {
+
+				bar.value = progress;
+				this._showFinding( `Finding the points on the mesh… ${ Math.round( progress * 100 ) }%` );
+
+			}, { what: 'Finding the points', signal: find.follow.signal } );
+
+		} catch ( error ) {
+
+			if ( find.follow.signal.aborted || ! current() ) return false;
+			// no face on the mesh is news, not a fault: the points are placed by hand as before
+			const reason = error.message.replace( /^Finding the points failed: /, '' );
+			this._findNote = reason.charAt( 0 ).toUpperCase() + reason.slice( 1 );
+			return false;
+
+		} finally {
+
+			if ( this._find === find ) {
+
+				this._find = null;
+				this.finding = false;
+				bar.hidden = true;
+				this.update();
+
+			}
+
+		}
+
+		const { result } = job;
+		if ( ! result.saved ) {
+
+			this._findNote = `Points were found but not kept: ${ result.reason }.`;
+			this.update();
+			return false;
+
+		}
+
+		const [ fresh, saved ] = await Promise.all( [ api.project( id ), api.landmarks( id ) ] );
+		if ( ! current() ) return false;
+		app.project = fresh;
+		if ( ! saved.confidence ) {
+
+			// landmarks saved since (another window, the API) replaced them: those are shown
+			this._findNote = 'Points were found, then replaced by landmarks saved meanwhile.';
+			await this.load( fresh, current );
+			app.landmarksSaved();
+			return false;
+
+		}
+
+		const found = { layout: saved.layout, points: surfacePoints( saved ) };
+		if ( find.touched || landmarks.state !== find.before ) {
+
+			// the server kept them before it heard of the user's points: those stay on screen, unsaved
+			landmarks.markSaved( found, saved );
+			this._findNote = `Points were found and saved while you placed yours; yours are shown (unsaved).`;
+			app.landmarksSaved();
+			return false;
+
+		}
+
+		if ( auto ) {
+
+			landmarks.load( saved.layout, saved );
+
+		} else {
+
+			landmarks.replace( saved.layout, found.points ); // undoable: the user's points come back
+			landmarks.markSaved( landmarks.state, saved );
+
+		}
+
+		this._findNote = `Found the ${ result.n_points } points of ${ result.layout }.`;
+		app.landmarksSaved();
+		app.showLandmarks();
+		return true;
 
 	}
 
@@ -154,6 +283,8 @@ export class LandmarksPanel {
 		$( 'mirror' ).disabled = ! hasMesh || ! landmarks.canMirror;
 		$( 'clear-points' ).disabled = landmarks.placedCount === 0;
 		$( 'save-landmarks' ).disabled = ! hasMesh || ! landmarks.dirty; // saving drops the rig: only when something changed
+		$( 'find-points' ).disabled = ! hasMesh || this.finding;
+		if ( ! this.finding ) this._showFindNote();
 		this.guide.setLayout( layout );
 		this.guide.update( { placed: landmarks.points.map( Boolean ), next: hasMesh ? next : - 1, selected: landmarks.selected } );
 
@@ -180,7 +311,8 @@ export class LandmarksPanel {
 		const app = this.app, project = app.project;
 		if ( ! project || ! app.face ) return;
 		if ( ! app.landmarks.dirty && ! project.settings?.draft ) return;
-		app.projectSettings.schedule( project.id, 'draft', () => this._draft() );
+		// while points are being found the draft goes at once: the server keeps found points only over none
+		app.projectSettings.schedule( project.id, 'draft', () => this._draft(), this._find ? 0 : undefined );
 
 	}
 
@@ -237,6 +369,42 @@ export class LandmarksPanel {
 
 		this._events.abort();
 		this.guide.dispose();
+
+	}
+
+	/** The user chose something in the panel while points were being found: theirs win. */
+	_touched() {
+
+		if ( this._find ) this._find.touched = true;
+
+	}
+
+	_showFinding( text ) {
+
+		const note = $( 'find-note' );
+		note.textContent = text;
+		note.className = 'note';
+
+	}
+
+	/** The points to check by region ("Check 3 points: jaw, brows"), else the last find's news. */
+	_showFindNote() {
+
+		const landmarks = this.app.landmarks, layout = landmarks.layout, note = $( 'find-note' );
+		const flagged = landmarks.flagged;
+		const n = flagged.filter( Boolean ).length;
+		if ( n && layout ) {
+
+			const regions = [ ...new Set( layout.points.filter( ( _, i ) => flagged[ i ] ).map( ( p ) => p.region.replace( /_/g, ' ' ) ) ) ];
+			note.textContent = `Check ${ n } point${ n > 1 ? 's' : '' }: ${ regions.join( ', ' ) } (ringed in red; drag any that is off, then save).`;
+			note.className = 'note warn';
+
+		} else {
+
+			note.textContent = this._findNote;
+			note.className = 'note';
+
+		}
 
 	}
 
@@ -298,8 +466,19 @@ export class LandmarksPanel {
 
 		const app = this.app, landmarks = app.landmarks, signal = this._events.signal;
 		const guard = ( fn ) => guarded( app.errors, fn );
-		this.guide.addEventListener( 'pick', ( event ) => landmarks.select( event.detail.index ), { signal } );
-		$( 'layout-select' ).addEventListener( 'change', guard( ( event ) => this._switchLayout( event.target.value ) ), { signal } );
+		this.guide.addEventListener( 'pick', ( event ) => {
+
+			this._touched();
+			landmarks.select( event.detail.index );
+
+		}, { signal } );
+		$( 'layout-select' ).addEventListener( 'change', guard( ( event ) => {
+
+			this._touched();
+			return this._switchLayout( event.target.value );
+
+		} ), { signal } );
+		$( 'find-points' ).addEventListener( 'click', guard( () => this.find() ), { signal } );
 		$( 'undo' ).addEventListener( 'click', () => landmarks.undo(), { signal } );
 		$( 'redo' ).addEventListener( 'click', () => landmarks.redo(), { signal } );
 		$( 'delete-point' ).addEventListener( 'click', () => landmarks.deleteSelected(), { signal } );

@@ -172,7 +172,8 @@ export class LivePanel {
 
 	}
 
-	async _play() {
+	/** Play the Performance panel's source (what *Play* does); a reason shows when it cannot. */
+	async play() {
 
 		const missing = this.missing();
 		if ( missing ) {
@@ -226,7 +227,7 @@ export class LivePanel {
 	_bind() {
 
 		const signal = this._events.signal;
-		$( 'play' ).addEventListener( 'click', guarded( this.app.errors, () => this._play() ), { signal } );
+		$( 'play' ).addEventListener( 'click', guarded( this.app.errors, () => this.play() ), { signal } );
 		$( 'stop' ).addEventListener( 'click', () => this._stop(), { signal } );
 		$( 'regions' ).addEventListener( 'change', ( event ) => {
 

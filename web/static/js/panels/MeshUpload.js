@@ -6,7 +6,8 @@ import { $, guarded, mebibytes } from './dom.js';
  * view): one mesh file with the files it refers to (an OBJ's MTL and texture images, a
  * glTF's buffers), picked or dropped together, or a zip of them. A mesh goes into the open project when that has no landmarks or rig yet, else
  * into a new project named after the file, so an upload never drops work; a refused file
- * changes nothing (a project made for it is deleted again).
+ * changes nothing (a project made for it is deleted again). An uploaded face then comes
+ * alive with no click (`App.animateUpload`: points found, rigged, played).
  */
 export class MeshUpload {
 
@@ -89,8 +90,9 @@ export class MeshUpload {
 		await app.refreshProjects();
 		if ( target.id === app.projectId ) app.landmarks.load( app.landmarks.state.layout ); // the old picks belong to the old mesh
 		const from = app.project;
-		await app.openProject( target.id, { force: true } );
+		if ( ! await app.openProject( target.id, { force: true } ) ) return;
 		if ( created && from ) $( 'landmarks-note' ).textContent = `Uploaded into the new project "${ created.name }"; "${ from.name }" keeps its mesh and landmarks.`;
+		app.animateUpload(); // not awaited: the upload is done; finding, rigging and playing show in their panels
 
 	}
 

@@ -1,15 +1,18 @@
-import { Color, Group, Mesh, MeshStandardMaterial, SphereGeometry, Vector3 } from 'three';
+import { Color, Group, Mesh, MeshBasicMaterial, MeshStandardMaterial, SphereGeometry, Vector3 } from 'three';
 
 import { regionColor } from './palette.js';
 import { redraw } from './Viewer.js';
 
 const MARKER_SCALE = 0.0085; // marker radius as a fraction of the mesh's bounding-sphere radius
 const GRAB_SLOP = 1.5; // CSS px beyond a marker's drawn radius that still grab it (close neighbours stay clickable)
+const CHECK_COLOR = 0xff2a2a; // no region's colour (palette.js): a point to check reads as such on any of them
+const CHECK_SCALE = 2.6; // the halo's radius over its marker's
 
 /**
  * The feature points drawn on the face: one sphere per placed point in its region's
  * colour (palette.js), the selected one white and larger, the hovered one a little larger,
- * moved by the live feature displacements. A group beside the face in the scene (the
+ * a point to check (found with a low confidence) inside a translucent red halo, moved by
+ * the live feature displacements. A group beside the face in the scene (the
  * viewer's wireframe and framing apply to the face alone) that follows the face's world
  * matrix.
  */
@@ -30,6 +33,15 @@ export class LandmarkMarkers {
 		this._sphere = new SphereGeometry( 1, 16, 12 );
 		this._materials = new Map();
 		this._selectedMaterial = new MeshStandardMaterial( { color: 0xffffff, emissive: 0x666666, roughness: 0.35 } );
+		// unlit and without depth writes: a halo never hides its marker or a neighbour
+		this._checkMaterial = new MeshBasicMaterial( { color: CHECK_COLOR, transparent: true, opacity: 0.5, depthWrite: false } );
+
+	}
+
+	/** How many drawn markers carry the halo of a point to check. */
+	get flaggedCount() {
+
+		return this.group.children.filter( ( marker ) => marker.visible && marker.userData.halo?.visible ).length;
 
 	}
 
@@ -38,10 +50,11 @@ export class LandmarkMarkers {
 	 * @param {import('./MeshSurface.js').MeshSurface|null} surface - the face; null hides every marker.
 	 * @param {{points: Array<{region: string}>}|null} layout
 	 * @param {Array<import('../model/LandmarkSet.js').SurfacePoint|null>} points
-	 * @param {{selected: number, hovered: number, offsets: Float32Array|null}} show -
-	 *   offsets: (3N) live displacements added to the rest positions, or null.
+	 * @param {{selected: number, hovered: number, offsets: Float32Array|null, flagged?: boolean[]}} show -
+	 *   offsets: (3N) live displacements added to the rest positions, or null; flagged:
+	 *   per point, whether it asks to be checked.
 	 */
-	update( surface, layout, points, { selected, hovered, offsets } ) {
+	update( surface, layout, points, { selected, hovered, offsets, flagged = null } ) {
 
 		const group = this.group;
 		while ( group.children.length < points.length ) group.add( new Mesh( this._sphere ) );
@@ -71,6 +84,7 @@ export class LandmarkMarkers {
 			marker.material = i === selected ? this._selectedMaterial : this._materialFor( layout.points[ i ].region );
 			marker.scale.setScalar( radius * ( i === selected ? 1.45 : i === hovered ? 1.25 : 1 ) );
 			marker.renderOrder = 1;
+			this._halo( marker ).visible = Boolean( flagged?.[ i ] );
 
 		} );
 		redraw( this.scene );
@@ -157,7 +171,26 @@ export class LandmarkMarkers {
 		this.scene.remove( this.group );
 		this._sphere.dispose();
 		this._selectedMaterial.dispose();
+		this._checkMaterial.dispose();
 		for ( const material of this._materials.values() ) material.dispose();
+
+	}
+
+	_halo( marker ) {
+
+		let halo = marker.userData.halo;
+		if ( ! halo ) {
+
+			halo = new Mesh( this._sphere, this._checkMaterial );
+			halo.name = 'check';
+			halo.scale.setScalar( CHECK_SCALE );
+			halo.renderOrder = 2;
+			marker.add( halo );
+			marker.userData.halo = halo;
+
+		}
+
+		return halo;
 
 	}
 

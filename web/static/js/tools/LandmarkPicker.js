@@ -241,7 +241,7 @@ export class LandmarkPicker extends EventTarget {
 	_updateMarkers() {
 
 		this.markers.update( this.surface, this.landmarks.layout, this.landmarks.points,
-			{ selected: this.landmarks.selected, hovered: this.hovered, offsets: this._offsets } );
+			{ selected: this.landmarks.selected, hovered: this.hovered, offsets: this._offsets, flagged: this.landmarks.flagged } );
 
 	}
 
