@@ -11,6 +11,9 @@ H.264, 30 fps, 1008 frames; the first --frames, default all):
                 and frames per second, and the share of frames with a face
     whole       start-up (models loaded, interpreters built) plus decoding plus tracking
                 of every frame: frames per second, start-up included, as a command sees it
+    stress      (--stress) hard frames made from the video's (blank, rolled 42 degrees,
+                jumps, upside down, a small face, dark) through both trackers: how often
+                they agree that there is a face, per kind of frame
     agreement   the first --agree frames tracked by the browser's tracker as well
                 (`track_video_markerless`, headless Chromium, the mediapipe68 points):
                 median, p95 and mean offset of the native points from the page's, px
@@ -24,6 +27,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -72,12 +76,65 @@ def whole_run(video: Path, frames: int | None) -> tuple[float, int, list[float],
     return time.perf_counter() - start, count, per_frame, found
 
 
+def stress_frames(rgb: list[np.ndarray], rng: np.random.Generator) -> tuple[list[np.ndarray], list[str]]:
+    """Hard frames made from the video's: runs of blank frames, a 42-degree roll, jumps
+    between distant frames, upside-down frames, a small face in a large frame and a
+    darkened one, each run named."""
+    h, w = rgb[0].shape[:2]
+    out, kinds = [], []
+
+    def add(kind, frames):
+        out.extend(frames)
+        kinds.extend([kind] * len(frames))
+
+    add("plain", rgb[:30])
+    add("blank", [np.zeros_like(rgb[0])] * 8 + [np.full_like(rgb[0], 128)] * 7)
+    add("plain", rgb[30:45])
+    turn = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), 42.0, 1.0)
+    add("roll 42", [cv2.warpAffine(f, turn, (w, h), borderMode=cv2.BORDER_REPLICATE) for f in rgb[45:85]])
+    add("jumps", [rgb[i] for i in rng.integers(0, len(rgb), 30)])
+    add("upside down", [f[::-1, ::-1].copy() for f in rgb[85:115]])
+    small = cv2.getRotationMatrix2D((0.0, 0.0), 0.0, 0.35)
+    add("small face", [cv2.warpAffine(f, small, (w, h), borderMode=cv2.BORDER_CONSTANT) for f in rgb[115:145]])
+    add("dark", [(f * 0.25).astype(np.uint8) for f in rgb[145:175]])
+    return out, kinds
+
+
+def stress(rgb: list[np.ndarray], folder: Path) -> None:
+    """Face / no-face answers of the native and the browser's tracker on `stress_frames`."""
+    from retarget.facemesh.tracker import FaceMeshTracker
+    from retarget.sources.markerless import track_video_markerless
+    from server import WEB_DIR
+
+    frames, kinds = stress_frames(rgb, np.random.default_rng(3))
+    path = folder / "stress.webm"
+    h, w = frames[0].shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"VP80"), 30.0, (w, h))
+    for f in frames:
+        writer.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+    writer.release()
+    # both trackers see the same decoded frames: the video's, not the ones before encoding
+    decoded = decode(path, None)
+    page = np.asarray(track_video_markerless(path, layout=get_layout("mediapipe68"), web_root=WEB_DIR).points)
+    page_face = np.isfinite(page[:, :, 0]).all(axis=1)
+    tracker = FaceMeshTracker()
+    ours = np.array([tracker.track(f) is not None for f in decoded])
+    n = min(len(ours), len(page_face), len(kinds))
+    print(f"stress      {n} frames: same face / no-face answer in {int((ours[:n] == page_face[:n]).sum())}")
+    for kind in dict.fromkeys(kinds):
+        rows = [i for i in range(n) if kinds[i] == kind]
+        print(f"            {kind:<12} face: native {int(ours[rows].sum()):>3}, browser "
+              f"{int(page_face[rows].sum()):>3} of {len(rows)}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--video", type=Path, default=VIDEO)
     parser.add_argument("--frames", type=int, default=None)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--agree", type=int, default=150, help="frames compared with the browser (0: none)")
+    parser.add_argument("--stress", action="store_true",
+                        help="also the face / no-face answers of both trackers on hard frames (`stress_frames`)")
     args = parser.parse_args()
     if not args.video.is_file():
         raise SystemExit(f"no video at {args.video} (the shared data set lies beside the checkout)")
@@ -117,6 +174,9 @@ def main() -> int:
               f"mean offset ({difference[both, 0].mean():+.2f}, {difference[both, 1].mean():+.2f}) px "
               f"over {n} frames; face found by both in {int(both.reshape(n, -1).all(axis=1).sum())}, "
               f"by one only in {int((np.isfinite(ours[:, 0, 0]) != np.isfinite(page[:, 0, 0])).sum())}")
+    if args.stress:
+        with tempfile.TemporaryDirectory() as folder:
+            stress(rgb, Path(folder))
     return 0
 
 
