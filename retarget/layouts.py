@@ -39,6 +39,16 @@ Layouts (`LAYOUTS`)
     The same 68 points as ``ibug68``, named for reading MediaPipe face-mesh output:
     ``from_mediapipe468(mesh, get_layout("mediapipe68"))`` gives 68 iBUG-ordered points.
 
+``"mediapipe468"`` (468 points)
+    Every vertex of MediaPipe's face mesh, in its order, for dense sources (the face mesh
+    itself: the webcam, ``track --method markerless``) and targets whose points are found
+    with no clicks (`retarget.facemesh.placement`). Its 68 iBUG vertices (the table
+    below) keep their iBUG names and regions; the others are named ``<region>_<side>_<k>``
+    and take their region from where they lie among the iBUG points on the canonical face
+    (`_dense_regions`), with two regions no other layout has, ``cheeks`` and ``forehead``.
+    Its ``ibug68`` column is -1 for the 400 vertices that are no iBUG point, so a 68-point
+    source cannot drive it (`from_ibug68` says so).
+
 Every point of every layout has the same name, region and side as the ``ibug68`` point at
 its ``ibug68`` index, so names mean one thing across layouts.
 
@@ -98,6 +108,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from retarget.errors import RetargetError
+from retarget.facemesh.canonical import BROWS, canonical_face
 from retarget.similarity import similarity_transform
 from retarget.sample_face import sample_face
 
@@ -440,8 +451,6 @@ def _reference_points(ibug68: tuple[int, ...], mediapipe468: tuple[int, ...]) ->
     if (ibug < 0).any():
         # points with no iBUG counterpart: MediaPipe's canonical face carried onto the sample
         # face by the similarity that best fits its inner 51 iBUG points to the sample's
-        from retarget.facemesh.canonical import canonical_face
-
         canonical = canonical_face().vertices
         inner = list(range(17, 68))
         scale, rotation, shift = similarity_transform(canonical[list(np.asarray(IBUG68_TO_MEDIAPIPE468)[inner])],
@@ -509,8 +518,6 @@ def _dense_layout() -> Layout:
     """All 468 face-mesh vertices (`_dense_regions`): the iBUG ones with their iBUG names and
     regions, the others named ``<region>_<side>_<k>`` (k counts the region's pairs, 0-padded;
     a pair's two points share k); partners from the canonical model's exact symmetry."""
-    from retarget.facemesh.canonical import canonical_face
-
     vertices = canonical_face().vertices
     mirror = cKDTree(vertices).query(vertices * [-1.0, 1.0, 1.0])[1]
     regions = _dense_regions(vertices[:, :2])
@@ -545,12 +552,13 @@ def _dense_layout() -> Layout:
 def _dense_regions(xy: np.ndarray) -> list[str]:
     """(468,) region of each canonical face-mesh vertex from its frontal position xy (468, 2)
     cm, by where it lies among the iBUG points: the philtrum (under the nose's base, above
-    the lip's top, within 30% of the mouth's half-width) and the lip outline grown by 12% (above or below
-    the inner-lip line; within 4.5 mm of a corner: the corner), the eye outlines grown by
+    the lip's top, within 30% of the mouth's half-width) and the lip outline grown by 12%
+    (above or below the inner-lip line; within 4.5 mm of a corner: the corner), the eye outlines grown by
     45%, within 7.5 mm of a brow point, inside the nose's outline (root to alae); else by
     height: above the eyes the forehead, more than a cm below the mouth the jaw, between
-    them the cheeks. iBUG points keep their own region; a vertex and its mirror image get
-    the same one (their positions mirror exactly)."""
+    them the cheeks. The face mesh's eyebrow rings are brows; iBUG points keep their own
+    region; a vertex and its mirror image get the same one (their positions mirror
+    exactly)."""
     at = lambda *ibug: xy[[IBUG68_TO_MEDIAPIPE468[i] for i in ibug]]  # noqa: E731
     region = np.full(len(xy), "cheeks", dtype=object)
     region[xy[:, 1] > at(36, 39, 42, 45)[:, 1].mean()] = "forehead"
@@ -574,6 +582,7 @@ def _dense_regions(xy: np.ndarray) -> list[str]:
     region[lips & ~above] = "lower_lip"
     corner = np.linalg.norm(xy[:, None] - at(48, 54)[None], axis=2).min(1) < 0.45
     region[lips & corner] = "mouth_corners"
+    region[list(BROWS)] = "brows"
     for name, row_region, vertex in _IBUG68_ROWS:
         region[vertex] = row_region
     return [str(r) for r in region]

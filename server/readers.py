@@ -122,9 +122,7 @@ def found_landmarks(mesh: Mesh, layout: str, progress) -> FoundLandmarks:
     are native code run on user geometry. Raises the library's `RetargetError` when no
     view of the mesh shows a face."""
     chosen = get_layout(layout)
-    progress(0.05)
-    found = find_face_mesh(mesh)
-    progress(0.9)  # finding the face is nearly all of the work
+    found = find_face_mesh(mesh, progress=lambda fraction: progress(0.95 * fraction))
     points, confidence = layout_landmarks(found, chosen, mesh)
     landmarks = {**points.to_json(), "layout": chosen.name,
                  "confidence": [round(float(c), 3) for c in confidence], "check_below": CHECK_BELOW}

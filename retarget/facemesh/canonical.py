@@ -20,7 +20,15 @@ import numpy as np
 from retarget.errors import RetargetError
 from retarget.facemesh.assets import model_bytes
 
-__all__ = ["CanonicalFace", "canonical_face"]
+__all__ = ["BROWS", "FACE_OVAL", "CanonicalFace", "canonical_face"]
+
+FACE_OVAL = (10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379, 378, 400,
+             377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127, 162, 21, 54, 103, 67, 109)
+"""The face-mesh vertices on the face's outline (MediaPipe's FACEMESH_FACE_OVAL ring)."""
+
+BROWS = (46, 53, 52, 65, 55, 70, 63, 105, 66, 107, 276, 283, 282, 295, 285, 300, 293, 334, 296, 336)
+"""The face-mesh vertices on the eyebrows (MediaPipe's FACEMESH_LEFT_EYEBROW and
+FACEMESH_RIGHT_EYEBROW rings)."""
 
 _FILE = "geometry_pipeline_metadata_landmarks.binarypb"
 _MESH, _VERTICES, _INDICES = 1, 3, 4

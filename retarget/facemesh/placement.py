@@ -36,6 +36,7 @@ import numpy as np
 import trimesh
 
 from retarget.errors import RetargetError
+from retarget.facemesh.canonical import BROWS, FACE_OVAL
 from retarget.facemesh.detector import Detection
 from retarget.facemesh.tracker import N_POINTS, FaceMeshTracker, Roi, roi_from_detection
 from retarget.facemesh.views import (Picture, View, look_from, picture, surface_hits, texture_rgb,
@@ -46,10 +47,6 @@ from retarget.mesh import Mesh
 from retarget.similarity import similarity_transform
 
 __all__ = ["FACE_OVAL", "FaceOnMesh", "find_face_mesh", "layout_landmarks", "landmark_offsets"]
-
-FACE_OVAL = (10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379, 378, 400,
-             377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127, 162, 21, 54, 103, 67, 109)
-"""The face-mesh vertices on the face's outline (MediaPipe's FACEMESH_FACE_OVAL ring)."""
 
 EYE_CORNERS = (33, 263)   # outer corners of the subject's right and left eye
 FOREHEAD, CHIN = 10, 152
@@ -78,27 +75,33 @@ class FaceOnMesh:
     presence: float
 
 
-def find_face_mesh(mesh: Mesh, tracker: FaceMeshTracker | None = None) -> FaceOnMesh:
+def find_face_mesh(mesh: Mesh, tracker: FaceMeshTracker | None = None, progress=None) -> FaceOnMesh:
     """The 468 face-mesh points on `mesh` (module docstring); RetargetError when no view
-    shows a face. `tracker` lends its models (one is made when None)."""
+    shows a face. `tracker` lends its models (one is made when None); `progress(fraction)`,
+    when given, hears how far the work is (0..1)."""
+    report = progress if progress is not None else (lambda fraction: None)
     tracker = FaceMeshTracker() if tracker is None else tracker
     normals = vertex_normals(mesh)
     texture = texture_rgb(mesh)
-    pic, face = _search(mesh, normals, texture, tracker)
+    report(0.05)
+    pic, face = _search(mesh, normals, texture, tracker, report)
     image, _ = _landmarks_twice(tracker, pic, roi_from_detection(face))
     # ray-cast the first guess only to set up the straight view: its points need not be final
     tri, bary, _ = surface_hits(pic, mesh, image[:, :2])
     hits = SurfacePoints(mesh.faces[tri], bary).positions(mesh.vertices)
     view = _straight_view(hits, image, pic.view)
+    report(0.6)
     pic = picture(mesh, view, normals, texture)
     projected = view.to_image(hits)[:, :2]
     roi = Roi.around(projected.min(0), projected.max(0), projected[EYE_CORNERS[0]], projected[EYE_CORNERS[1]])
     image, presence = _landmarks_twice(tracker, pic, roi)
+    report(0.8)
     tri, bary, snap = surface_hits(pic, mesh, image[:, :2])
     oval = np.zeros(N_POINTS, dtype=bool)
     oval[list(FACE_OVAL)] = True
     points = _oval_from_depth(mesh, pic, image, SurfacePoints(mesh.faces[tri], bary), snap, oval)
-    confidence = _confidence(mesh, normals, points, view, snap, oval, presence)
+    confidence = _confidence(normals, points, view, snap, oval, presence, textured=texture is not None)
+    report(1.0)
     return FaceOnMesh(points, confidence, view, presence)
 
 
@@ -139,12 +142,15 @@ def landmark_offsets() -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(table["offsets"], dtype=np.float64), np.asarray(table["spread"], dtype=np.float64)
 
 
-def _search(mesh: Mesh, normals, texture, tracker: FaceMeshTracker) -> tuple[Picture, Detection]:
-    """The picture and detection of the best-scored face over the search views."""
+def _search(mesh: Mesh, normals, texture, tracker: FaceMeshTracker, report) -> tuple[Picture, Detection]:
+    """The picture and detection of the best-scored face over the search views (reporting
+    progress from 0.05 to 0.5 as the views go by)."""
     lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
     centre, width = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) * 1.05
     best: tuple[Picture, Detection] | None = None
-    for i, (facing, up) in enumerate(_search_directions()):
+    directions = _search_directions()
+    for i, (facing, up) in enumerate(directions):
+        report(0.05 + 0.45 * i / len(directions))
         pic = picture(mesh, look_from(-facing, up, centre, width, SEARCH_SIZE), normals, texture)
         faces = tracker.detector.detect(pic.rgb)
         if faces and (best is None or faces[0].score > best[1].score):
@@ -225,12 +231,18 @@ def _closest_surface_points(mesh: Mesh, points: np.ndarray) -> tuple[np.ndarray,
     return corners, weights / weights.sum(1, keepdims=True)
 
 
-def _confidence(mesh: Mesh, normals: np.ndarray, points: SurfacePoints, view: View,
-                snap: np.ndarray, oval: np.ndarray, presence: float) -> np.ndarray:
+def _confidence(normals: np.ndarray, points: SurfacePoints, view: View, snap: np.ndarray,
+                oval: np.ndarray, presence: float, textured: bool) -> np.ndarray:
     """(468,) 0..1: the presence, lowered for points that snapped (halved per 4 pixels),
-    on grazing surface (by the cosine to the viewer) and on the oval (at most 0.5)."""
+    on grazing surface (by the cosine to the viewer), on the oval (at most 0.5) and, on a
+    mesh without a texture, on the brows (at most 0.5): brows are hair, which a picture
+    of bare geometry does not show, so the model guesses them from the brow ridge alone
+    (15 mm off on the project's sample face, whose ridge is faint)."""
     n = points.positions(normals)
     facing = np.clip(-(n @ view.rotation[2]) / np.maximum(np.linalg.norm(n, axis=1), 1e-12), 0.0, 1.0)
     confidence = presence * 0.5 ** (snap / 4.0) * np.sqrt(facing)
     confidence[oval] = np.minimum(confidence[oval], 0.5)
+    if not textured:
+        brows = list(BROWS)
+        confidence[brows] = np.minimum(confidence[brows], 0.5)
     return confidence

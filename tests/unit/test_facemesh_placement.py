@@ -50,7 +50,9 @@ def region_errors_mm(points, vertices, truth) -> dict[str, float]:
 
 def test_points_land_on_the_sample_face_near_its_landmarks(face, tracker):
     mesh = mesh_from_arrays(face.vertices, face.faces)
-    found = find_face_mesh(mesh, tracker)
+    heard = []
+    found = find_face_mesh(mesh, tracker, progress=heard.append)
+    assert heard == sorted(heard) and heard[0] > 0 and heard[-1] == 1.0 and len(heard) >= 4
     assert found.presence > 0.9
     points, confidence = layout_landmarks(found, IBUG, mesh)
     assert points.layout == "ibug68" and points.n_points == 68
@@ -64,6 +66,7 @@ def test_points_land_on_the_sample_face_near_its_landmarks(face, tracker):
     # what a user should check is flagged, what is seen clearly is not
     regions = np.asarray(IBUG.regions)
     assert np.all(confidence[regions == "jaw"] < CHECK_BELOW)
+    assert np.all(confidence[regions == "brows"] < CHECK_BELOW)   # no texture, no brow hair
     assert np.mean(confidence[regions == "eyes"] >= CHECK_BELOW) > 0.8
     assert np.all(found.confidence[list(FACE_OVAL)] <= 0.5)
 
