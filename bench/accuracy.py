@@ -62,14 +62,19 @@ def error_figures(pred: np.ndarray, truth: np.ndarray, rest: np.ndarray, report:
     return out
 
 
-def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: float | None,
-        true_motion: bool) -> list[dict]:
+def scenario(seed: int, n_random: int):
+    """(model, A's neutral (V, 3), B's neutral (V, 3), expression offsets (X, V, 3)) for a
+    seed: identities A and B and the expressions, cm."""
     model = load_model()
     rng = np.random.default_rng(seed)
     a, b = rng.standard_normal(100), rng.standard_normal(100)
-    src0, tgt0 = model.identity_face(a), model.identity_face(b)
     weights_x, _ = expression_weights(model.names, n_random, rng)
-    offsets = model.expression_offsets(weights_x)
+    return model, model.identity_face(a), model.identity_face(b), model.expression_offsets(weights_x)
+
+
+def run(seed: int, n_random: int, methods: list[str], kernel: str, smoothing: float | None,
+        true_motion: bool) -> list[dict]:
+    model, src0, tgt0, offsets = scenario(seed, n_random)
     feats = model.feature_vertices()
     layout = benchmark_layout()
     points = from_vertex_indices(feats, len(tgt0), layout.name)
@@ -122,12 +127,7 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
     from retarget.facemesh.tracker import FaceMeshTracker
     from retarget.mesh import mesh_from_arrays
 
-    model = load_model()
-    rng = np.random.default_rng(seed)
-    a, b = rng.standard_normal(100), rng.standard_normal(100)
-    src0, tgt0 = model.identity_face(a), model.identity_face(b)
-    weights_x, _ = expression_weights(model.names, n_random, rng)
-    offsets = model.expression_offsets(weights_x)
+    model, src0, tgt0, offsets = scenario(seed, n_random)
     report, _ = vertex_regions(tgt0, model.faces, model.feature_vertices(), benchmark_layout(), model.face_count)
     truth = tgt0 + offsets
     tracker = FaceMeshTracker()

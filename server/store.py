@@ -534,21 +534,26 @@ class ProjectStore:
                       layout: str, revision: int) -> dict:
         """Store (already validated) landmarks JSON for the mesh of `revision`; drops
         the rig. Raises `StaleRig` if the mesh changed since `revision`."""
-        folder = self.folder(project_id)
         with self._transaction() as db:
             row = self._row(project_id)
             if row["revision"] != revision:
                 raise StaleRig("the mesh changed while the landmarks were checked; send them again")
-            name = f"landmarks-r{revision + 1}.json"
-            write_atomic(folder / name, json.dumps(landmarks).encode())
-            db.execute(
-                "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
-                "landmarks_file = ?, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
-                "revision = revision + 1, updated = ? WHERE id = ?",
-                (layout, n_points, name, _now(), project_id),
-            )
+            self._write_landmarks(db, project_id, landmarks, n_points=n_points, layout=layout,
+                                  revision=revision)
         self._sweep(project_id)
         return self.get(project_id)
+
+    def _write_landmarks(self, db, project_id: str, landmarks: dict, *, n_points: int, layout: str,
+                         revision: int) -> None:
+        """Inside a transaction: the landmarks of the next revision, the rig dropped."""
+        name = f"landmarks-r{revision + 1}.json"
+        write_atomic(self.folder(project_id) / name, json.dumps(landmarks).encode())
+        db.execute(
+            "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
+            "landmarks_file = ?, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
+            "revision = revision + 1, updated = ? WHERE id = ?",
+            (layout, n_points, name, _now(), project_id),
+        )
 
     def put_found_landmarks(self, project_id: str, landmarks: dict, *, n_points: int,
                             layout: str, revision: int, replace: bool = False) -> str | None:
@@ -572,14 +577,8 @@ class ProjectStore:
                 draft = json.loads(row["settings"]).get("draft")
                 if isinstance(draft, dict) and draft.get("revision") == revision:
                     return "points are being placed by hand on this mesh"
-            name = f"landmarks-r{revision + 1}.json"
-            write_atomic(folder / name, json.dumps(landmarks).encode())
-            db.execute(
-                "UPDATE projects SET layout = ?, n_landmarks = ?, rig_method = NULL, "
-                "landmarks_file = ?, rig_file = NULL, painted_file = NULL, rig_painted = 0, "
-                "revision = revision + 1, updated = ? WHERE id = ?",
-                (layout, n_points, name, _now(), project_id),
-            )
+            self._write_landmarks(db, project_id, landmarks, n_points=n_points, layout=layout,
+                                  revision=revision)
         self._sweep(project_id)
         return None
 

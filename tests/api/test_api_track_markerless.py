@@ -23,19 +23,10 @@ from retarget.layouts import get_layout
 from retarget.testing.face_video import render_face_video
 from server.app import create_app
 from server.readers import face_mesh_take
+from tests.api.test_api_takes import write_video
 from tests.waits import wait_job
 
 SIZE, N_FRAMES, FPS = 480, 10, 30.0
-
-
-def write_video(path, frames, fps=FPS):
-    """`frames` (H, W, 3) uint8 BGR into a lossless FFV1 .mkv at `path`; the path."""
-    h, w = frames[0].shape[:2]
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h))
-    for frame in frames:
-        writer.write(frame)
-    writer.release()
-    return path
 
 
 @pytest.fixture(scope="module")
