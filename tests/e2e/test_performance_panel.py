@@ -71,6 +71,16 @@ def bar_runs(progress: list) -> list[list[float]]:
     return runs
 
 
+def assert_upload_then_job(page) -> None:
+    """The source bar showed the upload, then the server's job from 0 to done, never going
+    back, and is hidden at the end."""
+    progress = page.evaluate("() => window.progress")
+    runs = bar_runs(progress)
+    assert len(runs) == 2 and progress[-1][0] is True, progress
+    job = runs[1]
+    assert job[0] == 0 and job[-1] == 1 and job == sorted(job), job
+
+
 def jaw_weight(t: np.ndarray) -> np.ndarray:
     """(F,) jawOpen weight at times t (s): rest until 1.1 s, open by 1.4 s, held to 1.8 s,
     closed again by 2.1 s (smooth ramps)."""
@@ -298,13 +308,7 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     assert f"{MARKER_FRAMES} frames" in page.inner_text("#source-note")
     assert page.is_enabled("#video-file") and page.is_enabled("#take-file")
 
-    # the bar showed the upload, then the job from 0 to done, never going back, and it
-    # is hidden at the end
-    progress = page.evaluate("() => window.progress")
-    runs = bar_runs(progress)
-    assert len(runs) == 2 and progress[-1][0] is True, progress
-    job = runs[1]
-    assert job[0] == 0 and job[-1] == 1 and job == sorted(job), job
+    assert_upload_then_job(page)
 
     # it is selected; it is no longer than the default neutral capture (its first half
     # second), so Play says what to change instead of playing nothing

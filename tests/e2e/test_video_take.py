@@ -22,7 +22,7 @@ import pytest
 from retarget.sources.facemesh_video import track_video_facemesh
 from retarget.testing.face_video import render_face_video
 from tests.e2e.conftest import Server, open_project
-from tests.e2e.test_performance_panel import WATCH_PROGRESS, bar_runs
+from tests.e2e.test_performance_panel import WATCH_PROGRESS, assert_upload_then_job
 from tests.waits import scaled_ms
 
 FACE_FRAMES, FACE_FPS, FACE_SIZE = 12, 25.0, 320
@@ -78,12 +78,7 @@ def test_a_face_video_is_tracked_by_a_server_job_into_a_take_of_all_its_frames(s
     assert page.inner_text("#error").strip() == ""
     assert page.is_enabled("#video-file") and page.is_enabled("#take-file")
 
-    # the bar showed the upload, then the server's job from 0 to done, never going back
-    progress = page.evaluate("() => window.progress")
-    runs = bar_runs(progress)
-    assert len(runs) == 2 and progress[-1][0] is True, progress
-    job = runs[1]
-    assert job[0] == 0 and job[-1] == 1 and job == sorted(job), job
+    assert_upload_then_job(page)
 
     # the points are the library's on the same file
     stored = np.load(io.BytesIO(server.read(f"/api/projects/{sample['id']}/takes/{take['id']}/points")))
