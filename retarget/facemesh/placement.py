@@ -13,7 +13,8 @@ each point's ray is followed back onto the surface. In steps:
    give, as the tracker does from frame to frame.
 3. **Back to the surface.** Points whose pixel sees a front face are followed exactly;
    a point in a hole (an eye or mouth opening reads dark) snaps to the nearest
-   front-facing pixel.
+   front-facing pixel. The inner-lip points first move a hair into their own lip, so
+   that on closed lips each lands on its lip and not on the other.
 4. **The face oval** (jaw line, temples, hairline) is the silhouette of a frontal face,
    where a ray grazes the surface and lands anywhere along it. Those points are placed
    with the model's own depth instead: the similarity that carries the model's 3D
@@ -48,7 +49,10 @@ from retarget.similarity import similarity_transform
 
 __all__ = ["FACE_OVAL", "FaceOnMesh", "find_face_mesh", "layout_landmarks", "landmark_offsets"]
 
-EYE_CORNERS = (33, 263)   # outer corners of the subject's right and left eye
+EYE_CORNERS = (33, 263)
+INNER_UPPER_LIP = (191, 80, 81, 82, 13, 312, 311, 310, 415)   # corners 78 and 308 excluded
+INNER_LOWER_LIP = (95, 88, 178, 87, 14, 317, 402, 318, 324)
+LIP_PUSH = 0.01           # eye widths (about 0.9 mm) an inner-lip point is moved into its lip   # outer corners of the subject's right and left eye
 FOREHEAD, CHIN = 10, 152
 SEARCH_SIZE = 256         # pixels of the views searched for a face
 FACE_SIZE = 512           # pixels of the view looking straight at the face
@@ -96,7 +100,7 @@ def find_face_mesh(mesh: Mesh, tracker: FaceMeshTracker | None = None, progress=
     roi = Roi.around(projected.min(0), projected.max(0), projected[EYE_CORNERS[0]], projected[EYE_CORNERS[1]])
     image, presence = _landmarks_twice(tracker, pic, roi)
     report(0.8)
-    tri, bary, snap = surface_hits(pic, mesh, image[:, :2])
+    tri, bary, snap = surface_hits(pic, mesh, _onto_own_lips(image[:, :2]))
     oval = np.zeros(N_POINTS, dtype=bool)
     oval[list(FACE_OVAL)] = True
     points = _oval_from_depth(mesh, pic, image, SurfacePoints(mesh.faces[tri], bary), snap, oval)
@@ -184,6 +188,17 @@ def _landmarks_twice(tracker: FaceMeshTracker, pic: Picture, roi: Roi) -> tuple[
     roi = Roi.around(points[:, :2].min(0), points[:, :2].max(0),
                      points[EYE_CORNERS[0], :2], points[EYE_CORNERS[1], :2])
     return tracker.landmarks(pic.rgb, roi)
+
+
+def _onto_own_lips(pixels: np.ndarray) -> np.ndarray:
+    """(468, 2) pixels with the inner-lip points moved `LIP_PUSH` eye widths into their own
+    lip: on closed lips both inner-lip lines fall on the contact line, where a ray meets
+    either lip (a coin toss between two surfaces that part when the mouth opens)."""
+    out = pixels.copy()
+    push = LIP_PUSH * np.linalg.norm(pixels[EYE_CORNERS[1]] - pixels[EYE_CORNERS[0]])
+    out[list(INNER_UPPER_LIP), 1] -= push   # image y runs down: up into the upper lip
+    out[list(INNER_LOWER_LIP), 1] += push
+    return out
 
 
 def _straight_view(hits: np.ndarray, image: np.ndarray, seen_from: View) -> View:
