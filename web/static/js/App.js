@@ -273,15 +273,28 @@ export class App {
 	 */
 	animateUpload() {
 
-		this.animation = this._animateUpload().catch( ( error ) => this.errors.show( error ) );
+		this.animation = this._animate( { auto: true } ).catch( ( error ) => this.errors.show( error ) );
 		return this.animation;
 
 	}
 
-	async _animateUpload() {
+	/**
+	 * The user switched to a layout whose points are found, not placed (mediapipe468): as
+	 * after an upload, they are found (replacing the points shown, undoably), the face
+	 * rigged and the demo played, with no click.
+	 * @returns {Promise<void>} `animation`, which never rejects.
+	 */
+	animateFound() {
+
+		this.animation = this._animate( { confirmed: true } ).catch( ( error ) => this.errors.show( error ) );
+		return this.animation;
+
+	}
+
+	async _animate( findOptions ) {
 
 		const current = this.ticket();
-		if ( ! await this.marks.find( { auto: true } ) || ! current() ) return;
+		if ( ! await this.marks.find( findOptions ) || ! current() ) return;
 		const found = this.landmarks.state;
 		await this.rig.compute();
 		if ( ! current() || this.landmarks.state !== found || this.streaming || ! this.project?.rig ) return;

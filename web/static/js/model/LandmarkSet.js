@@ -1,5 +1,20 @@
 import { History } from './History.js';
 
+/** More points than anyone places click by click (mediapipe468's 468): such a layout is found on the mesh. */
+const MOST_PLACED_BY_HAND = 100;
+
+/**
+ * Whether a layout's points are placed by hand, one click each, as the guide and picker
+ * ask; a denser layout's are found on the mesh (*Find points*) and only corrected by hand.
+ * @param {{n_points: number}|null} layout
+ * @returns {boolean}
+ */
+export function placedByHand( layout ) {
+
+	return ! layout || layout.n_points <= MOST_PLACED_BY_HAND;
+
+}
+
 /**
  * @typedef {{triangle: number[], barycentric: number[]}} SurfacePoint
  *   A point on the mesh: the triangle's three vertex indices and the point's barycentric

@@ -1,4 +1,5 @@
 import { $ } from './dom.js';
+import { regionColor } from '../scene/palette.js';
 
 /**
  * The Conditioning form of the Performance panel (index.html #conditioning): the neutral
@@ -36,9 +37,10 @@ export class ConditioningForm {
 
 			const row = document.createElement( 'tr' );
 			row.dataset.region = region;
-			row.innerHTML = `<td>${ region }</td>
+			row.innerHTML = `<td><span class="swatch"></span>${ region.replace( /_/g, ' ' ) }</td>
 				<td><input class="gain" type="range" min="0" max="2" step="0.05" title="Gain: 1 = as performed"></td>
 				<td><input class="cutoff" type="number" min="0.01" max="30" step="0.1" title="One Euro minimum cutoff (Hz): lower = smoother at rest"></td>`;
+			row.querySelector( '.swatch' ).style.background = regionColor( region );
 			row.querySelector( '.gain' ).value = s.gain[ region ] ?? 1;
 			row.querySelector( '.cutoff' ).value = s.cutoff[ region ] ?? 1;
 			table.append( row );

@@ -1,4 +1,4 @@
-import { surfacePoints } from '../model/LandmarkSet.js';
+import { placedByHand, surfacePoints } from '../model/LandmarkSet.js';
 import { ApiError, api } from '../net/api.js';
 import { ask } from './ask.js';
 import { $, guarded, option } from './dom.js';
@@ -115,18 +115,20 @@ export class LandmarksPanel {
 	/**
 	 * Have the server find the layout's points on the mesh and show them once saved as the
 	 * project's landmarks, unless the user placed, moved or chose anything meanwhile.
-	 * @param {{auto?: boolean}} [options] - auto: after an upload; nothing is asked and
-	 *   nothing happens when the project already has points, saved or drafted.
+	 * @param {{auto?: boolean, confirmed?: boolean}} [options] - auto: after an upload;
+	 *   nothing is asked and nothing happens when the project already has points, saved or
+	 *   drafted. confirmed: the user already chose to replace the points (a switch to a
+	 *   layout that is found, not placed): nothing is asked.
 	 * @returns {Promise<boolean>} whether the found points are the ones shown now.
 	 */
-	async find( { auto = false } = {} ) {
+	async find( { auto = false, confirmed = false } = {} ) {
 
 		const app = this.app, landmarks = app.landmarks, project = app.project;
 		if ( ! project?.mesh || ! app.face ) throw new ApiError( 0, 'Upload a mesh first.' );
 		if ( this._find ) return false;
 		if ( auto && ( project.landmarks || landmarks.placedCount > 0 ) ) return false;
 		const placed = landmarks.placedCount;
-		if ( ! auto && placed > 0 && ( landmarks.dirty || ! landmarks.flagged.some( Boolean ) ) ) {
+		if ( ! auto && ! confirmed && this._ownPoints() ) {
 
 			const answer = await ask( `Replace the ${ placed } placed point${ placed > 1 ? 's' : '' } with points found on the mesh? Undo brings yours back.`, { ok: 'Find points' } );
 			if ( answer !== 'ok' ) return false;
@@ -275,8 +277,9 @@ export class LandmarksPanel {
 		$( 'landmark-count' ).textContent = layout ? `${ landmarks.placedCount } / ${ layout.n_points }` : '';
 		$( 'landmark-count' ).className = 'badge' + ( layout && landmarks.placedCount === layout.n_points ? ' good' : '' );
 		$( 'unsaved' ).hidden = ! landmarks.dirty || ! hasMesh;
-		$( 'next-point' ).textContent = ! layout ? '' : next >= 0 ? layout.points[ next ].name : 'all placed ✓';
-		$( 'next-side' ).textContent = layout && next >= 0 ? SIDE_WORDS[ layout.points[ next ].side ] ?? '' : '';
+		const byHand = placedByHand( layout );
+		$( 'next-point' ).textContent = ! layout ? '' : next < 0 ? 'all placed ✓' : byHand ? layout.points[ next ].name : 'Find points places them';
+		$( 'next-side' ).textContent = layout && next >= 0 && byHand ? SIDE_WORDS[ layout.points[ next ].side ] ?? '' : '';
 		$( 'undo' ).disabled = ! landmarks.canUndo;
 		$( 'redo' ).disabled = ! landmarks.canRedo;
 		$( 'delete-point' ).disabled = landmarks.selected < 0;
@@ -286,7 +289,7 @@ export class LandmarksPanel {
 		$( 'find-points' ).disabled = ! hasMesh || this.finding;
 		if ( ! this.finding ) this._showFindNote();
 		this.guide.setLayout( layout );
-		this.guide.update( { placed: landmarks.points.map( Boolean ), next: hasMesh ? next : - 1, selected: landmarks.selected } );
+		this.guide.update( { placed: landmarks.points.map( Boolean ), next: hasMesh && byHand ? next : - 1, selected: landmarks.selected } );
 
 	}
 
@@ -299,6 +302,7 @@ export class LandmarksPanel {
 
 		const landmarks = this.app.landmarks, layout = landmarks.layout;
 		if ( hovered >= 0 && layout ) return `${ layout.points[ hovered ].name } · drag to slide it over the surface`;
+		if ( layout && landmarks.next >= 0 && ! placedByHand( layout ) ) return `Find points places the ${ layout.n_points } points of ${ layout.name } · drag a marker to move it · Shift+click selects`;
 		if ( layout && landmarks.next >= 0 ) return `Click the mesh to place ${ layout.points[ landmarks.next ].name } · drag a marker to move it · Shift+click selects`;
 		if ( landmarks.selected >= 0 && layout ) return `${ layout.points[ landmarks.selected ].name } selected · Delete removes it`;
 		return 'Drag to orbit · right-drag pans · wheel zooms · F frames the face';
@@ -372,6 +376,14 @@ export class LandmarksPanel {
 
 	}
 
+	/** Whether points on screen are the user's own (placed, moved, or never found): replacing them asks first. */
+	_ownPoints() {
+
+		const landmarks = this.app.landmarks;
+		return landmarks.placedCount > 0 && ( landmarks.dirty || ! landmarks.flagged.some( Boolean ) );
+
+	}
+
 	/** The user chose something in the panel while points were being found: theirs win. */
 	_touched() {
 
@@ -427,8 +439,31 @@ export class LandmarksPanel {
 
 	async _switchLayout( name ) {
 
-		const landmarks = this.app.landmarks;
+		const app = this.app, landmarks = app.landmarks;
 		if ( name === landmarks.state.layout ) return;
+		if ( ! placedByHand( landmarks.layouts.get( name ) ) && app.face ) {
+
+			// nobody places 468 points: they are found, the face rigged and played, as after an upload
+			if ( this._ownPoints() ) {
+
+				const placed = landmarks.placedCount;
+				const answer = await ask( `Switch the layout to ${ name } and find its points on the mesh? They replace the ${ placed } placed point${ placed > 1 ? 's' : '' }; Undo brings yours back.`, { ok: 'Switch layout' } );
+				if ( answer !== 'ok' ) {
+
+					$( 'layout-select' ).value = landmarks.state.layout;
+					return;
+
+				}
+
+			}
+
+			landmarks.setLayout( name );
+			localStorage.setItem( LAST_LAYOUT_KEY, name );
+			app.animateFound(); // not awaited: finding, rigging and playing show in their panels
+			return;
+
+		}
+
 		if ( landmarks.placedCount > 0 ) {
 
 			const dropped = landmarks.droppedBy( name );

@@ -1,4 +1,4 @@
-import { Color, Group, Mesh, MeshBasicMaterial, MeshStandardMaterial, SphereGeometry, Vector3 } from 'three';
+import { Color, DynamicDrawUsage, Group, InstancedMesh, Matrix4, MeshBasicMaterial, MeshStandardMaterial, Quaternion, SphereGeometry, Vector3 } from 'three';
 
 import { regionColor } from './palette.js';
 import { redraw } from './Viewer.js';
@@ -7,14 +7,19 @@ const MARKER_SCALE = 0.0085; // marker radius as a fraction of the mesh's boundi
 const GRAB_SLOP = 1.5; // CSS px beyond a marker's drawn radius that still grab it (close neighbours stay clickable)
 const CHECK_COLOR = 0xff2a2a; // no region's colour (palette.js): a point to check reads as such on any of them
 const CHECK_SCALE = 2.6; // the halo's radius over its marker's
+const SELECTED_SCALE = 1.45, HOVERED_SCALE = 1.25;
+const SELECTED_COLOR = new Color( 0xffffff );
 
 /**
- * The feature points drawn on the face: one sphere per placed point in its region's
- * colour (palette.js), the selected one white and larger, the hovered one a little larger,
- * a point to check (found with a low confidence) inside a translucent red halo, moved by
- * the live feature displacements. A group beside the face in the scene (the
- * viewer's wireframe and framing apply to the face alone) that follows the face's world
- * matrix.
+ * The feature points drawn on the face: a sphere per placed point in its region's colour
+ * (palette.js), the selected one white and larger, the hovered one a little larger, a point
+ * to check (found with a low confidence) inside a translucent red halo, moved by the live
+ * feature displacements. A group beside the face in the scene (the viewer's wireframe and
+ * framing apply to the face alone) that follows the face's world matrix.
+ *
+ * The spheres are one `InstancedMesh` (`points`, instance i = point i, an unplaced point
+ * scaled to nothing) and the halos another (`halos`, one instance per point to check), so
+ * a dense layout's 468 points cost two draw calls, not 468 (or 936 with their halos).
  */
 export class LandmarkMarkers {
 
@@ -24,24 +29,51 @@ export class LandmarkMarkers {
 	constructor( scene ) {
 
 		this.scene = scene;
-		/** The markers, one child per layout point (hidden while unplaced). */
+		/** The markers: `points` and `halos`. */
 		this.group = new Group();
 		this.group.name = 'landmarks';
 		this.group.matrixAutoUpdate = false; // follows the mesh's world matrix
 		/** Whether the markers are drawn at all (`setShown`; hidden ones cannot be grabbed). */
 		this.shown = true;
-		this._sphere = new SphereGeometry( 1, 16, 12 );
-		this._materials = new Map();
-		this._selectedMaterial = new MeshStandardMaterial( { color: 0xffffff, emissive: 0x666666, roughness: 0.35 } );
+		// coarse: a marker is a few pixels wide, and SwiftShader (and weak GPUs) pay per vertex
+		// for a dense layout's 468 spheres, instanced or not
+		this._sphere = new SphereGeometry( 1, 10, 8 );
+		// the region's colour tints the emission as well as the albedo (as a material per
+		// region did), so a marker in shadow still reads as its region
+		this._material = new MeshStandardMaterial( { color: 0xffffff, emissive: 0xffffff, emissiveIntensity: 0.35, roughness: 0.45 } );
+		this._material.onBeforeCompile = ( shader ) => {
+
+			shader.fragmentShader = shader.fragmentShader.replace( '#include <emissivemap_fragment>',
+				'#include <emissivemap_fragment>\n\ttotalEmissiveRadiance *= vColor.rgb;' );
+
+		};
+
+		this._material.customProgramCacheKey = () => 'landmark-markers';
 		// unlit and without depth writes: a halo never hides its marker or a neighbour
 		this._checkMaterial = new MeshBasicMaterial( { color: CHECK_COLOR, transparent: true, opacity: 0.5, depthWrite: false } );
+		/** @type {InstancedMesh} one sphere per layout point. */
+		this.points = this._instanced( 'points', this._material, 16, 1 );
+		/** @type {InstancedMesh} one halo per drawn point to check. */
+		this.halos = this._instanced( 'check', this._checkMaterial, 16, 2 );
+		this._positions = new Float32Array( 0 ); // (3N) marker centres in the face's model space
+		this._radii = new Float32Array( 0 ); // (N) marker radii in model units, 0 for an undrawn point
+		this._colors = new Map(); // region -> Color
 
 	}
 
 	/** How many drawn markers carry the halo of a point to check. */
 	get flaggedCount() {
 
-		return this.group.children.filter( ( marker ) => marker.visible && marker.userData.halo?.visible ).length;
+		return this.halos.count;
+
+	}
+
+	/** How many points are drawn (placed). */
+	get drawnCount() {
+
+		let n = 0;
+		for ( const r of this._radii ) if ( r > 0 ) n ++;
+		return n;
 
 	}
 
@@ -56,11 +88,18 @@ export class LandmarkMarkers {
 	 */
 	update( surface, layout, points, { selected, hovered, offsets, flagged = null } ) {
 
-		const group = this.group;
-		while ( group.children.length < points.length ) group.add( new Mesh( this._sphere ) );
-		while ( group.children.length > points.length ) group.remove( group.children[ group.children.length - 1 ] );
+		const group = this.group, n = points.length;
+		if ( this._radii.length !== n ) {
+
+			this._positions = new Float32Array( 3 * n );
+			this._radii = new Float32Array( n );
+
+		}
+
 		if ( ! surface || ! layout ) {
 
+			this._radii.fill( 0 );
+			this.points.count = this.halos.count = 0;
 			group.visible = false;
 			this.scene.remove( group );
 			redraw( this.scene );
@@ -73,20 +112,38 @@ export class LandmarkMarkers {
 		group.visible = this.shown;
 		mesh.updateWorldMatrix( true, false );
 		group.matrix.copy( mesh.matrixWorld );
+		group.updateMatrixWorld( true );
 		const radius = mesh.geometry.boundingSphere.radius * MARKER_SCALE;
-		points.forEach( ( point, i ) => {
+		const nFlagged = flagged ? flagged.reduce( ( sum, f, i ) => sum + ( f && points[ i ] ? 1 : 0 ), 0 ) : 0;
+		const spheres = this.points = this._fit( this.points, n );
+		const halos = this.halos = this._fit( this.halos, nFlagged );
+		const at = new Vector3(), scale = new Vector3(), matrix = new Matrix4(), still = new Quaternion();
+		let h = 0;
+		for ( let i = 0; i < n; i ++ ) {
 
-			const marker = group.children[ i ];
-			marker.visible = point !== null;
-			if ( ! point ) return;
-			surface.position( point, marker.position );
-			if ( offsets ) marker.position.x += offsets[ 3 * i ], marker.position.y += offsets[ 3 * i + 1 ], marker.position.z += offsets[ 3 * i + 2 ];
-			marker.material = i === selected ? this._selectedMaterial : this._materialFor( layout.points[ i ].region );
-			marker.scale.setScalar( radius * ( i === selected ? 1.45 : i === hovered ? 1.25 : 1 ) );
-			marker.renderOrder = 1;
-			this._halo( marker ).visible = Boolean( flagged?.[ i ] );
+			const point = points[ i ];
+			if ( point ) {
 
-		} );
+				surface.position( point, at );
+				if ( offsets ) at.x += offsets[ 3 * i ], at.y += offsets[ 3 * i + 1 ], at.z += offsets[ 3 * i + 2 ];
+
+			}
+
+			const r = point ? radius * ( i === selected ? SELECTED_SCALE : i === hovered ? HOVERED_SCALE : 1 ) : 0;
+			at.toArray( this._positions, 3 * i );
+			this._radii[ i ] = r;
+			spheres.setMatrixAt( i, matrix.compose( at, still, scale.setScalar( r ) ) );
+			spheres.setColorAt( i, i === selected ? SELECTED_COLOR : this._colorFor( layout.points[ i ].region ) );
+			if ( point && flagged?.[ i ] ) halos.setMatrixAt( h ++, matrix.compose( at, still, scale.setScalar( r * CHECK_SCALE ) ) );
+
+		}
+
+		spheres.count = n;
+		halos.count = h;
+		halos.visible = h > 0; // no empty draw call
+		spheres.instanceMatrix.needsUpdate = true;
+		if ( spheres.instanceColor ) spheres.instanceColor.needsUpdate = true;
+		halos.instanceMatrix.needsUpdate = true;
 		redraw( this.scene );
 
 	}
@@ -110,9 +167,8 @@ export class LandmarkMarkers {
 	 */
 	worldPosition( index ) {
 
-		const marker = this.group.children[ index ];
-		if ( ! marker || ! marker.visible ) return null;
-		return marker.getWorldPosition( new Vector3() ).toArray();
+		if ( ! ( this._radii[ index ] > 0 ) ) return null;
+		return this._world( index, new Vector3() ).toArray();
 
 	}
 
@@ -132,13 +188,13 @@ export class LandmarkMarkers {
 		const scale = surface.mesh.matrixWorld.getMaxScaleOnAxis();
 		const world = new Vector3(), edge = new Vector3(), right = new Vector3().setFromMatrixColumn( camera.matrixWorld, 0 );
 		let best = - 1, bestD = Infinity;
-		this.group.children.forEach( ( marker, i ) => {
+		for ( let i = 0; i < this._radii.length; i ++ ) {
 
-			if ( ! marker.visible ) return;
-			marker.getWorldPosition( world );
-			edge.copy( world ).addScaledVector( right, marker.scale.x * scale ).project( camera );
+			if ( ! ( this._radii[ i ] > 0 ) ) continue;
+			this._world( i, world );
+			edge.copy( world ).addScaledVector( right, this._radii[ i ] * scale ).project( camera );
 			world.project( camera );
-			if ( world.z > 1 ) return;
+			if ( world.z > 1 ) continue;
 			const x = rect.left + ( world.x + 1 ) / 2 * rect.width, y = rect.top + ( 1 - world.y ) / 2 * rect.height;
 			const r = GRAB_SLOP + Math.abs( edge.x - world.x ) / 2 * rect.width;
 			const d = Math.hypot( x - event.clientX, y - event.clientY );
@@ -149,15 +205,15 @@ export class LandmarkMarkers {
 
 			}
 
-		} );
+		}
+
 		if ( best < 0 ) return - 1;
 
 		const hit = surface.hit( event, viewer );
 		if ( hit ) {
 
-			const marker = this.group.children[ best ];
-			const distance = marker.getWorldPosition( world ).distanceTo( camera.getWorldPosition( edge ) );
-			if ( hit.distance < distance - 3 * marker.scale.x * scale ) return - 1;
+			const distance = this._world( best, world ).distanceTo( camera.getWorldPosition( edge ) );
+			if ( hit.distance < distance - 3 * this._radii[ best ] * scale ) return - 1;
 
 		}
 
@@ -169,43 +225,56 @@ export class LandmarkMarkers {
 	dispose() {
 
 		this.scene.remove( this.group );
+		this.points.dispose();
+		this.halos.dispose();
 		this._sphere.dispose();
-		this._selectedMaterial.dispose();
+		this._material.dispose();
 		this._checkMaterial.dispose();
-		for ( const material of this._materials.values() ) material.dispose();
 
 	}
 
-	_halo( marker ) {
+	_world( index, target ) {
 
-		let halo = marker.userData.halo;
-		if ( ! halo ) {
-
-			halo = new Mesh( this._sphere, this._checkMaterial );
-			halo.name = 'check';
-			halo.scale.setScalar( CHECK_SCALE );
-			halo.renderOrder = 2;
-			marker.add( halo );
-			marker.userData.halo = halo;
-
-		}
-
-		return halo;
+		return target.fromArray( this._positions, 3 * index ).applyMatrix4( this.group.matrixWorld );
 
 	}
 
-	_materialFor( region ) {
+	_instanced( name, material, capacity, renderOrder ) {
 
-		let material = this._materials.get( region );
-		if ( ! material ) {
+		const mesh = new InstancedMesh( this._sphere, material, capacity );
+		mesh.name = name;
+		mesh.count = 0;
+		mesh.renderOrder = renderOrder;
+		mesh.instanceMatrix.setUsage( DynamicDrawUsage ); // rewritten on every stream frame
+		// the instances move with the stream: a bounding sphere computed once would cull them wrongly
+		mesh.frustumCulled = false;
+		this.group.add( mesh );
+		return mesh;
 
-			const color = new Color( regionColor( region ) );
-			material = new MeshStandardMaterial( { color, emissive: color.clone().multiplyScalar( 0.35 ), roughness: 0.45 } );
-			this._materials.set( region, material );
+	}
+
+	/** `mesh`, or a larger one in its place when it holds fewer than `n` instances. */
+	_fit( mesh, n ) {
+
+		if ( mesh.instanceMatrix.count >= n ) return mesh;
+		const grown = this._instanced( mesh.name, mesh.material, Math.max( n, 2 * mesh.instanceMatrix.count, 16 ), mesh.renderOrder );
+		this.group.remove( mesh );
+		mesh.dispose();
+		return grown;
+
+	}
+
+	_colorFor( region ) {
+
+		let color = this._colors.get( region );
+		if ( ! color ) {
+
+			color = new Color( regionColor( region ) );
+			this._colors.set( region, color );
 
 		}
 
-		return material;
+		return color;
 
 	}
 

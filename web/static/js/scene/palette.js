@@ -13,6 +13,8 @@ const REGION_COLORS = {
 	lower_lip: '#e8547a',
 	mouth_corners: '#ff8f5a',
 	jaw: '#6cd39a',
+	cheeks: '#d4a373',
+	forehead: '#a3c45a',
 };
 
 const OTHER = '#c8c8c8';

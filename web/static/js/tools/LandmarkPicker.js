@@ -1,5 +1,6 @@
 import { Vector3 } from 'three';
 
+import { placedByHand } from '../model/LandmarkSet.js';
 import { reflect, symmetryPlane } from '../model/symmetryPlane.js';
 import { LandmarkMarkers } from '../scene/LandmarkMarkers.js';
 import { MeshSurface } from '../scene/MeshSurface.js';
@@ -307,8 +308,9 @@ export class LandmarkPicker extends EventTarget {
 
 		// a click places the next point, even on a marker: on a closed mouth the lower inner
 		// lip's points lie on the upper's. With nothing left to place, or with Shift, a
-		// click on a marker selects it.
-		const next = landmarks.next;
+		// click on a marker selects it. A dense layout's points are found, not placed: a click
+		// there only selects.
+		const next = placedByHand( landmarks.layout ) ? landmarks.next : - 1;
 		if ( gesture.marker >= 0 && ( next < 0 || event.shiftKey ) ) {
 
 			landmarks.select( gesture.marker );
@@ -356,7 +358,7 @@ export class LandmarkPicker extends EventTarget {
 			const e = this._hoverEvent;
 			const marker = this._markerAt( e );
 			const element = this.viewer.renderer.domElement;
-			element.style.cursor = marker >= 0 ? 'grab' : ( this.landmarks.layout && this.landmarks.next >= 0 && this.hitFace( e ) ? 'crosshair' : '' );
+			element.style.cursor = marker >= 0 ? 'grab' : ( this.landmarks.layout && placedByHand( this.landmarks.layout ) && this.landmarks.next >= 0 && this.hitFace( e ) ? 'crosshair' : '' );
 			if ( marker !== this.hovered ) {
 
 				this.hovered = marker;
