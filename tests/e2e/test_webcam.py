@@ -23,7 +23,7 @@ import pytest
 from playwright.sync_api import sync_playwright
 
 from retarget.layouts import get_layout
-from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project
+from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project, write_face_file
 from tests.e2e.fake_camera import checkerboard, video_frames, write_y4m
 from tests.waits import scaled_ms
 
@@ -270,3 +270,54 @@ def test_a_camera_without_a_face_says_so_and_leaves_the_face_at_rest(server, pag
     assert [server.api("GET", f"/api/projects/{sample['id']}{part}") for part in ("", "/takes")] == before
 
     stop_releases_the_camera_and_rests(page, server, sample["id"])
+
+
+@needs_shared
+@pytest.mark.parametrize("camera", ["performer"], indirect=True)
+def test_webcam_drives_all_468_points_of_a_dense_project(server, page, tmp_path):
+    """A mediapipe468 project (the layout chosen, then the face uploaded: found, rigged and
+    played with no click): the webcam sends all 468 tracked points, not a reduction, and
+    the face they come back onto follows the performer."""
+    layout = get_layout("mediapipe468")
+    project = server.api("POST", "/api/projects", {"name": "dense webcam"})
+    open_project(page, server, project["id"])
+    page.select_option("#layout-select", layout.name)
+    path, _ = write_face_file(tmp_path, "scan.obj", None)
+    page.set_input_files("#file-input", str(path))
+    page.wait_for_function("n => window.app.face && window.app.face.nJoints === n && window.app.streaming",
+                           arg=layout.n_points, timeout=scaled_ms(180_000))
+    # the demo stopped and its rest frame in before the log starts: the demo's frame indices
+    # would be taken for the webcam's
+    page.evaluate("() => { window.rested = new Promise((done) => window.app.stream.addEventListener("
+                  "'frame', (e) => e.detail.flags & 1 && done())); }")
+    page.click("#stop")
+    page.evaluate("() => window.rested")
+    page.evaluate(_LOG)
+    page.click("#conditioning summary")
+    page.select_option("#filter", "none")
+    page.select_option("#neutral-mode", "frame")
+    page.fill("#neutral-value", "0")
+    page.dispatch_event("#neutral-value", "change")
+    play_webcam(page)
+    page.wait_for_function("() => { const sent = new Set(window.log.sent.map(s => s.index));"
+                           " return window.log.frames.filter(f => sent.has(f.index)).length >= 12; }",
+                           timeout=scaled_ms(90_000))
+    assert np.abs(on_screen(page) - rest_vertices(server, project["id"])).max() > 0.05  # cm
+
+    log = page.evaluate("() => window.log")
+    sent = {s["index"]: np.array(s["points"], np.float32).reshape(-1, 3) for s in log["sent"] if "index" in s}
+    assert {len(points) for points in sent.values()} == {layout.n_points}
+    frames = [f for f in log["frames"] if f["index"] in sent]
+    assert len(frames) >= 12 and all(f["flags"] == 0 for f in frames)
+    assert {len(f["displacements"]) for f in frames} == {3 * layout.n_points}
+    performer = _series(np.stack([sent[f["index"]] for f in frames]), layout)
+    target = _series(np.stack([np.reshape(f["displacements"], (-1, 3)) for f in frames]), layout)
+    for part in ("mouth", "brows"):
+        r = np.corrcoef(performer[part], target[part])[0, 1]
+        assert r > 0.8, f"{part}: correlation {r:.2f} between performer and target"
+        assert np.ptp(target[part]) > 0.05, f"{part}: the target moves only {np.ptp(target[part]):.3f} cm"
+    # the cheeks, which no short layout drives, move with her too
+    cheeks = np.array(layout.regions) == "cheeks"
+    moved = np.ptp(np.stack([np.reshape(f["displacements"], (-1, 3))[cheeks] for f in frames]), axis=0)
+    assert np.linalg.norm(moved, axis=1).max() > 0.05
+    stop_releases_the_camera_and_rests(page, server, project["id"])
