@@ -24,6 +24,9 @@ _REGION_RADII = {
     "lower_lip": ("mouth_width", (0.4, 0.3, 0.4)),
     "mouth_corners": ("mouth_width", (0.35, 0.35, 0.4)),
     "jaw": ("chin_height", (1.0, 0.8, 0.8)),
+    # only the dense mediapipe468 layout has these; not tuned (the bench tunes 58 points)
+    "cheeks": ("eye_width", (0.8, 0.8, 0.8)),
+    "forehead": ("eye_width", (0.9, 0.9, 0.9)),
 }
 
 

@@ -17,8 +17,8 @@ from retarget.skin import SkinWeights
 from retarget.weights.geodesic import nearest_features
 
 PARTS = {
-    "top": ("brows", "eyes"),
-    "middle": ("nose",),
+    "top": ("brows", "eyes", "forehead"),
+    "middle": ("nose", "cheeks"),
     "bottom": ("upper_lip", "lower_lip", "mouth_corners", "jaw"),
 }
 

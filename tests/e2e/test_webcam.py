@@ -18,6 +18,7 @@ import io
 import os
 from pathlib import Path
 
+import httpx
 import numpy as np
 import pytest
 from playwright.sync_api import sync_playwright
@@ -25,7 +26,7 @@ from playwright.sync_api import sync_playwright
 from retarget.layouts import get_layout
 from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project, write_face_file
 from tests.e2e.fake_camera import checkerboard, video_frames, write_y4m
-from tests.waits import scaled_ms
+from tests.waits import scaled_ms, wait_job
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
@@ -275,23 +276,23 @@ def test_a_camera_without_a_face_says_so_and_leaves_the_face_at_rest(server, pag
 @needs_shared
 @pytest.mark.parametrize("camera", ["performer"], indirect=True)
 def test_webcam_drives_all_468_points_of_a_dense_project(server, page, tmp_path):
-    """A mediapipe468 project (the layout chosen, then the face uploaded: found, rigged and
-    played with no click): the webcam sends all 468 tracked points, not a reduction, and
-    the face they come back onto follows the performer."""
+    """A mediapipe468 project: the webcam sends all 468 tracked points, not a reduction, and
+    the face they come back onto follows the performer. The project is made through the API
+    (points found by the server, an ellipsoid rig, four joints a vertex, cheap to draw in
+    SwiftShader); test_dense_layout.py walks the page's own no-click way there."""
     layout = get_layout("mediapipe468")
     project = server.api("POST", "/api/projects", {"name": "dense webcam"})
-    open_project(page, server, project["id"])
-    page.select_option("#layout-select", layout.name)
+    pid = project["id"]
     path, _ = write_face_file(tmp_path, "scan.obj", None)
-    page.set_input_files("#file-input", str(path))
-    page.wait_for_function("n => window.app.face && window.app.face.nJoints === n && window.app.streaming",
-                           arg=layout.n_points, timeout=scaled_ms(180_000))
-    # the demo stopped and its rest frame in before the log starts: the demo's frame indices
-    # would be taken for the webcam's
-    page.evaluate("() => { window.rested = new Promise((done) => window.app.stream.addEventListener("
-                  "'frame', (e) => e.detail.flags & 1 && done())); }")
-    page.click("#stop")
-    page.evaluate("() => window.rested")
+    reply = httpx.put(f"{server.url}/api/projects/{pid}/mesh", timeout=60,
+                      files={"file": ("scan.obj", path.read_bytes())})
+    assert reply.status_code == 200, reply.text
+    for post, body in (("landmarks/find", {"layout": layout.name}), ("rig", {"method": "ellipsoid"})):
+        job = wait_job(server, server.api("POST", f"/api/projects/{pid}/{post}", body)["id"], 120)
+        assert job["state"] == "done", job["detail"]
+    open_project(page, server, pid)
+    page.wait_for_function("n => window.app.face && window.app.face.nJoints === n", arg=layout.n_points,
+                           timeout=scaled_ms(60_000))
     page.evaluate(_LOG)
     page.click("#conditioning summary")
     page.select_option("#filter", "none")

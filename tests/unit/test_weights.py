@@ -129,3 +129,30 @@ def test_layoutless_ellipsoid_falls_back_to_spheres(face):
     f, _, pts = face
     sk = compute_weights("ellipsoid", f.vertices, f.faces, pts)
     assert sk.row_sums().max() <= 1 + 1e-6 and (sk.row_sums() > 0).sum() > pts.n_points
+
+
+@pytest.fixture(scope="module")
+def dense_face():
+    """The sample face and its 468 face-mesh points, found with no clicks."""
+    from retarget.facemesh.placement import find_face_mesh
+    from retarget.mesh import mesh_from_arrays
+
+    face = sample_face(1)
+    return face, find_face_mesh(mesh_from_arrays(face.vertices, face.faces)).points
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_every_method_rigs_the_dense_layout(method, dense_face):
+    """The dense mediapipe468 layout's regions (cheeks and forehead among them) are known to
+    every method: each vertex near the face is driven, every joint drives something."""
+    face, found = dense_face
+    layout = get_layout("mediapipe468")
+    weights = compute_weights(method, face.vertices, face.faces, found, layout).dense()
+    assert weights.shape == (len(face.vertices), 468) and np.isfinite(weights).all()
+    near = np.linalg.norm(face.vertices[:, None] - found.positions(face.vertices)[None], axis=2).min(1) < 0.3
+    assert (np.abs(weights[near]).sum(1) > 0.5).all()
+    # every joint drives something; those of the new regions clearly (close pairs of
+    # points, such as the inner lips, share their vertices under the RBF methods)
+    assert (np.abs(weights).max(0) > 0.02).all()
+    new = np.isin(layout.regions, ("cheeks", "forehead"))
+    assert (np.abs(weights[:, new]).max(0) > 0.1).all()
