@@ -1,7 +1,7 @@
 """The browser's face-mesh tracker on video files: `track_video_markerless` (OpenCV
 decoding, the web app's tracker in headless Chromium: the reference the native face mesh
 is checked against) on a real face video and on a generated one without a face, and its
-refusals.
+refusals; the native tracker's agreement with it on the real video.
 
 The real video is ``../shared/data/video/face_expressions_480.mp4``; the tests that need it
 skip only when ../shared is absent. Its first 60 frames were labelled by eye: the mouth is
@@ -52,6 +52,29 @@ def noise_video(tmp_path_factory):
         writer.write(rng.integers(0, 256, (96, 96, 3), dtype=np.uint8))
     writer.release()
     return path
+
+
+@needs_shared
+def test_the_native_tracker_agrees_with_the_browser_s_on_the_real_video(clip):
+    """Within 1 px median (issue 14): the page's MediaPipe and ours (`retarget.facemesh`) on
+    the same frames, with no constant offset."""
+    from retarget.facemesh.tracker import FaceMeshTracker
+
+    take, _ = clip
+    columns = list(get_layout("ibug68").mediapipe468)
+    video = cv2.VideoCapture(str(VIDEO))
+    tracker = FaceMeshTracker()
+    ours = []
+    for _ in range(CLIP):
+        ok, frame = video.read()
+        assert ok
+        points = tracker.track(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+        assert points is not None
+        ours.append(points[columns])
+    difference = np.asarray(ours)[:, :, :2] - np.asarray(take.points)[:, :, :2]
+    distance = np.linalg.norm(difference, axis=2)
+    assert np.median(distance) < 1.0, np.median(distance)
+    assert np.abs(difference.reshape(-1, 2).mean(0)).max() < 0.3  # no constant offset
 
 
 def _point(take, name):
