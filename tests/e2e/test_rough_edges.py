@@ -7,15 +7,29 @@ shown feature's weight range."""
 
 from __future__ import annotations
 
+import shutil
 import struct
 
 import numpy as np
+import pytest
 
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.sample_face import demo_performance
-from tests.e2e.conftest import open_project
+from tests.e2e.conftest import Server, open_project
 from tests.waits import scaled_ms
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory, sample_data_dir):
+    """One server for these tests (a start costs seconds of CPU): each opens the sample
+    project or makes projects of its own, and none depends on what another left there (the
+    export test deletes the take it adds; new projects are named after the existing ones)."""
+    folder = tmp_path_factory.mktemp("rough") / "data"
+    shutil.copytree(sample_data_dir, folder)
+    srv = Server(folder).start()
+    yield srv
+    srv.stop()
 
 
 def _sample(server) -> dict:
@@ -47,14 +61,16 @@ def test_play_is_visible_on_first_open_without_scrolling(server, page):
 def test_a_double_click_on_new_makes_one_project(server, page):
     _open_sample(server, page)
     before = {p["id"] for p in server.api("GET", "/api/projects")}
+    taken = {p["name"] for p in server.api("GET", "/api/projects")}
+    expected = next(f"Untitled {n}" for n in range(1, 1000) if f"Untitled {n}" not in taken)
     page.dblclick("#new-project")
     page.wait_for_function("() => window.app.project && window.app.project.name.startsWith('Untitled')", timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     page.wait_for_timeout(1500)  # a second request would have landed by now
     projects = server.api("GET", "/api/projects")
     new = [p for p in projects if p["id"] not in before]
-    assert [p["name"] for p in new] == ["Untitled 1"]
-    assert page.input_value("#project-name") == "Untitled 1"
+    assert [p["name"] for p in new] == [expected]
+    assert page.input_value("#project-name") == expected
     names = [p["name"] for p in projects]
     assert len(names) == len(set(names))
 
