@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -149,11 +150,28 @@ def open_project(page, server: Server, project_id: str) -> None:
     page.evaluate("() => window.app.ready")
 
 
+def sample_copy(sample_data_dir: Path, folder: Path) -> Path:
+    """`folder` made a data dir holding the sample project, a copy of the one built once per
+    run (a server started on an empty dir builds the same, at a few seconds of CPU)."""
+    shutil.copytree(sample_data_dir, folder)
+    return folder
+
+
 @pytest.fixture
 def server(tmp_path, copy_sample_data):
     """A real server on a free port with a fresh data dir holding the sample project
     (a copy of the one built once per run: the server would build the same at its start)."""
     srv = Server(copy_sample_data(tmp_path / "data")).start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="module")
+def module_server(tmp_path_factory, sample_data_dir):
+    """One server for a whole test module (a start costs seconds of CPU), for modules whose
+    tests make projects of their own or leave the sample project as they found it; such a
+    module opts in with a module-scoped ``server`` fixture that returns this one."""
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("module") / "data")).start()
     yield srv
     srv.stop()
 

@@ -28,15 +28,15 @@ import numpy as np
 import pytest
 
 from retarget.layouts import get_layout
-from tests.e2e.conftest import Server
+from tests.e2e.conftest import Server, sample_copy
 
 SCHEMATHESIS = Path(sys.executable).with_name("schemathesis")
 EXCLUDED = "positive_data_acceptance,ensure_resource_availability"
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("schema") / "data", args=("--max-upload-mb", "2")).start()
+def server(tmp_path_factory, sample_data_dir):
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("schema") / "data"), args=("--max-upload-mb", "2")).start()
     yield srv
     srv.stop()
 

@@ -6,14 +6,15 @@ import json
 
 import pytest
 
-from tests.e2e.conftest import Server
+from tests.e2e.conftest import Server, sample_copy
 from tests.waits import scaled_ms
 
 
-@pytest.fixture
-def small_server(tmp_path):
+@pytest.fixture(scope="module")
+def small_server(tmp_path_factory, sample_data_dir):
     """A server that takes uploads of at most 0.25 MiB, so "too big" is quick to send."""
-    srv = Server(tmp_path / "data", args=("--max-upload-mb", "0.25")).start()
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("small") / "data"),
+                 args=("--max-upload-mb", "0.25")).start()
     yield srv
     srv.stop()
 

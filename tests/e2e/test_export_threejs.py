@@ -26,7 +26,7 @@ from retarget.gltf import read_gltf
 from retarget.gltf.document import GltfDocument
 from retarget.sample_face import demo_weights, sample_face
 from retarget.skin import SkinWeights, skin_displacements
-from tests.e2e.conftest import Server, open_project
+from tests.e2e.conftest import Server, open_project, sample_copy
 from tests.waits import wait_job
 from tests.waits import scaled_ms
 
@@ -109,9 +109,9 @@ window.ready = true;
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def server(tmp_path_factory, sample_data_dir):
     """One server for the module, on a fresh data dir with the sample project."""
-    srv = Server(tmp_path_factory.mktemp("export") / "data").start()
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("export") / "data")).start()
     yield srv
     srv.stop()
 

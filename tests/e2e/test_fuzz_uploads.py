@@ -25,7 +25,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.e2e.conftest import Server
+from tests.e2e.conftest import Server, sample_copy
 from tests.hostile_inputs import (
     MESH_EXTENSIONS,
     TAKE_EXTENSIONS,
@@ -117,8 +117,8 @@ def sample_state(client: httpx.Client, sample_id: str) -> dict:
 
 
 @pytest.fixture(scope="module")
-def fuzz(tmp_path_factory):
-    server = Server(tmp_path_factory.mktemp("fuzz") / "data").start()
+def fuzz(tmp_path_factory, sample_data_dir):
+    server = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("fuzz") / "data")).start()
     client = httpx.Client(base_url=server.url, timeout=120)
     try:
         (sample,) = [p for p in client.get("/api/projects").json() if p["name"] == "Sample face"]

@@ -25,7 +25,7 @@ from retarget.sources.files import write_take_csv
 from retarget.sources.take import Take
 from retarget.testing.marker_video import default_camera, render_marker_video
 from retarget.testing.render import render_face
-from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project
+from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project, sample_copy
 from tests.waits import scaled_ms
 
 FPS = 30.0
@@ -91,8 +91,8 @@ def jaw_weight(t: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("perf") / "data").start()
+def server(tmp_path_factory, sample_data_dir):
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("perf") / "data")).start()
     yield srv
     srv.stop()
 

@@ -7,7 +7,6 @@ shown feature's weight range."""
 
 from __future__ import annotations
 
-import shutil
 import struct
 
 import numpy as np
@@ -16,20 +15,16 @@ import pytest
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
 from retarget.sample_face import demo_performance
-from tests.e2e.conftest import Server, open_project
+from tests.e2e.conftest import open_project
 from tests.waits import scaled_ms
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory, sample_data_dir):
-    """One server for these tests (a start costs seconds of CPU): each opens the sample
-    project or makes projects of its own, and none depends on what another left there (the
-    export test deletes the take it adds; new projects are named after the existing ones)."""
-    folder = tmp_path_factory.mktemp("rough") / "data"
-    shutil.copytree(sample_data_dir, folder)
-    srv = Server(folder).start()
-    yield srv
-    srv.stop()
+def server(module_server):
+    """One server for these tests: each opens the sample project or makes projects of its
+    own, and none depends on what another left there (the export test deletes the take it
+    adds; new projects are named after the existing ones)."""
+    return module_server
 
 
 def _sample(server) -> dict:

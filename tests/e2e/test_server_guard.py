@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.e2e.conftest import Server, free_port
+from tests.e2e.conftest import Server, free_port, sample_copy
 
 MIB = 2**20
 
@@ -37,8 +37,8 @@ def peak_growth_mib(pid: int, request) -> tuple[float, object]:
 
 
 @pytest.fixture(scope="module")
-def guarded(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("guard") / "data").start()
+def guarded(tmp_path_factory, sample_data_dir):
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("guard") / "data")).start()
     yield srv
     srv.stop()
 

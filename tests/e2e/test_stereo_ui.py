@@ -18,7 +18,7 @@ import pytest
 
 from retarget.sources.calibration import StereoCalibration
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
-from tests.e2e.conftest import Server, open_project
+from tests.e2e.conftest import Server, open_project, sample_copy
 from tests.waits import scaled_ms
 
 N_FRAMES = 6
@@ -43,9 +43,9 @@ _RECORD = """() => {
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def server(tmp_path_factory, sample_data_dir):
     """One server for the module (with the sample project)."""
-    srv = Server(tmp_path_factory.mktemp("data")).start()
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("stereo") / "data")).start()
     yield srv
     srv.stop()
 

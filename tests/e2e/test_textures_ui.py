@@ -22,6 +22,12 @@ from tests.waits import scaled_ms, wait_job
 N = 25  # grid vertices per side
 
 
+@pytest.fixture(scope="module")
+def server(module_server):
+    """One server for these tests: each makes a project of its own."""
+    return module_server
+
+
 def _surface() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A face-sized bulging sheet facing +z: vertices (V, 3) cm, faces (F, 3), uv (V, 2)
     with u along x and v along y (OBJ's convention)."""

@@ -21,7 +21,7 @@ import pytest
 
 from retarget.sources.facemesh_video import track_video_facemesh
 from retarget.testing.face_video import render_face_video
-from tests.e2e.conftest import Server, open_project
+from tests.e2e.conftest import Server, open_project, sample_copy
 from tests.e2e.test_performance_panel import WATCH_PROGRESS, assert_upload_then_job
 from tests.waits import scaled_ms
 
@@ -41,8 +41,8 @@ def write_webm(path: Path, frames, fps: float, codec: str = "VP80") -> Path:
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("video-take") / "data",
+def server(tmp_path_factory, sample_data_dir):
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("video-take") / "data"),
                  args=("--max-video-frames", str(MAX_FRAMES))).start()
     yield srv
     srv.stop()

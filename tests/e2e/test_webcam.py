@@ -24,7 +24,7 @@ import pytest
 from playwright.sync_api import sync_playwright
 
 from retarget.layouts import get_layout
-from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project, write_face_file
+from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project, write_face_file, sample_copy
 from tests.e2e.fake_camera import checkerboard, video_frames, write_y4m
 from tests.waits import scaled_ms, wait_job
 
@@ -69,10 +69,10 @@ needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared is abse
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def server(tmp_path_factory, sample_data_dir):
     """One real server for the module (starting one costs seconds on a loaded machine):
     the tests only add to its sample project, and each checks what it added."""
-    srv = Server(tmp_path_factory.mktemp("webcam") / "data").start()
+    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("webcam") / "data")).start()
     yield srv
     srv.stop()
 
