@@ -18,14 +18,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.stream import ServerProcess, http_json, machine  # noqa: E402
-from bench.zero_click import CHROMIUM, SWIFTSHADER, TIMEOUT_MS  # noqa: E402
+from bench.stream import http_json, machine  # noqa: E402
+from bench.zero_click import TIMEOUT_MS, server_and_chromium  # noqa: E402
 from retarget.mesh import mesh_from_arrays, save_mesh  # noqa: E402
 from retarget.sample_face import sample_face  # noqa: E402
 
@@ -69,22 +68,16 @@ def main(argv=None) -> int:
     p.add_argument("--gpu", action="store_true", help="let Chromium use the machine's GPU")
     args = p.parse_args(argv)
 
-    from playwright.sync_api import sync_playwright
-
     print(machine())
-    with tempfile.TemporaryDirectory() as tmp, ServerProcess() as server, sync_playwright() as pw:
+    with server_and_chromium(args.gpu) as (tmp, server, browser):
         face = sample_face(1)
-        obj = Path(tmp) / "sample_face.obj"
+        obj = tmp / "sample_face.obj"
         save_mesh(mesh_from_arrays(face.vertices, face.faces), obj)
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=[] if args.gpu else SWIFTSHADER)
-        try:
-            print(f"sample face, 1280 x 800 page, {'GPU' if args.gpu else 'SwiftShader'}, {args.frames} frames:")
-            for layout in ("ibug68", "mediapipe468"):
-                r = one_layout(browser, server.url, obj, layout, args.frames)
-                print(f"  {layout:13s} shown {r['shown']:6.1f} ms  hidden {r['hidden']:6.1f} ms  "
-                      f"markers {r['shown'] - r['hidden']:6.1f} ms  calls {r['calls']}  ({r['flagged']} to check)")
-        finally:
-            browser.close()
+        print(f"sample face, 1280 x 800 page, {'GPU' if args.gpu else 'SwiftShader'}, {args.frames} frames:")
+        for layout in ("ibug68", "mediapipe468"):
+            r = one_layout(browser, server.url, obj, layout, args.frames)
+            print(f"  {layout:13s} shown {r['shown']:6.1f} ms  hidden {r['hidden']:6.1f} ms  "
+                  f"markers {r['shown'] - r['hidden']:6.1f} ms  calls {r['calls']}  ({r['flagged']} to check)")
     return 0
 
 

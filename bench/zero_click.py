@@ -25,6 +25,7 @@ import statistics
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,35 +102,43 @@ def meshes(folder: Path) -> list[tuple[str, Path]]:
     return out
 
 
+@contextmanager
+def server_and_chromium(gpu: bool):
+    """(scratch folder, a real `retarget serve`, Chromium: SwiftShader unless `gpu`), all
+    closed on leaving."""
+    from playwright.sync_api import sync_playwright
+
+    with tempfile.TemporaryDirectory() as tmp, ServerProcess() as server, sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=[] if gpu else SWIFTSHADER)
+        try:
+            yield Path(tmp), server, browser
+        finally:
+            browser.close()
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--gpu", action="store_true", help="let Chromium use the machine's GPU")
     args = p.parse_args(argv)
 
-    from playwright.sync_api import sync_playwright
-
     print(machine())
-    with tempfile.TemporaryDirectory() as tmp, ServerProcess() as server, sync_playwright() as pw:
-        faces = meshes(Path(tmp))
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=[] if args.gpu else SWIFTSHADER)
-        try:
-            for name, obj in faces:
-                runs = []
-                for r in range(args.repeats):
-                    print(f"  {name}: repeat {r + 1}/{args.repeats}", file=sys.stderr, flush=True)
-                    start = time.perf_counter()
-                    runs.append(one_run(browser, server.url, obj, r))
-                    print(f"    {time.perf_counter() - start:.1f} s in all", file=sys.stderr, flush=True)
-                print(f"\n{name}, upload through the file chooser -> (s), {'GPU' if args.gpu else 'SwiftShader'}:")
-                for i, run in enumerate(runs):
-                    print(f"  repeat {i + 1}: " + ", ".join(f"{s} {run[s]:.2f}" for s in STAGES))
-                print("  median:   " + ", ".join(f"{s} {statistics.median(run[s] for run in runs):.2f}"
-                                                for s in STAGES))
-                print(f"  upload -> rigged face with landmarks: {statistics.median(run['rigged'] for run in runs):.1f} s"
-                      f" (median of {len(runs)}); the panel: {runs[-1]['check']!r}")
-        finally:
-            browser.close()
+    with server_and_chromium(args.gpu) as (tmp, server, browser):
+        faces = meshes(tmp)
+        for name, obj in faces:
+            runs = []
+            for r in range(args.repeats):
+                print(f"  {name}: repeat {r + 1}/{args.repeats}", file=sys.stderr, flush=True)
+                start = time.perf_counter()
+                runs.append(one_run(browser, server.url, obj, r))
+                print(f"    {time.perf_counter() - start:.1f} s in all", file=sys.stderr, flush=True)
+            print(f"\n{name}, upload through the file chooser -> (s), {'GPU' if args.gpu else 'SwiftShader'}:")
+            for i, run in enumerate(runs):
+                print(f"  repeat {i + 1}: " + ", ".join(f"{s} {run[s]:.2f}" for s in STAGES))
+            print("  median:   " + ", ".join(f"{s} {statistics.median(run[s] for run in runs):.2f}"
+                                            for s in STAGES))
+            print(f"  upload -> rigged face with landmarks: {statistics.median(run['rigged'] for run in runs):.1f} s"
+                  f" (median of {len(runs)}); the panel: {runs[-1]['check']!r}")
     return 0
 
 

@@ -143,6 +143,18 @@ def upload_face(server: Server, page, face_file, name: str) -> tuple[dict, objec
     return project, face
 
 
+def wait_face_moves(page, cm: float, timeout_ms: float = 30_000) -> None:
+    """Wait until the skinning shader's vertices leave the rest pose by more than `cm`
+    (mesh units) somewhere: the face on screen moves."""
+    page.wait_for_function("""(cm) => {
+        const face = window.app.face, rest = face.mesh.geometry.attributes.position.array;
+        const now = face.deformedPositions();
+        let most = 0;
+        for (let i = 0; i < rest.length; i ++) most = Math.max(most, Math.abs(now[i] - rest[i]));
+        return most > cm;
+    }""", arg=cm, polling=200, timeout=scaled_ms(timeout_ms))
+
+
 def open_project(page, server: Server, project_id: str) -> None:
     """Load the app on `project_id` and wait until it is shown."""
     page.goto(f"{server.url}/#p={project_id}")

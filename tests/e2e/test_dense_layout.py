@@ -10,16 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from retarget.layouts import REGIONS, get_layout
-from tests.e2e.conftest import upload_face, write_face_file
+from tests.e2e.conftest import upload_face, wait_face_moves, write_face_file
 from tests.waits import scaled_ms
-
-_MOVING = """() => {
-    const face = window.app.face, rest = face.mesh.geometry.attributes.position.array;
-    const now = face.deformedPositions();
-    let most = 0;
-    for (let i = 0; i < rest.length; i ++) most = Math.max(most, Math.abs(now[i] - rest[i]));
-    return most > 0.1;
-}"""
 
 # the markers' instances in the face's model space: (N, 3) centres, per instance its scale
 _INSTANCES = """() => {
@@ -47,7 +39,7 @@ def test_choosing_the_dense_layout_finds_rigs_and_plays_468_points(server, page,
     # no click from here on: found, rigged with 468 joints, the demo moving the face
     page.wait_for_function("n => window.app.face.nJoints === n && window.app.streaming"
                            " && window.app.project.rig", arg=dense.n_points, timeout=scaled_ms(180_000))
-    page.wait_for_function(_MOVING, polling=200, timeout=scaled_ms(30_000))
+    wait_face_moves(page, 0.1)
     assert page.inner_text("#error").strip() == ""
     assert server.api("GET", f"/api/projects/{pid}")["landmarks"] == {"layout": dense.name, "n_points": dense.n_points}
     stored = server.api("GET", f"/api/projects/{pid}/landmarks")

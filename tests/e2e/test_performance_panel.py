@@ -25,7 +25,7 @@ from retarget.sources.files import write_take_csv
 from retarget.sources.take import Take
 from retarget.testing.marker_video import default_camera, render_marker_video
 from retarget.testing.render import render_face
-from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project, sample_copy
+from tests.e2e.conftest import ARTIFACTS, Server, _expected_error, open_project, sample_copy, wait_face_moves
 from tests.waits import scaled_ms
 
 FPS = 30.0
@@ -335,13 +335,7 @@ def test_marker_video_is_tracked_with_progress_into_a_take_that_moves_the_face(s
     _, size = motion(page.evaluate("() => window.streamFrames"))
     assert size.max() > 0.05
     # and the face on screen is deformed by them (its skinned vertices leave the rest pose)
-    page.wait_for_function("""() => {
-        const face = window.app.face, rest = face.mesh.geometry.attributes.position.array;
-        const now = face.deformedPositions();
-        let most = 0;
-        for (let i = 0; i < rest.length; i++) most = Math.max(most, Math.abs(now[i] - rest[i]));
-        return most > 0.05;
-    }""", polling=200)
+    wait_face_moves(page, 0.05)
     if page.is_enabled("#stop"):  # a short take played once may have ended by now
         page.click("#stop")
 

@@ -159,19 +159,23 @@ def _series(points: np.ndarray, layout) -> dict[str, np.ndarray]:
             "brows": points[:, regions == "brows", 1].mean(axis=1) - points[:, regions == "eyes", 1].mean(axis=1)}
 
 
+def unfiltered_from_the_first_frame(page) -> None:
+    """Conditioning with no filter (each frame that comes back depends on that frame's
+    points only) and the neutral from frame 0 (this performer does not hold still through
+    a capture window; test_neutral_capture.py has the performer who moves refused)."""
+    page.click("#conditioning summary")
+    page.select_option("#filter", "none")
+    page.select_option("#neutral-mode", "frame")
+    page.fill("#neutral-value", "0")
+    page.dispatch_event("#neutral-value", "change")
+
+
 @needs_shared
 @pytest.mark.parametrize("camera", ["performer"], indirect=True)
 def test_webcam_drives_the_face_records_a_take_and_stop_releases_it(server, page):
     sample = open_sample(server, page)
     layout = get_layout(sample["landmarks"]["layout"])
-    # no filter: each frame that comes back depends on that frame's points only
-    page.click("#conditioning summary")
-    page.select_option("#filter", "none")
-    # the neutral from one frame: this performer does not hold still through a capture
-    # window (test_neutral_capture.py has the performer who moves refused)
-    page.select_option("#neutral-mode", "frame")
-    page.fill("#neutral-value", "0")
-    page.dispatch_event("#neutral-value", "change")
+    unfiltered_from_the_first_frame(page)
     play_webcam(page)
     assert page.evaluate("() => { const v = document.getElementById('webcam-video');"
                          " return !v.paused && v.readyState >= 2 && v.videoWidth; }") == CAMERA_SIZE
@@ -294,11 +298,7 @@ def test_webcam_drives_all_468_points_of_a_dense_project(server, page, tmp_path)
     page.wait_for_function("n => window.app.face && window.app.face.nJoints === n", arg=layout.n_points,
                            timeout=scaled_ms(60_000))
     page.evaluate(_LOG)
-    page.click("#conditioning summary")
-    page.select_option("#filter", "none")
-    page.select_option("#neutral-mode", "frame")
-    page.fill("#neutral-value", "0")
-    page.dispatch_event("#neutral-value", "change")
+    unfiltered_from_the_first_frame(page)
     play_webcam(page)
     page.wait_for_function("() => { const sent = new Set(window.log.sent.map(s => s.index));"
                            " return window.log.frames.filter(f => sent.has(f.index)).length >= 12; }",

@@ -17,7 +17,7 @@ from PIL import Image
 from retarget.layouts import get_layout
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
-from tests.e2e.conftest import open_project
+from tests.e2e.conftest import open_project, wait_face_moves
 from tests.waits import scaled_ms
 
 
@@ -64,13 +64,7 @@ def test_an_uploaded_face_is_found_rigged_and_moving_with_no_click(server, page,
     assert not page.is_visible("#unsaved")
 
     # the face moves: the skinning shader's vertices leave the rest pose by millimetres
-    page.wait_for_function("""() => {
-        const face = window.app.face, rest = face.mesh.geometry.attributes.position.array;
-        const now = face.deformedPositions();
-        let most = 0;
-        for (let i = 0; i < rest.length; i ++) most = Math.max(most, Math.abs(now[i] - rest[i]));
-        return most > 0.1;
-    }""", polling=200, timeout=scaled_ms(30_000))
+    wait_face_moves(page, 0.1)
 
     # the points to check: named by region in the panel, ringed on the face once it stops
     confidence = np.array(stored["confidence"])
