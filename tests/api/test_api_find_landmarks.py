@@ -14,7 +14,6 @@ import threading
 import numpy as np
 import pytest
 import trimesh
-from fastapi.testclient import TestClient
 
 from retarget.facemesh.placement import CHECK_BELOW
 from retarget.landmarks import landmarks_from_json

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from retarget.facemesh.tracker import N_POINTS, FaceMeshTracker, Roi
-from retarget.layouts import IBUG68_TO_MEDIAPIPE468, get_layout
+from retarget.layouts import IBUG68_TO_MEDIAPIPE468
 from retarget.sample_face import sample_face
 from retarget.testing.camera import look_at
 from retarget.testing.render import render_face
