@@ -1,6 +1,7 @@
 """Speed of the retargeting core on one CPU core.
 
     python bench/speed.py [--repeats 200] [--big-resolution 4]
+    python bench/speed.py --dense [--repeats 200] [--rounds 5]
 
 Prints medians over repeats:
 - fit of the RBF space transform for 68 points (default kernel and Dutreve's);
@@ -10,6 +11,13 @@ Prints medians over repeats:
 - auto-rig of a ~100k-vertex built-in face with 68 points, for every weight method.
 Ratios are against the paper's method (adaptive multiquadric, ellipsoid) run in the same
 process.
+
+--dense prints only the dense layout's per-frame space transform (issue 14, section 3: the
+server's work a frame, target < 1 ms): `Retargeter.displacements` of one 468-point frame
+of the built-in performer onto the built-in face, per kernel, against the transform as it
+was before its hot path was rewritten (`displacements_before`, kept here only for the
+ratio), alternated in rounds so both see the same load; with the largest difference
+between the two relative to the frame's largest displacement.
 """
 
 from __future__ import annotations
@@ -29,13 +37,15 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.timing import median_ms  # noqa: E402
+from scipy.spatial.distance import cdist  # noqa: E402
+
 from retarget.landmarks import from_vertex_indices  # noqa: E402
 from retarget.layouts import get_layout  # noqa: E402
 from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter  # noqa: E402
-from retarget.sample_face import sample_face  # noqa: E402
+from retarget.rbf import _polynomial, kernel_values  # noqa: E402
+from retarget.sample_face import demo_points, sample_face  # noqa: E402
 from retarget.skin import skin_displacements  # noqa: E402
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights  # noqa: E402
-
 
 
 def face_for_frames():
@@ -48,11 +58,49 @@ def face_for_frames():
     return f.vertices, f.faces, f.landmarks68, "built-in face"
 
 
+def displacements_before(rt: Retargeter, frame: np.ndarray) -> np.ndarray:
+    """(N, 3) float32 `Retargeter.displacements` of one fully driven, unmasked (N, 3)
+    frame as computed before the hot path's rewrite: the (M, N+P) basis (kernel matrix
+    from cdist distances, polynomial columns stacked onto it) times the coefficients."""
+    rbf = rt.transform_
+    x = np.asarray(frame, dtype=np.float64)
+    k = kernel_values(rbf.kernel, cdist(x, rbf.centers_), rbf.shape_[None, :])
+    if rbf.degree_ >= 0:
+        k = np.hstack([k, _polynomial(x, rbf.origin_, rbf.axes_)])
+    return np.nan_to_num(k @ rbf.coefs_ - rt.target_rest_, nan=0.0).astype(np.float32)
+
+
+def dense_transform(repeats: int, rounds: int) -> None:
+    """Print the --dense section (module docstring)."""
+    layout = get_layout("mediapipe468")
+    s0, frames = demo_points(layout, n_frames=30)
+    t0 = layout.reference_points()
+    frame = frames[15]
+    print(f"Space transform of one {len(s0)}-point frame, Retargeter.displacements "
+          f"(median of {repeats}, {rounds} alternated rounds):")
+    for kernel in (DEFAULT_KERNEL, "adaptive_multiquadric"):
+        rt = Retargeter(kernel).fit(s0, t0)
+        before, after = [], []
+        for _ in range(rounds):
+            before.append(median_ms(lambda: displacements_before(rt, frame), repeats))
+            after.append(median_ms(lambda: rt.displacements(frame), repeats))
+        ref = displacements_before(rt, frame)
+        error = np.abs(rt.displacements(frame) - ref).max() / np.abs(ref).max()
+        ratio = np.median(np.divide(after, before))
+        print(f"  {kernel:<22} before {np.median(before):6.3f} ms  now {np.median(after):6.3f} ms  "
+              f"({ratio:.2f}x)  max difference {error:.1e} of the largest displacement")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeats", type=int, default=200)
     p.add_argument("--big-resolution", type=int, default=4, help="built-in face resolution for the auto-rig figures")
+    p.add_argument("--dense", action="store_true", help="only the dense 468-point transform (module docstring)")
+    p.add_argument("--rounds", type=int, default=5, help="--dense: alternated rounds of before and now")
     args = p.parse_args(argv)
+    if args.dense:
+        dense_transform(args.repeats, args.rounds)
+        return 0
     layout = get_layout("ibug68")
     rng = np.random.default_rng(0)
 

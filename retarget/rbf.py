@@ -180,14 +180,30 @@ class RBFInterpolant:
         """(M, N) float64 matrix mapping values at the N centres to values at (M, 2|3) points."""
         self._check_fitted()
         x = as_points(points, "points")
-        return self._basis(x) @ self.solution_
+        return self._combination(x, self.solution_)
 
-    def _basis(self, x: np.ndarray) -> np.ndarray:
-        """(M, N+P) kernel and polynomial terms at (M, 3) points."""
-        k = kernel_values(self.kernel, cdist(x, self.centers_), self.shape_[None, :])
-        if self.degree_ < 0:
-            return k
-        return np.hstack([k, _polynomial(x, self.origin_, self.axes_)])
+    def _combination(self, x: np.ndarray, coefs: np.ndarray) -> np.ndarray:
+        """(M, K) float64: the kernel and polynomial terms at (M, 3) points times (N+P, K)
+        coefficients, ``[phi(|x - c|), poly(x)] @ coefs``.
+
+        The per-frame hot path (the dense 468-point transform): the (M, N) kernel matrix is
+        the only large array, made by one distance pass and at most two in-place passes,
+        and the small polynomial block is multiplied apart instead of stacked onto it.
+        """
+        n = len(self.centers_)
+        if self.kernel == "linear":
+            # phi = -r is linear in r: negate the (N, K) weights, not the (M, N) distances
+            out = cdist(x, self.centers_) @ -coefs[:n]
+        elif self.kernel == "adaptive_multiquadric":
+            # sqrt(r² + sc²) from the squared distances, in place: no r or r² temporaries
+            k = cdist(x, self.centers_, "sqeuclidean")
+            k += np.square(self.shape_)
+            out = np.sqrt(k, out=k) @ coefs[:n]
+        else:
+            out = kernel_values(self.kernel, cdist(x, self.centers_), self.shape_[None, :]) @ coefs[:n]
+        if self.degree_ >= 0:
+            out += _polynomial(x, self.origin_, self.axes_) @ coefs[n:]
+        return out
 
     def _check_fitted(self):
         if not hasattr(self, "solution_"):
@@ -228,9 +244,12 @@ class RBFTransform(RBFInterpolant):
         if x.shape[1] == 2:
             x = np.hstack([x, np.zeros((len(x), 1))])
         ok = np.isfinite(x).all(1)
+        if ok.all():
+            # the usual frame: no lost point, so no row selection copies
+            return self._combination(x, self.coefs_).reshape(*lead, 3)
         out = np.full((len(x), 3), np.nan)
         if ok.any():
-            out[ok] = self._basis(x[ok]) @ self.coefs_
+            out[ok] = self._combination(x[ok], self.coefs_)
         return out.reshape(*lead, 3)
 
 
