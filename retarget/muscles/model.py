@@ -31,7 +31,7 @@ radians.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -131,6 +131,9 @@ class SphincterMuscle:
     strength : largest displacement at full contraction, mesh units.
     limits : (low, high) valid contraction range; a negative low lets the muscle push
         outward (the orbicularis oculi's opposite, the eye opening wide).
+    pull : (3,) gains on the pull along each axis, in [0, 1]. The paper draws vertices
+        straight at the centre (all 1); the eye's sphincter pulls mostly across the lid
+        slit (an eyelid closes, its corners hardly move), which a centre alone cannot do.
     """
 
     name: str
@@ -140,6 +143,7 @@ class SphincterMuscle:
     start: float
     strength: float
     limits: tuple[float, float] = (0.0, 1.0)
+    pull: np.ndarray = (1.0, 1.0, 1.0)
     kind = "sphincter"
 
     def __post_init__(self) -> None:
@@ -161,11 +165,15 @@ class SphincterMuscle:
         object.__setattr__(self, "start", start)
         object.__setattr__(self, "strength", _positive(self.strength, f"{self.name}.strength"))
         object.__setattr__(self, "limits", _limits(self.limits, f"{self.name}.limits"))
+        pull = _vector(self.pull, f"{self.name}.pull")
+        if (pull < 0).any() or (pull > 1).any() or not pull.any():
+            raise RetargetError(f"{self.name}.pull must be in [0, 1] and not all 0, got {self.pull!r}")
+        object.__setattr__(self, "pull", pull)
 
     def to_json(self) -> dict:
         return {"name": self.name, "kind": self.kind, "centre": self.centre.tolist(),
                 "axes": self.axes.tolist(), "radii": self.radii.tolist(), "start": self.start,
-                "strength": self.strength, "limits": list(self.limits)}
+                "strength": self.strength, "limits": list(self.limits), "pull": self.pull.tolist()}
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,6 +257,8 @@ class _Pairs:
         cos_omega = np.array([np.cos(m.omega) if m.kind == "linear" else 0.0 for m in muscles])
         start = np.array([m.rs / m.rf if m.kind == "linear" else m.start for m in muscles])
         strength = np.array([m.strength for m in muscles])
+        gains = np.array([np.eye(3) if m.kind == "linear" else m.axes.T @ (m.pull[:, None] * m.axes)
+                          for m in muscles]).reshape(-1, 3, 3)
         self.linear = lin[muscle]
         self.origin = origin[muscle]
         self.scaled = scaled[muscle]
@@ -257,6 +267,9 @@ class _Pairs:
         self.angular_scale = 1.0 / (1.0 - self.cos_omega)
         self.start = start[muscle]
         self.strength = strength[muscle]
+        self.gains = gains[muscle]
+        self.plain = np.array([m.kind == "linear" or bool((m.pull == 1).all()) for m in muscles], dtype=bool)[muscle]
+        self.any_gains = not self.plain.all()
 
     def fields(self, p: np.ndarray) -> np.ndarray:
         """(..., P, 3) each pair's displacement at full contraction, p (..., P, 3) its
@@ -268,7 +281,8 @@ class _Pairs:
         # §4.1 angular factor, continuous at omega (see the module docstring)
         a = np.clip(((q * self.direction).sum(-1) / d - self.cos_omega) * self.angular_scale, 0.0, None)
         a = np.where(self.linear, a, 1.0)
-        return ((-self.strength / d) * a * _falloff(t, self.start))[..., None] * q
+        pulled = np.matmul(self.gains, q[..., None])[..., 0] if self.any_gains else q
+        return ((-self.strength / d) * a * _falloff(t, self.start))[..., None] * pulled
 
 
 def _reach(muscle) -> tuple[np.ndarray, float]:
@@ -451,7 +465,7 @@ class MuscleFace:
                                                 m["omega"], m["strength"], tuple(m["limits"])))
                 elif kind == "sphincter":
                     muscles.append(SphincterMuscle(m["name"], m["centre"], m["axes"], m["radii"], m["start"],
-                                                   m["strength"], tuple(m["limits"])))
+                                                   m["strength"], tuple(m["limits"]), m.get("pull", (1, 1, 1))))
                 else:
                     raise RetargetError(f"muscle {m.get('name')!r}: kind must be 'linear' or 'sphincter', got {kind!r}")
             j = data["jaw"]

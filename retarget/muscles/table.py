@@ -47,44 +47,46 @@ MUSCLE_TABLE: tuple[MuscleRow, ...] = (
               "45 (36), 0.1 E below the lower eyelid; insertion: the mouth corner 54 (48)",
               "pulls the mouth corner up and back (smile)"),
     MuscleRow((3, 4), "Frontalis major", "frontalis_major", "frontalis (central part)", "linear", "left-right",
-              "insertion: brow point 23 (20); origin 0.9 E above it, 0.25 E back, on the frontal bone",
+              "insertion: brow point 23 (20); origin 0.9 E above it, 0.08 E back, on the frontal bone",
               "raises the brow's inner-middle part"),
     MuscleRow((5, 6), "Frontalis secondary", "frontalis_secondary", "frontalis (lateral-central part)", "linear",
-              "left-right", "insertion: brow point 24 (19); origin 0.9 E above it, 0.25 E back",
+              "left-right", "insertion: brow point 24 (19); origin 0.9 E above it, 0.08 E back",
               "raises the middle of the brow"),
     MuscleRow((7, 8), "Orbicularis oculi", "orbicularis_oculi", "orbicularis oculi", "sphincter", "left-right",
-              "ellipsoid centred on the eye (mean of 42-47 / 36-41), semi-axes 0.55, 0.42, 0.5 E "
-              "along the face's x, y, z",
+              "ellipsoid a quarter of the lid slit above the lower lid (46, 47 / 40, 41), semi-axes "
+              "0.55, 0.42, 0.5 E along the face's x, y, z, pulling mostly across the slit (gains "
+              "0.25, 1, 0.5)",
               "narrows the eye (squint); negative contraction opens it wide (levator palpebrae)"),
     MuscleRow((9,), "Orbicularis oris", "orbicularis_oris", "orbicularis oris", "sphincter", "midline",
-              "ellipsoid centred on the lips (mean of 48-67) 0.25 half mouth widths in front, semi-axes "
-              "1.7 half mouth widths across and in depth, 1.8 half lip heights (51-57) up",
+              "ellipsoid centred one half mouth width in front of the lips (mean of 48-67), semi-axes "
+              "1.7 half mouth widths across, 1.8 half lip heights (51-57) up, 2.2 half widths deep",
               "purses the lips: corners in, lips together and forward"),
     MuscleRow((10, 11), "Frontalis outer", "frontalis_outer", "frontalis (lateral part)", "linear", "left-right",
-              "insertion: the brow between 25 and 26 (18 and 17); origin 0.9 E above it, 0.25 E back",
+              "insertion: the brow between 25 and 26 (18 and 17); origin 0.9 E above it, 0.08 E back",
               "raises the brow's tail"),
     MuscleRow((12, 13), "Frontalis inner", "frontalis_inner", "frontalis (medial part)", "linear", "left-right",
-              "insertion: the brow's head 22 (21); origin 0.9 E above it, 0.25 E back",
+              "insertion: the brow's head 22 (21); origin 0.9 E above it, 0.08 E back",
               "raises the inner brow (sadness, surprise, fear)"),
     MuscleRow((14, 15), "Lateral corugator", "corrugator_supercilii", "corrugator supercilii", "linear",
               "left-right",
-              "origin: the medial brow ridge, 0.08 E beside the nasal bridge top 27, 0.1 E up, "
-              "0.15 E deep; insertion: brow point 24 (19); a wide angular range (50 degrees) takes "
-              "in the brow's head 22 (21)",
+              "origin: the medial brow ridge, 0.08 E beside the nasal bridge top 27, 0.15 E up, "
+              "0.05 E deep; insertion: brow point 24 (19); its 40-degree range takes in the brow "
+              "from its head 22 (21) to 25 (18) and leaves the upper eyelid out",
               "draws the brow down and toward the midline (frown; lowers the brows in fear, anger)"),
     MuscleRow((16, 17), "Inner labii nasi", "levator_labii_superioris_alaeque_nasi",
               "levator labii superioris alaeque nasi", "linear", "left-right",
               "origin: the maxilla's frontal process, between the inner eye corner 42 (39) and the "
-              "nasal bridge 28, 0.1 E up; insertion: the nose ala 35 (31)",
+              "nasal bridge 28, 0.1 E up, 0.05 E out; insertion: the nose ala 35 (31)",
               "raises the nose flange and the upper lip beside it (sneer, disgust, fear)"),
     MuscleRow((18, 19), "Labii nasi", "levator_labii_superioris", "levator labii superioris", "linear",
               "left-right",
-              "origin: the infraorbital margin, 0.15 E below the lower eyelid (46, 47 / 40, 41); "
+              "origin: the infraorbital margin, 0.15 E below the lower eyelid (46, 47 / 40, 41), 0.05 E out; "
               "insertion: the upper lip between 52 and 53 (50 and 49)",
               "raises the upper lip"),
     MuscleRow((20, 21), "Angular depressor", "depressor_anguli_oris", "depressor anguli oris", "linear",
               "left-right",
-              "origin: the jaw line at 11 (5); insertion: the mouth corner 54 (48)",
+              "origin: the mandible straight below the mouth corner, at the height of jaw points 10-11 "
+              "(6-5), 0.1 E outward; insertion: the mouth corner 54 (48)",
               "lowers the mouth corner (sadness)"),
 )
 """The paper's Table 1 in its order: muscles 1-21 (each pair left then right)."""
