@@ -14,10 +14,11 @@ process.
 
 --dense prints only the dense layout's per-frame space transform (issue 14, section 3: the
 server's work a frame, target < 1 ms): `Retargeter.displacements` of one 468-point frame
-of the built-in performer onto the built-in face, per kernel, against the transform as it
-was before its hot path was rewritten (`displacements_before`, kept here only for the
-ratio), alternated in rounds so both see the same load; with the largest difference
-between the two relative to the frame's largest displacement.
+of the built-in performer (its widest expression in the first second) onto the built-in
+face, per kernel, against the transform as it was before its hot path was rewritten
+(`displacements_before`, kept here only for the ratio), alternated in rounds so both see
+the same load; with the largest difference between the two relative to the frame's
+largest displacement.
 """
 
 from __future__ import annotations
@@ -75,7 +76,7 @@ def dense_transform(repeats: int, rounds: int) -> None:
     layout = get_layout("mediapipe468")
     s0, frames = demo_points(layout, n_frames=30)
     t0 = layout.reference_points()
-    frame = frames[15]
+    frame = frames[np.abs(frames - s0).max(axis=(1, 2)).argmax()]  # the widest expression
     print(f"Space transform of one {len(s0)}-point frame, Retargeter.displacements "
           f"(median of {repeats}, {rounds} alternated rounds):")
     for kernel in (DEFAULT_KERNEL, "adaptive_multiquadric"):

@@ -243,10 +243,11 @@ class RBFTransform(RBFInterpolant):
         x = x.reshape(-1, x.shape[-1])
         if x.shape[1] == 2:
             x = np.hstack([x, np.zeros((len(x), 1))])
-        ok = np.isfinite(x).all(1)
-        if ok.all():
-            # the usual frame: no lost point, so no row selection copies
+        finite = np.isfinite(x)
+        if finite.all():
+            # the usual frame: no lost point, so no per-row test and no row selection copies
             return self._combination(x, self.coefs_).reshape(*lead, 3)
+        ok = finite.all(1)
         out = np.full((len(x), 3), np.nan)
         if ok.any():
             out[ok] = self._combination(x[ok], self.coefs_)
