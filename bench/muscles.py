@@ -21,7 +21,9 @@ Sections (functions, so later benches can add theirs):
     model cost   one `displacements` and one `jacobian` of the restricted model: the floor
                  under every iteration
     solvers      for each solver (`MuscleIK`, warm-started frame to frame), clean and noisy:
-                 ms a frame (median frame, and p95, of the median run over --repeats),
+                 ms a frame (median frame, and p95, of the median run over --repeats;
+                 wall clock, and the thread's CPU time, which a loaded machine inflates
+                 less),
                  iterations a frame (mean, max), contraction error (mean |c - truth| as a
                  share of each DOF's range), residual (RMS marked vertex to its target, cm,
                  IKResult.residual) and truth error (RMS marked vertex to its noise-free
@@ -120,17 +122,18 @@ def run_sequence(model, ids, options: dict, targets: np.ndarray, truth: np.ndarr
     ik = MuscleIK(model, ids, **options)
     sub = ik.model_
     span = np.where(np.ptp(model.limits, axis=1) > 0, np.ptp(model.limits, axis=1), 1.0)
-    times, iterations, residuals, c_err, v_err = [], [], [], [], []
+    times, cpu, iterations, residuals, c_err, v_err = [], [], [], [], [], []
     for target, c_true in zip(targets, truth):
-        t0 = time.perf_counter()
+        t0, u0 = time.perf_counter(), time.thread_time()
         c = ik.push(target)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.thread_time() - u0)
         iterations.append(ik.result_.iterations)
         residuals.append(ik.result_.residual)
         c_err.append(np.mean(np.abs(c - c_true) / span))
         miss = sub.displacements(c) - sub.displacements(c_true)
         v_err.append(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
-    return dict(ms=1e3 * np.median(times), p95=1e3 * np.percentile(times, 95),
+    return dict(ms=1e3 * np.median(times), p95=1e3 * np.percentile(times, 95), cpu=1e3 * np.median(cpu),
                 iterations=np.mean(iterations), max_iterations=int(np.max(iterations)),
                 c_err=np.mean(c_err), residual=np.nanmean(residuals), v_err=np.mean(v_err))
 
@@ -145,14 +148,14 @@ def solvers(model, ids, frames: int, repeats: int, sigma: float, lost: float, at
     noise_rms = sigma * np.sqrt(3.0)
     print(f"  {frames} frames; marked motion RMS {np.sqrt(np.mean(np.sum(clean ** 2, axis=2))):.3f} cm, "
           f"largest {np.linalg.norm(clean, axis=2).max():.3f} cm; input noise RMS {noise_rms:.3f} cm a point")
-    print(f"  {'solver':<18} {'targets':<26} {'ms/frame':>8} {'p95':>7} {'iter':>6} {'max':>5} "
+    print(f"  {'solver':<18} {'targets':<26} {'ms/frame':>8} {'p95':>7} {'cpu ms':>7} {'iter':>6} {'max':>5} "
           f"{'c err':>7} {'residual':>9} {'truth err':>9}")
     for label, options in SOLVERS:
         for name, targets in conditions:
             runs = [run_sequence(model, ids, dict(options, atol=atol), targets, truth) for _ in range(repeats)]
             r = sorted(runs, key=lambda run: run["ms"])[len(runs) // 2]     # the median run
             ratio = f" ({r['v_err'] / noise_rms:.2f}x)" if targets is not clean else ""
-            print(f"  {label:<18} {name:<26} {r['ms']:8.3f} {r['p95']:7.3f} {r['iterations']:6.1f} "
+            print(f"  {label:<18} {name:<26} {r['ms']:8.3f} {r['p95']:7.3f} {r['cpu']:7.3f} {r['iterations']:6.1f} "
                   f"{r['max_iterations']:5d} {100 * r['c_err']:6.2f}% {r['residual']:9.5f} "
                   f"{r['v_err']:9.5f}{ratio}")
 

@@ -309,10 +309,15 @@ class _Problem:
                 f_new = e_new @ e_new
                 if f_new < f:
                     # The linear model's own forecast of the new error: where the exact error
-                    # matches it, a further step could only recover their difference (for an
-                    # undamped step J^T e_forecast = 0), so the last step has converged.
+                    # matches it, a further step could recover only their difference plus what
+                    # a DOF held at a bound would gain by leaving it (for an undamped step the
+                    # forecast gradient J^T e_forecast = g - A u vanishes on the free DOFs), so
+                    # when both are within tol the last step has converged.
                     miss = e_new - (e - j @ u)
-                    confirmed = lam <= _CONFIRM_LAMBDA and miss @ miss <= 2.0 * self.tol * f_new
+                    pull = g - a @ u
+                    inward = ((c_new <= self.low) & (pull > 0)) | ((c_new >= self.high) & (pull < 0))
+                    gain = miss @ miss + np.sum(pull[inward] ** 2 / damp[inward])
+                    confirmed = lam <= _CONFIRM_LAMBDA and gain <= 2.0 * self.tol * f_new
                     lam = max(lam / 10.0, _LAMBDA_MIN)   # trust the linear model more
                     break
                 lam *= 4.0                             # the linear model over-promised: damp more
