@@ -13,10 +13,13 @@ Woodward §4.1 moves each vertex directly by abstract muscles, with no physics:
   a = (cos alpha - cos omega) / (1 - cos omega), 1 along m, 0 at and beyond omega.
 - an **ellipsoid (sphincter) muscle** draws vertices toward its centre with the same
   radial fall-off, measured in the ellipsoid's normalised distance (semi-axes lx, ly, lz),
-  and no angular factor.
+  and no angular factor. One addition: per-axis pull gains (`SphincterMuscle.pull`, all 1
+  in the paper), so the eye's sphincter closes the lids without dragging the eye corners.
 
-k is the contraction in [0, 1] times the muscle's `strength` (its largest displacement,
-mesh units), so a muscle alone is linear in its contraction. The **jaw** (§4 and §7.2's
+k is the contraction times the muscle's `strength` (its largest displacement, mesh
+units), so a muscle alone is linear in its contraction. Contractions are in [0, 1],
+except the orbicularis oculi's, in [-1, 1]: negative opens the eye wide, the motion of
+fear the paper's muscles lacked (§10). The **jaw** (§4 and §7.2's
 angular joint) rotates the lower face about the hinge axis by the jaw angle, each vertex
 by its weight times the angle. §4.2: the jaw moves vertices further than the muscles
 can, out of the zones of the mouth muscles; such a vertex "is unaltered until it returns
@@ -64,15 +67,6 @@ def _limits(value, what: str) -> tuple[float, float]:
     if not (np.isfinite(low) and np.isfinite(high) and low <= 0.0 < high):
         raise RetargetError(f"{what} must be [low, high] with low <= 0 < high, got {value!r}")
     return low, high
-
-
-def _falloff(t: np.ndarray, start: np.ndarray) -> np.ndarray:
-    """Waters' radial factor r for t = D / Rf (linear) or the normalised ellipsoid
-    distance (sphincter), with the fall-off starting at `start` = Rs / Rf (§4.1):
-    cos((1 - t/start) pi/2) inside, cos((t - start)/(1 - start) pi/2) out to t = 1, then 0
-    (the clip makes the cosine 0 beyond the edge)."""
-    x = np.where(t <= start, 1.0 - t / start, (t - start) / (1.0 - start))
-    return np.cos(np.minimum(x, 1.0) * _HALF_PI)
 
 
 @dataclass(frozen=True)
@@ -211,17 +205,6 @@ class Jaw:
         a = self.hinge_left - self.hinge_right
         return a / np.linalg.norm(a)
 
-    def moved(self, points: np.ndarray, weights: np.ndarray, angle: float) -> np.ndarray:
-        """(K, 3) `points` (K, 3) turned about the axis by `weights` (K,) times `angle`
-        (Rodrigues; turning by a share of the angle keeps each vertex's distance to the
-        axis, where blending rotated and rest positions would shrink the chin)."""
-        a = self.axis
-        v = points - self.hinge_right
-        along = (v @ a)[:, None] * a
-        perp = v - along
-        phi = (weights * angle)[:, None]
-        return self.hinge_right + along + np.cos(phi) * perp + np.sin(phi) * np.cross(a, perp)
-
     def restricted(self, vertex_ids: np.ndarray) -> "Jaw":
         return Jaw(self.hinge_right, self.hinge_left, self.weights[vertex_ids], self.limits)
 
@@ -236,11 +219,13 @@ class Jaw:
 class _Pairs:
     """(muscle, point) pairs with each pair's muscle parameters gathered, so the fields of
     every muscle at every point it may reach are a few elementwise numpy calls on (P,)
-    arrays (no Python loop over muscles, no work on pairs out of reach).
+    arrays (no Python loop over muscles, no work on pairs out of reach). Parameters are
+    stored component-major, (3, P) and (3, 3, P), so every call runs on contiguous rows.
 
-    Both kinds share one formula: a linear muscle's "ellipsoid" is the sphere of radius
-    Rf about its origin (normalised distance D / Rf, start Rs / Rf) with the angular
-    factor; a sphincter's is its own, with no angular factor.
+    Both kinds share one formula. The normalised distance is t = sqrt(q' G q): a linear
+    muscle's G is I / Rf² (t = D / Rf, its fall-off starts at Rs / Rf), a sphincter's the
+    ellipsoid's form. The angular factor of a sphincter is 1 (direction 0, cos omega = -1,
+    scale 1). The pull is along H q: H = I except for a sphincter with axis gains.
     """
 
     def __init__(self, muscles, muscle: np.ndarray, point: np.ndarray):
@@ -248,41 +233,46 @@ class _Pairs:
         self.point = point                              # (P,) int, row of the points
         # pairs come grouped by point: the points that have any, and where each group starts
         self.points, self.starts = np.unique(point, return_index=True)
-        lin = np.array([m.kind == "linear" for m in muscles], dtype=bool)
-        origin = np.array([m.origin if m.kind == "linear" else m.centre for m in muscles]).reshape(-1, 3)
-        scaled = np.array([np.eye(3) / m.rf if m.kind == "linear" else m.axes / m.radii[:, None]
-                           for m in muscles]).reshape(-1, 3, 3)
+        lin = [m.kind == "linear" for m in muscles]
+        origin = np.array([m.origin if k else m.centre for m, k in zip(muscles, lin)]).reshape(-1, 3)
+        form = np.array([np.eye(3) / m.rf ** 2 if k else m.axes.T @ (m.axes / m.radii[:, None] ** 2)
+                         for m, k in zip(muscles, lin)]).reshape(-1, 3, 3)
+        pull = np.array([np.eye(3) if k else m.axes.T @ (m.pull[:, None] * m.axes)
+                         for m, k in zip(muscles, lin)]).reshape(-1, 3, 3)
+        scale = np.array([1.0 / (1.0 - np.cos(m.omega)) if k else 1.0 for m, k in zip(muscles, lin)])
         direction = np.array([(m.insertion - m.origin) / np.linalg.norm(m.insertion - m.origin)
-                              if m.kind == "linear" else np.zeros(3) for m in muscles]).reshape(-1, 3)
-        cos_omega = np.array([np.cos(m.omega) if m.kind == "linear" else 0.0 for m in muscles])
-        start = np.array([m.rs / m.rf if m.kind == "linear" else m.start for m in muscles])
-        strength = np.array([m.strength for m in muscles])
-        gains = np.array([np.eye(3) if m.kind == "linear" else m.axes.T @ (m.pull[:, None] * m.axes)
-                          for m in muscles]).reshape(-1, 3, 3)
-        self.linear = lin[muscle]
-        self.origin = origin[muscle]
-        self.scaled = scaled[muscle]
-        self.direction = direction[muscle]
-        self.cos_omega = cos_omega[muscle]
-        self.angular_scale = 1.0 / (1.0 - self.cos_omega)
-        self.start = start[muscle]
-        self.strength = strength[muscle]
-        self.gains = gains[muscle]
-        self.plain = np.array([m.kind == "linear" or bool((m.pull == 1).all()) for m in muscles], dtype=bool)[muscle]
-        self.any_gains = not self.plain.all()
+                              if k else np.zeros(3) for m, k in zip(muscles, lin)]).reshape(-1, 3)
+        cos_omega = np.array([np.cos(m.omega) if k else -1.0 for m, k in zip(muscles, lin)])
+        start = np.array([m.rs / m.rf if k else m.start for m, k in zip(muscles, lin)])[muscle]
+        self.origin = np.ascontiguousarray(origin[muscle].T)                     # (3, P)
+        self.form = np.ascontiguousarray(form[muscle].transpose(1, 2, 0))        # (3, 3, P)
+        self.pull = np.ascontiguousarray(pull[muscle].transpose(1, 2, 0))        # (3, 3, P)
+        self.plain = bool(np.all(self.pull == np.eye(3)[:, :, None]))
+        self.direction = np.ascontiguousarray((direction * scale[:, None])[muscle].T)   # (3, P) m / (1 - cos w)
+        self.cos_omega = (cos_omega * scale)[muscle]                             # (P,) cos w / (1 - cos w)
+        self.start = start
+        # Waters' r as one cosine: cos((t - start) * k), k = pi/2 / start inside, pi/2 / (1 - start) out
+        self.k_in = _HALF_PI / start
+        self.k_out = _HALF_PI / (1.0 - start)
+        self.minus_strength = -np.array([m.strength for m in muscles])[muscle]
 
     def fields(self, p: np.ndarray) -> np.ndarray:
-        """(..., P, 3) each pair's displacement at full contraction, p (..., P, 3) its
-        positions (leading axes: several positions per pair at once)."""
-        q = p - self.origin
-        d = np.sqrt(np.maximum((q * q).sum(-1), 1e-300))
-        u = np.matmul(self.scaled, q[..., None])[..., 0]
-        t = np.sqrt((u * u).sum(-1))
+        """(P, 3) or (S, P, 3): each pair's displacement at full contraction, p (P, 3) or
+        (S, P, 3) its positions (S: several positions per pair at once)."""
+        stacked = p.ndim == 3
+        q = p.transpose(2, 0, 1) - self.origin[:, None] if stacked else p.T - self.origin   # (3, [S,] P)
+        d = np.sqrt(np.maximum((q * q).sum(0), 1e-300))
+        t = np.sqrt(np.einsum("ijp,isp,jsp->sp", self.form, q, q) if stacked
+                    else np.einsum("ijp,ip,jp->p", self.form, q, q))
         # §4.1 angular factor, continuous at omega (see the module docstring)
-        a = np.clip(((q * self.direction).sum(-1) / d - self.cos_omega) * self.angular_scale, 0.0, None)
-        a = np.where(self.linear, a, 1.0)
-        pulled = np.matmul(self.gains, q[..., None])[..., 0] if self.any_gains else q
-        return ((-self.strength / d) * a * _falloff(t, self.start))[..., None] * pulled
+        a = np.maximum((q * (self.direction[:, None] if stacked else self.direction)).sum(0) / d
+                       - self.cos_omega, 0.0)
+        r = np.cos(np.minimum((t - self.start) * np.where(t <= self.start, self.k_in, self.k_out), _HALF_PI))
+        coef = self.minus_strength / d * a * r
+        if not self.plain:
+            q = np.einsum("ijp,jsp->isp", self.pull, q) if stacked else np.einsum("ijp,jp->ip", self.pull, q)
+        out = coef * q
+        return out.transpose(1, 2, 0) if stacked else out.T
 
 
 def _reach(muscle) -> tuple[np.ndarray, float]:
