@@ -2,11 +2,11 @@
 solvers on a synthetic performance.
 
     python bench/muscles.py [--frames 300] [--repeats 3] [--noise 0.05] [--lost 0.02]
-                            [--atol 0.001] [--model auto|real|standin] [--seed 0]
+                            [--atol 0.001] [--model real|standin] [--seed 0]
 
 The face: the muscles placed on the built-in sample face (`place_muscles`, 68 iBUG points
-marked, 22 DOFs, cm) when `retarget.muscles.placement` exists (--model auto), else the
-tests' stand-in model (21 smooth fields and a jaw, tests/unit/test_muscle_ik.py).
+marked, 22 DOFs, cm; --model real), or the tests' stand-in model (21 smooth fields and a
+jaw, tests/unit/test_muscle_ik.py; --model standin).
 
 The performance: --frames frames at 30 fps of smooth random contractions (each DOF a
 half-wave rectified sine of its own frequency, 0.1-0.5 Hz, and amplitude, so muscles rest at
@@ -52,6 +52,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.stream import machine  # noqa: E402
+from retarget.muscles import place_muscles  # noqa: E402
 from retarget.muscles.ik import MuscleIK  # noqa: E402
 from retarget.sample_face import sample_face  # noqa: E402
 
@@ -65,18 +66,12 @@ SOLVERS = (
 
 
 def face_model(kind: str):
-    """(whole model, (68,) marked vertex ids, label)."""
-    if kind in ("auto", "real"):
-        try:
-            from retarget.muscles.placement import place_muscles
-        except ImportError:
-            if kind == "real":
-                raise
-        else:
-            face = sample_face()
-            ids = face.landmarks68
-            model = place_muscles(face.vertices, face.faces, face.vertices[ids], "ibug68")
-            return model, ids, "muscles placed on the built-in face (68 iBUG points)"
+    """(whole model, (68,) marked vertex ids, label) for --model `kind`."""
+    if kind == "real":
+        face = sample_face()
+        ids = face.landmarks68
+        model = place_muscles(face.vertices, face.faces, face.vertices[ids], "ibug68")
+        return model, ids, "muscles placed on the built-in face (68 iBUG points)"
     sys.path.insert(0, str(ROOT / "tests" / "unit"))
     from test_muscle_ik import StandInFace
 
@@ -166,7 +161,7 @@ def main(argv=None) -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--noise", type=float, default=0.05, help="tracker noise, cm per coordinate")
     parser.add_argument("--lost", type=float, default=0.02, help="share of points lost a frame")
-    parser.add_argument("--model", choices=("auto", "real", "standin"), default="auto")
+    parser.add_argument("--model", choices=("real", "standin"), default="real")
     parser.add_argument("--atol", type=float, default=1e-3,
                         help="stop at this RMS residual, cm (clean targets converge forever otherwise)")
     parser.add_argument("--seed", type=int, default=0)

@@ -3,8 +3,8 @@ hold, warm starts pay, lost points are ignored, both solvers converge.
 
 A stand-in model (`StandInFace`: 21 smooth displacement fields, mildly non-linear in the
 contraction, then a jaw rotation about an axis) honours the `MuscleFace` contract of
-/tmp/notes/muscles_spec.md, so the solvers are tested apart from the muscle model; the same
-properties are checked on the real model placed on the sample face when it is importable.
+the project's muscle spec, so the solvers are tested apart from the muscle model; the same
+properties are checked on the real model (`place_muscles` on the built-in sample face).
 """
 
 from __future__ import annotations
@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 
 from retarget.errors import RetargetError
+from retarget.muscles import place_muscles
 from retarget.muscles.ik import IKResult, MuscleIK, solve
+from retarget.sample_face import sample_face
 
 
 class StandInFace:
@@ -88,14 +90,10 @@ def standin():
 
 
 def _real_face():
-    """The real model on the sample face (or a skip until it lands), and its 68 marked ids."""
-    placement = pytest.importorskip("retarget.muscles.placement")
-    from retarget.sample_face import sample_face
-
+    """The muscles placed on the built-in face, and its 68 marked (landmark) vertex ids."""
     face = sample_face()
     ids = face.landmarks68
-    model = placement.place_muscles(face.vertices, face.faces, face.vertices[ids], "ibug68")
-    return model, ids
+    return place_muscles(face.vertices, face.faces, face.vertices[ids], "ibug68"), ids
 
 
 @pytest.fixture(scope="module", params=["standin", "real"])
