@@ -29,6 +29,10 @@ Sections (functions, so later benches can add theirs):
                  IKResult.residual) and truth error (RMS marked vertex to its noise-free
                  position, cm; under noise, over the input noise's RMS: below 1 means the
                  muscles absorbed noise)
+    built-in performance  (--model real) the sample face's demo performance (its own
+                 expression shapes, which muscles only approximate) at the 68 marked
+                 vertices: ms a frame, iterations, residual (cm, and as a share of the
+                 marked motion's RMS)
 
 The machine's load is printed first: the figures move with it.
 """
@@ -54,7 +58,7 @@ sys.path.insert(0, str(ROOT))
 from bench.stream import machine  # noqa: E402
 from retarget.muscles import place_muscles  # noqa: E402
 from retarget.muscles.ik import MuscleIK  # noqa: E402
-from retarget.sample_face import sample_face  # noqa: E402
+from retarget.sample_face import demo_weights, sample_face  # noqa: E402
 
 # (label, MuscleIK keyword arguments): the two solvers of the issue and a variant of each.
 SOLVERS = (
@@ -155,6 +159,32 @@ def solvers(model, ids, frames: int, repeats: int, sigma: float, lost: float, at
                   f"{r['v_err']:9.5f}{ratio}")
 
 
+def builtin_performance(model, ids, frames: int, repeats: int, atol: float) -> None:
+    """Section: the built-in demo performance (the sample face's own expression shapes,
+    `demo_weights`, not made by muscles) at the 68 marked vertices: targets the muscles can
+    only approximate, as real tracking gives. Real model only (the same mesh and ids)."""
+    face = sample_face()
+    targets = np.einsum("fe,evk->fvk", demo_weights(frames), face.expressions[:, ids])
+    motion = np.sqrt(np.mean(np.sum(targets ** 2, axis=2)))
+    print(f"  {frames} frames; marked motion RMS {motion:.3f} cm")
+    print(f"  {'solver':<18} {'ms/frame':>8} {'p95':>7} {'iter':>6} {'max':>5} {'residual':>9} {'of motion':>9}")
+    for label, options in SOLVERS:
+        runs = []
+        for _ in range(repeats):
+            ik = MuscleIK(model, ids, **options, atol=atol)
+            times, iterations, residuals = [], [], []
+            for target in targets:
+                t0 = time.perf_counter()
+                ik.push(target)
+                times.append(time.perf_counter() - t0)
+                iterations.append(ik.result_.iterations)
+                residuals.append(ik.result_.residual)
+            runs.append((1e3 * np.median(times), 1e3 * np.percentile(times, 95), np.mean(iterations),
+                         int(np.max(iterations)), np.mean(residuals)))
+        ms, p95, it, top, res = sorted(runs)[len(runs) // 2]
+        print(f"  {label:<18} {ms:8.3f} {p95:7.3f} {it:6.1f} {top:5d} {res:9.5f} {res / motion:8.0%}")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=300)
@@ -173,6 +203,9 @@ def main(argv=None) -> None:
     model_cost(model, ids)
     print("solvers (MuscleIK, warm-started)")
     solvers(model, ids, args.frames, args.repeats, args.noise, args.lost, args.atol, args.seed)
+    if args.model == "real":
+        print("built-in performance (MuscleIK, warm-started)")
+        builtin_performance(model, ids, args.frames, args.repeats, args.atol)
 
 
 if __name__ == "__main__":
