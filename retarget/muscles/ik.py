@@ -315,7 +315,8 @@ class _Problem:
                     # when both are within tol the last step has converged.
                     miss = e_new - (e - j @ u)
                     pull = g - a @ u
-                    inward = ((c_new <= self.low) & (pull > 0)) | ((c_new >= self.high) & (pull < 0))
+                    inward = (((c_new <= self.low) & (pull > 0)) | ((c_new >= self.high) & (pull < 0))) \
+                        & (self.span > 0)
                     gain = miss @ miss + np.sum(pull[inward] ** 2 / damp[inward])
                     confirmed = lam <= _CONFIRM_LAMBDA and gain <= 2.0 * self.tol * f_new
                     lam = max(lam / 10.0, _LAMBDA_MIN)   # trust the linear model more
