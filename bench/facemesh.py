@@ -1,7 +1,7 @@
 """Native face-mesh tracking (`retarget.facemesh`, LiteRT) on a real video, against the
 browser's tracker.
 
-    python bench/facemesh.py [--video V] [--frames N] [--repeats 3] [--agree 150]
+    python bench/facemesh.py [--video V] [--frames N] [--repeats 3] [--agree 150] [--before]
 
 Prints, for --video (default ../shared/data/video/face_expressions_480.mp4, 480 x 480
 H.264, 30 fps, 1008 frames; the first --frames, default all):
@@ -11,6 +11,11 @@ H.264, 30 fps, 1008 frames; the first --frames, default all):
                 and frames per second, and the share of frames with a face
     whole       start-up (models loaded, interpreters built) plus decoding plus tracking
                 of every frame: frames per second, start-up included, as a command sees it
+    before      (--before) `FaceMeshTracker.track` against the tracker as it was before
+                its crop was rewritten (`TrackerBefore`, kept here only for the ratio),
+                frame by frame in alternating order so both see the same load: median ms
+                a frame of each, the median of the per-frame ratios, and the largest
+                difference between their points, px
     stress      (--stress) hard frames made from the video's (blank, rolled 42 degrees,
                 jumps, upside down, a small face, dark) through both trackers: how often
                 they agree that there is a face, per kind of frame
@@ -76,6 +81,50 @@ def whole_run(video: Path, frames: int | None) -> tuple[float, int, list[float],
     return time.perf_counter() - start, count, per_frame, found
 
 
+def tracker_before():
+    """A `FaceMeshTracker` whose crop is made as before its rewrite: the 3-channel frame
+    warped whole, scaled into a new array and copied into the model by set_tensor."""
+    from retarget.facemesh.tracker import INPUT, N_POINTS, FaceMeshTracker
+
+    class TrackerBefore(FaceMeshTracker):
+        def landmarks(self, rgb, roi):
+            axes = roi.axes()
+            linear = axes / INPUT
+            offset = roi.centre + axes @ np.full(2, 0.5 / INPUT - 0.5) - 0.5
+            crop = cv2.warpAffine(rgb, np.column_stack([linear, offset]), (INPUT, INPUT),
+                                  flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+            self._interpreter.set_tensor(self._input, crop[None].astype(np.float32) / 255.0)
+            self._interpreter.invoke()
+            raw = self._interpreter.get_tensor(self._points).reshape(N_POINTS, 3).astype(np.float64)
+            logit = float(self._interpreter.get_tensor(self._presence).ravel()[0])
+            presence = 1.0 / (1.0 + np.exp(-np.clip(logit, -100.0, 100.0)))
+            xy = roi.centre + (raw[:, :2] / INPUT - 0.5) @ axes.T
+            return np.column_stack([xy, raw[:, 2] / INPUT * roi.side]), presence
+
+    return TrackerBefore()
+
+
+def against_before(rgb: list[np.ndarray]) -> tuple[float, float, float, float]:
+    """(ms a frame now, ms before, median per-frame ratio, largest point difference px)
+    of `FaceMeshTracker` and `tracker_before` on the frames, alternately first."""
+    from retarget.facemesh.tracker import FaceMeshTracker
+
+    trackers = [FaceMeshTracker(), tracker_before()]
+    seconds, difference = [[], []], 0.0
+    for i, frame in enumerate(rgb):
+        points = [None, None]
+        for k in (0, 1) if i % 2 else (1, 0):
+            t = time.perf_counter()
+            points[k] = trackers[k].track(frame)
+            seconds[k].append(time.perf_counter() - t)
+        if (points[0] is None) != (points[1] is None):
+            difference = float("inf")
+        elif points[0] is not None:
+            difference = max(difference, float(np.abs(points[0] - points[1]).max()))
+    now, before = np.array(seconds)
+    return 1000 * np.median(now), 1000 * np.median(before), float(np.median(now / before)), difference
+
+
 def stress_frames(rgb: list[np.ndarray], rng: np.random.Generator) -> tuple[list[np.ndarray], list[str]]:
     """Hard frames made from the video's: runs of blank frames, a 42-degree roll, jumps
     between distant frames, upside-down frames, a small face in a large frame and a
@@ -133,6 +182,8 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=None)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--agree", type=int, default=150, help="frames compared with the browser (0: none)")
+    parser.add_argument("--before", action="store_true",
+                        help="also tracking against the tracker before its crop rewrite (`against_before`)")
     parser.add_argument("--stress", action="store_true",
                         help="also the face / no-face answers of both trackers on hard frames (`stress_frames`)")
     args = parser.parse_args()
@@ -151,6 +202,12 @@ def main() -> int:
     print(f"tracking    {ms:8.2f} ms a frame, {1000 / ms:.0f} frames/s; face in {found}/{count} frames")
     print(f"whole       {count / seconds:8.0f} frames/s, start-up, decoding and tracking included "
           f"({seconds:.2f} s for {count} frames)")
+
+    if args.before:
+        for _ in range(args.repeats):
+            now, before, ratio, difference = against_before(rgb)
+            print(f"before      {now:8.2f} ms a frame now, {before:.2f} ms before ({ratio:.2f}x per frame); "
+                  f"points differ by {difference:.1e} px at most")
 
     if args.agree:
         from retarget.facemesh.tracker import FaceMeshTracker
