@@ -130,7 +130,7 @@ def _muscles(p: np.ndarray, frame: np.ndarray, e: float) -> list:
                 origin = brow + 0.9 * e * Y - 0.08 * e * Z      # up the forehead, along its curve
                 out.append(_linear(name, origin, brow, 0.95, 1.4, 18, 0.11 * e))
             elif b == "corrugator_supercilii":
-                origin = p[27] - 0.08 * e * inward + 0.15 * e * Y - 0.05 * e * Z
+                origin = p[27] - 0.08 * e * inward + 0.15 * e * Y + 0.05 * e * Z
                 out.append(_linear(name, origin, pt(24), 0.5, 1.35, 40, 0.18 * e))
             elif b == "levator_labii_superioris_alaeque_nasi":
                 origin = 0.5 * (pt(42) + p[28]) + 0.1 * e * Y + 0.05 * e * Z

@@ -70,8 +70,9 @@ MUSCLE_TABLE: tuple[MuscleRow, ...] = (
     MuscleRow((14, 15), "Lateral corugator", "corrugator_supercilii", "corrugator supercilii", "linear",
               "left-right",
               "origin: the medial brow ridge, 0.08 E beside the nasal bridge top 27, 0.15 E up, "
-              "0.05 E deep; insertion: brow point 24 (19); its 40-degree range takes in the brow "
-              "from its head 22 (21) to 25 (18) and leaves the upper eyelid out",
+              "0.05 E out (a lowered brow bunches forward); insertion: brow point 24 (19); its "
+              "40-degree range takes in the brow from its head 22 (21) to 25 (18) and leaves the "
+              "upper eyelid out",
               "draws the brow down and toward the midline (frown; lowers the brows in fear, anger)"),
     MuscleRow((16, 17), "Inner labii nasi", "levator_labii_superioris_alaeque_nasi",
               "levator labii superioris alaeque nasi", "linear", "left-right",
