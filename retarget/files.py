@@ -34,12 +34,17 @@ from retarget.gltf.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import Layout, get_layout
 from retarget.mesh import Mesh, load_mesh
+from retarget.muscles import MuscleFace, place_muscles
+from retarget.muscles.drive import MuscleDrive
 from retarget.performance import Performance
 from retarget.pipeline import DEFAULT_KERNEL, transfer
 from retarget.skin import SkinWeights
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
 
-__all__ = ["ExportResult", "TransferResult", "export_gltf_files", "transfer_files"]
+__all__ = ["ExportResult", "TransferResult", "contractions_files", "export_gltf_files", "muscles_for",
+           "transfer_files"]
+
+DRIVES = ("points", "muscles")
 
 
 # ---------------------------------------------------------------------------------------
@@ -53,10 +58,12 @@ class TransferResult:
     vertices : (F, V, 3) float32, the deformed target, mesh units (also written to `out`).
     rest : (V, 3) float64, the target mesh's neutral vertices as read.
     n_points : N, the number of feature points.
-    method : the deformer (the rig's method when the weights were read from a file).
-    weights_seconds, transfer_seconds : wall time of the weight solve (or rig read) and of
-        the per-frame transfer.
+    method : the deformer (the rig's method when the weights were read from a file;
+        "muscles" when driven by muscles).
+    weights_seconds, transfer_seconds : wall time of the weight solve (or rig read, or
+        muscle placement) and of the per-frame transfer.
     out : the path written.
+    contractions : (F, D) float64 solved muscle contractions when driven by muscles.
     """
 
     vertices: np.ndarray
@@ -66,6 +73,7 @@ class TransferResult:
     weights_seconds: float
     transfer_seconds: float
     out: Path
+    contractions: np.ndarray | None = None
 
     def summary(self) -> str:
         """The one-line report `transfer` prints."""
@@ -92,6 +100,9 @@ def transfer_files(
     mask: list[str] | None = None,
     layout: str | None = None,
     rig=None,
+    drive: str = "points",
+    muscles=None,
+    contractions_out=None,
     quiet: bool = False,
 ) -> TransferResult:
     """Retarget source frames in files onto a target mesh in a file; write (F, V, 3).
@@ -109,11 +120,23 @@ def transfer_files(
         strings or ints) of the active points, their union; None for all.
     layout : layout name; default the landmarks JSON's ``"layout"``, if any.
     rig : ``.npz`` from `SkinWeights.save` to use instead of computing weights.
+    drive : "points" (feature points as skinning joints, Dutreve §3) or "muscles" (the
+        feature points' motion solved into muscle contractions by the muscle IK and made by
+        the muscles, Woodward §4, §7; no rig).
+    muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the mesh
+        from its landmarks.
+    contractions_out : with drive "muscles", ``.npy`` written with the (F, D) contractions.
 
     Raises `RetargetError` for every refusal, naming the file or option.
     """
+    if drive not in DRIVES:
+        raise RetargetError(f"unknown drive {drive!r}; choose one of {', '.join(DRIVES)}")
+    if drive != "muscles" and (muscles is not None or contractions_out is not None):
+        raise RetargetError("muscles and contractions_out need drive 'muscles'")
     out = Path(out)
     require_parent(out)
+    if contractions_out is not None:
+        require_parent(Path(contractions_out))
     mesh = read_mesh(target_mesh)
     points = read_landmarks(target_landmarks, mesh)
     n = points.n_points
@@ -122,6 +145,20 @@ def transfer_files(
     active = mask_for(mask, the_layout, n)
 
     start = time.perf_counter()
+    if drive == "muscles":
+        model = muscles_for(muscles, mesh, points, the_layout)
+        placed_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        performance = _performance(mesh, points, the_layout, active, kernel, smoothing, s0)
+        muscle_drive = MuscleDrive(model, points)
+        contractions = _contractions(muscle_drive, performance, frames, quiet)
+        result = mesh.vertices + muscle_drive.displacements(contractions)
+        transfer_seconds = time.perf_counter() - start
+        write_npy(out, result.astype(np.float32))
+        if contractions_out is not None:
+            write_npy(Path(contractions_out), contractions)
+        return TransferResult(result.astype(np.float32), mesh.vertices, n, "muscles", placed_seconds,
+                              transfer_seconds, out, contractions)
     weights = rig_weights(rig, deformer, mesh, points, the_layout, quiet=quiet)
     method = (weights.method or "rig") if rig is not None else deformer
     weights_seconds = time.perf_counter() - start
@@ -136,6 +173,49 @@ def transfer_files(
     return TransferResult(
         result, mesh.vertices, n, method, weights_seconds, transfer_seconds, out
     )
+
+
+def contractions_files(target_mesh, target_landmarks, source_neutral, source_frames, *,
+                       layout: str | None = None, muscles=None, kernel: str = DEFAULT_KERNEL,
+                       smoothing: float | None = None, quiet: bool = False) -> tuple[np.ndarray, tuple[str, ...]]:
+    """(F, D) muscle contractions of a source's frames on a target (as `transfer_files`
+    with drive "muscles" solves them) and the D dof names."""
+    mesh = read_mesh(target_mesh)
+    points = read_landmarks(target_landmarks, mesh)
+    s0, frames = source_arrays(source_neutral, source_frames, points.n_points)
+    the_layout = layout_for(layout, points)
+    drive = MuscleDrive(muscles_for(muscles, mesh, points, the_layout), points)
+    performance = _performance(mesh, points, the_layout, None, kernel, smoothing, s0)
+    return _contractions(drive, performance, frames, quiet), drive.names
+
+
+def muscles_for(path, mesh: Mesh, points: SurfacePoints, layout: Layout | None) -> MuscleFace:
+    """The muscles read from `path` (a ``retarget muscles`` JSON for this mesh), or (path
+    None) placed on the mesh from its feature points."""
+    if path is not None:
+        require_file(path, "muscles")
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise RetargetError(f"could not read muscles {str(path)!r} as JSON: {exc}") from None
+        if not isinstance(data, dict):
+            raise RetargetError(f"muscles {str(path)!r} is not a JSON object")
+        return MuscleFace.from_json(data, mesh.vertices)
+    if layout is None:
+        raise RetargetError("placing muscles needs the landmarks' layout: give --layout or a "
+                            "landmarks JSON with \"layout\"")
+    return place_muscles(mesh.vertices, mesh.faces, points, layout)
+
+
+def _contractions(drive: MuscleDrive, performance: Performance, frames: np.ndarray, quiet: bool,
+                  chunk: int = 64) -> np.ndarray:
+    """(F, D) contractions of (F, N, 2|3) source frames, solved in order, with a progress bar."""
+    out = np.empty((len(frames), len(drive.names)))
+    with progress_bar(len(frames), "muscle IK", "frame", quiet) as advance:
+        for i in range(0, len(frames), chunk):
+            out[i:i + chunk] = drive.contractions(performance.displacements(frames[i:i + chunk]))
+            advance(min(1.0, (i + chunk) / max(len(frames), 1)))
+    return out
 
 
 # ---------------------------------------------------------------------------------------

@@ -36,13 +36,20 @@ Subcommands (``retarget <command> --help`` for the details):
 ``open-mouth``
     A mesh whose lips are joined (most scans and sculpts) cut open along the lip contact
     line (`retarget.lips`), original vertices first, the cut's duplicates appended.
+``muscles``
+    Woodward et al.'s 21 virtual muscles and the jaw placed on a face from its landmarks
+    (`retarget.muscles`), as JSON for ``transfer --drive muscles``.
+``recognise``
+    The expression of each frame (neutral or one of six) from muscle contractions, with
+    the distances and a confidence, as CSV (Woodward §10).
 
 ``serve`` (the web app) is the server's: `server.cli` owns the installed ``retarget``
 command and adds it to this parser, so the library never imports the web stack; ``python -m
 retarget.cli`` runs the library's commands alone.
 
 One module per command family: `retargeting` (transfer, rig, export-gltf, demo), `sources`
-(track, condition, calibrate), `mouth` (open-mouth), `landmarks`, `layouts`; `parser` holds what their parsers share. The
+(track, condition, calibrate), `mouth` (open-mouth), `landmarks`, `muscles` (muscles,
+recognise), `layouts`; `parser` holds what their parsers share. The
 work is the library's (`retarget.files` reads, checks and writes the files).
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
@@ -58,7 +65,7 @@ import os
 import sys
 
 from retarget import __version__
-from retarget.cli import landmarks, layouts, mouth, retargeting, sources
+from retarget.cli import landmarks, layouts, mouth, muscles, retargeting, sources
 from retarget.cli.parser import PROG, Parser, UsageError, quiet_option
 from retarget.errors import RetargetError
 
@@ -87,6 +94,8 @@ def build_parser() -> Parser:
     retargeting.add_export_gltf(commands, quiet)
     mouth.add_open_mouth(commands)
     landmarks.add_landmarks(commands)
+    muscles.add_muscles(commands)
+    muscles.add_recognise(commands, quiet)
     layouts.add_layouts(commands)
     return parser
 

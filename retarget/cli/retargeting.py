@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.files import (computed_weights, export_gltf_files, layout_for, read_landmarks,
+from retarget.files import (DRIVES, computed_weights, export_gltf_files, layout_for, read_landmarks,
                             read_mesh, require_parent, transfer_files, write_file, write_json,
                             write_npy)
 from retarget.cli.parser import PROG, non_negative_float, positive_float, positive_int
@@ -62,10 +62,22 @@ def add_transfer(commands, parents) -> None:
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
                    help=f"landmark layout ({', '.join(LAYOUTS)}); default: the landmarks "
                    "JSON's \"layout\"")
+    p.add_argument("--drive", choices=list(DRIVES), default="points",
+                   help="points: feature points as skinning joints (default); muscles: their motion "
+                   "solved into the 21 muscles' contractions and the jaw (Woodward et al.), no rig")
+    p.add_argument("--muscles", metavar="MUSCLES.json",
+                   help="with --drive muscles: muscles from 'retarget muscles' (default: placed from "
+                   "the landmarks)")
+    p.add_argument("--contractions-out", metavar="C.npy",
+                   help="with --drive muscles: the (F, 22) contractions, written here (for "
+                   "'retarget recognise')")
     p.set_defaults(run=_transfer)
 
 
 def _transfer(args) -> int:
+    if args.drive == "muscles" and (args.deformer or args.rig):
+        raise RetargetError("--drive muscles makes the motion with the muscles, not a rig: drop "
+                            "--deformer and --rig")
     result = transfer_files(
         args.target_mesh,
         args.target_landmarks,
@@ -78,6 +90,9 @@ def _transfer(args) -> int:
         mask=args.mask,
         layout=args.layout,
         rig=args.rig,
+        drive=args.drive,
+        muscles=args.muscles,
+        contractions_out=args.contractions_out,
         quiet=args.quiet,
     )
     print(result.summary())
