@@ -33,8 +33,8 @@ from retarget.similarity import similarity_transform
 __all__ = ["ibug68_points", "jaw_weights", "place_muscles"]
 
 _MIRROR68 = np.asarray(get_layout("ibug68").mirror)
-_JAW_LIMITS = (0.0, 0.35)
-"""Radians: closed to about 20 degrees open (ICT's jawOpen is about 0.3 rad)."""
+_JAW_LIMITS = (0.0, 0.45)
+"""Radians: closed to about 26 degrees open (ICT's jawOpen, fitted, is 0.36 rad)."""
 _EYE_LIMITS = (-1.0, 1.0)
 """The orbicularis oculi may go negative: the eye opening wide, which fear needs and the
 paper's muscles could not do (§10)."""
