@@ -123,27 +123,27 @@ def _muscles(p: np.ndarray, frame: np.ndarray, e: float) -> list:
                 lid = 0.5 * (pt(46) + pt(47))
                 bone = 0.5 * (pt(15) + pt(45))          # the zygomatic bone, below the eye's outer corner
                 origin = bone + ((lid - bone) @ Y - 0.1 * e) * Y
-                out.append(_linear(name, origin, pt(54), 1.0, 1.25, 20, 0.22 * e))
+                out.append(_linear(name, origin, pt(54), 1.0, 1.25, 20, 0.27 * e))
             elif b.startswith("frontalis"):
                 brow = {"frontalis_inner": pt(22), "frontalis_major": pt(23),
                         "frontalis_secondary": pt(24), "frontalis_outer": 0.5 * (pt(25) + pt(26))}[b]
                 origin = brow + 0.9 * e * Y - 0.08 * e * Z      # up the forehead, along its curve
-                out.append(_linear(name, origin, brow, 0.95, 1.4, 18, 0.11 * e))
+                out.append(_linear(name, origin, brow, 0.95, 1.4, 18, 0.13 * e))
             elif b == "corrugator_supercilii":
                 origin = p[27] - 0.08 * e * inward + 0.15 * e * Y + 0.05 * e * Z
                 out.append(_linear(name, origin, pt(24), 0.5, 1.35, 40, 0.18 * e))
             elif b == "levator_labii_superioris_alaeque_nasi":
                 origin = 0.5 * (pt(42) + p[28]) + 0.1 * e * Y + 0.05 * e * Z
-                out.append(_linear(name, origin, pt(35), 1.0, 1.45, 20, 0.09 * e))
+                out.append(_linear(name, origin, pt(35), 1.0, 1.45, 20, 0.11 * e))
             elif b == "levator_labii_superioris":
                 origin = 0.5 * (pt(46) + pt(47)) - 0.15 * e * Y + 0.05 * e * Z
-                out.append(_linear(name, origin, 0.5 * (pt(52) + pt(53)), 1.0, 1.3, 20, 0.10 * e))
+                out.append(_linear(name, origin, 0.5 * (pt(52) + pt(53)), 1.0, 1.3, 20, 0.13 * e))
             elif b == "depressor_anguli_oris":
                 # on the mandible below the corner (not the jaw contour's far-back point 11,
                 # which would pull the corner back more than down)
                 jawline = 0.5 * (pt(10) + pt(11))
                 origin = pt(54) + ((jawline - pt(54)) @ Y) * Y - 0.1 * e * inward
-                out.append(_linear(name, origin, pt(54), 1.0, 1.3, 25, 0.13 * e))
+                out.append(_linear(name, origin, pt(54), 1.0, 1.3, 25, 0.16 * e))
             elif b == "orbicularis_oculi":
                 # a quarter of the slit above the lower lid: in a blink the upper lid travels
                 # about three times as far as the lower (ICT's eyeBlink: 8.0 and 2.7 mm)
