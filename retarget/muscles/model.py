@@ -432,8 +432,8 @@ class MuscleFace:
         measures how far that is from `displacements`). It is exact with the jaw closed (the
         muscles are linear); over poses drawn uniformly within the limits it is 14 % off on
         the sample face and 20 % on the ICT face, against 7 % for the jaw's rotation alone
-        (bench/muscle_model.py): most of it is the jaw carrying the lower lip out of the mouth muscles' zones
-        (§4.2), which the linear form cannot know."""
+        (bench/muscle_model.py): most of it is the jaw carrying the lower lip out of the
+        mouth muscles' zones (§4.2), which the linear form cannot know."""
         out = np.empty((self.n_dof, len(self.rest), 3), dtype=np.float32)
         out[:-1] = self._fields0 * self.limits[:-1, 1, None, None]
         c = np.zeros(self.n_dof)
