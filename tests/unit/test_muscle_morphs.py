@@ -41,3 +41,31 @@ def test_the_jaw_joint_opens_the_mouth_as_the_model_does_and_the_error_is_bounde
     assert played_error(model, n_samples=16) < 0.2
     with pytest.raises(RetargetError, match="22 values"):
         morphs.weights(np.zeros(5))
+
+
+def test_correctives_add_each_muscles_exact_motion_to_the_open_jaw_and_halve_the_error(model):
+    morphs, plain = muscle_morphs(model), muscle_morphs(model, correctives=False)
+    assert len(plain.corrective_of) == 0 and plain.correctives.shape[0] == 0
+    names = set(morphs.corrective_names)
+    # the mouth muscles the jaw carries the lower lip through; nothing on the brows or eyes
+    assert {"orbicularis_oris*jaw", "zygomatic_major_left*jaw", "depressor_anguli_oris_right*jaw"} <= names
+    assert not any(n.startswith(("frontalis", "corrugator", "orbicularis_oculi")) for n in names)
+    assert morphs.correctives.shape == (len(names), len(model.rest), 3)
+    opened = np.zeros(22)
+    opened[-1] = model.limits[-1, 1]
+    jaw_off = played_displacements(morphs, model.rest, opened) - model.displacements(opened)
+    for m in morphs.corrective_of:
+        c = opened.copy()
+        c[m] = model.limits[m, 1]
+        off = played_displacements(morphs, model.rest, c) - model.displacements(c)
+        assert np.abs(off - jaw_off).max() < 1e-4  # cm: the muscle's own part is exact
+    assert np.allclose(morphs.corrective_weights(c), np.where(morphs.corrective_of == m, 1.0, 0.0))
+    half = c * 0.5
+    assert np.allclose(morphs.corrective_weights(half)[list(morphs.corrective_of).index(m)], 0.25)
+    # closed jaw: the correctives weigh nothing, the form stays exact
+    closed = c.copy()
+    closed[-1] = 0.0
+    assert np.allclose(played_displacements(morphs, model.rest, closed), model.displacements(closed),
+                       atol=1e-5)
+    with_, without = played_error(model, n_samples=16), played_error(model, n_samples=16, correctives=False)
+    assert with_ < 0.6 * without
