@@ -25,8 +25,8 @@ from server.isolation import Isolation, IsolationLimits
 from server.jobs import JobRegistry
 from server.hub import StreamHub
 from server.limits import BodyLimit, Limits
-from server.routers import (exports, info, landmarks, layouts, meshes, mouth, projects, rigs,
-                            stream, takes)
+from server.routers import (exports, info, landmarks, layouts, meshes, mouth, muscles, projects,
+                            rigs, stream, takes)
 from server.sample import ensure_sample_project
 from server.store import ProjectStore
 from server.web import mount_web
@@ -87,8 +87,8 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     if sample:
         ensure_sample_project(app.state.store)
     errors.install(app)
-    for module in (projects, meshes, mouth, landmarks, rigs, takes, exports, stream, layouts,
-                   info):
+    for module in (projects, meshes, mouth, landmarks, rigs, muscles, takes, exports, stream,
+                   layouts, info):
         app.include_router(module.router)
     mount_web(app)
     app.add_middleware(BodyLimit, limits=app.state.limits)

@@ -3,7 +3,8 @@
 A slow viewer never slows the source or grows a queue: publishing overwrites whatever
 frame the viewer has not taken yet (counted as dropped), and the viewer's sender always
 sends the newest frame there is. The hub also owns each project's running source (an
-asyncio task) and its partial-retargeting regions, so every viewer of a project sees the
+asyncio task), its partial-retargeting regions and its drive (feature points or
+muscles), so every viewer of a project sees the
 same performance; the source stops when the last viewer leaves. Everything runs on the
 server's event loop; the hub holds no maths.
 """
@@ -65,6 +66,7 @@ class StreamHub:
         self._sources: dict[str, object] = {}
         self._tasks: dict[str, asyncio.Task] = {}
         self._regions: dict[str, list[str] | None] = {}
+        self._drives: dict[str, str] = {}
         self._unsaved: dict[str, object] = {}  # a source that ended while recording
 
     # -- viewers ------------------------------------------------------------------------
@@ -81,6 +83,7 @@ class StreamHub:
             del self._viewers[project_id]
             self.stop_source(project_id)
             self._regions.pop(project_id, None)
+            self._drives.pop(project_id, None)
 
     def viewer_count(self, project_id: str) -> int:
         return len(self._viewers.get(project_id, ()))
@@ -121,6 +124,14 @@ class StreamHub:
         if source is not None:
             source.set_regions(regions)  # refuses unknown names before anything changes
         self._regions[project_id] = regions
+
+    def drive(self, project_id: str) -> str:
+        """What the project's sources are driven by: "points" (default) or "muscles"."""
+        return self._drives.get(project_id, "points")
+
+    def set_drive(self, project_id: str, drive: str) -> None:
+        """The drive for the project's later sources (the stream sets the running one's)."""
+        self._drives[project_id] = drive
 
     def unsaved_recording(self, project_id: str):
         """The source that stopped or ended while it was recording (once), or None: its

@@ -9,6 +9,8 @@ Layout on disk::
     <data_dir>/projects/<id>/paint-r<R>-<hex>.npz `retarget.weights.painting.WeightEdit.save`:
                                                  the rows painted over it, if any
     <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
+    <data_dir>/projects/<id>/muscles-r<R>-<hex>.json  `retarget.muscles.MuscleFace.to_json`:
+                                                 the virtual muscles, placed or edited
 
 A mesh revision made from the current one (the mouth cut open, `put_mesh_revision`) keeps
 the mesh and landmarks it replaced (the row's ``previous_mesh``) until `revert_mesh` goes
@@ -33,6 +35,11 @@ Takes (recorded performances) belong to the project, not to its mesh: they are s
 points, so a new mesh or new landmarks keep them. A take's file is written once; renaming
 and trimming change only its row (trimming is non-destructive: the row keeps the span
 in seconds and `take()` applies it).
+
+Muscles (`put_muscles`) are placed automatically from the landmarks of a revision the
+first time they are needed, or saved by the user; placed muscles never replace muscles
+the user saved for the same revision (edited ones outlive a landmarks change, placed ones
+are placed again).
 
 Project ids come from `secrets.token_urlsafe(16)` and every id is matched against
 `ID_PATTERN` before it is joined to a path; uploaded file names never reach the
@@ -68,9 +75,9 @@ MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf", "zip")
 """File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads; a
 zip holds a mesh file with its MTL, images or buffers)."""
 
-_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file")
+_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file", "muscles_file")
 _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz"
-                           r"|paint-r\d+-[0-9a-f]+\.npz|\.tmp-.*)")
+                           r"|paint-r\d+-[0-9a-f]+\.npz|muscles-r\d+-[0-9a-f]+\.json|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
 
 _RIG_CACHE_BYTES = 512 * 2**20
@@ -102,7 +109,10 @@ CREATE TABLE IF NOT EXISTS projects (
     painted_file  TEXT,              -- rows painted over it, NULL = none
     rig_version   INTEGER NOT NULL DEFAULT 0,  -- bumped by every new rig, paint or reset
     rig_painted   INTEGER NOT NULL DEFAULT 0,  -- vertices whose rows differ from the automatic rig's
-    previous_mesh TEXT               -- JSON: the mesh and landmarks a mesh revision replaced, NULL = none
+    previous_mesh TEXT,              -- JSON: the mesh and landmarks a mesh revision replaced, NULL = none
+    muscles_file  TEXT,              -- the virtual muscles (JSON), NULL = none yet
+    muscles_revision INTEGER,        -- the revision they were placed or saved on
+    muscles_edited INTEGER NOT NULL DEFAULT 0  -- 1: saved by the user, not placed
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS takes (
@@ -261,6 +271,9 @@ class ProjectStore:
                 db.execute(f"ALTER TABLE projects ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0")
         if "previous_mesh" not in columns:
             db.execute("ALTER TABLE projects ADD COLUMN previous_mesh TEXT")
+        if "muscles_revision" not in columns:
+            db.execute("ALTER TABLE projects ADD COLUMN muscles_revision INTEGER")
+            db.execute("ALTER TABLE projects ADD COLUMN muscles_edited INTEGER NOT NULL DEFAULT 0")
         if "upload_key" not in {row["name"] for row in db.execute("PRAGMA table_info(takes)")}:
             db.execute("ALTER TABLE takes ADD COLUMN upload_key TEXT")
 
@@ -674,6 +687,35 @@ class ProjectStore:
         if row["rig_method"] is None:
             return None
         return {"version": row["rig_version"], "painted_vertices": row["rig_painted"]}
+
+    # -- muscles ------------------------------------------------------------------------
+
+    def put_muscles(self, project_id: str, muscles: dict, *, revision: int, edited: bool) -> bool:
+        """Store (already validated) muscle JSON made for the mesh and landmarks of
+        `revision`: `edited` by the user, or placed automatically. False, and nothing
+        stored, when placed muscles would replace ones the user saved for this revision;
+        raises `StaleRig` when the mesh or landmarks changed since `revision`."""
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["revision"] != revision:
+                raise StaleRig("the mesh or landmarks changed while the muscles were made; make them again")
+            if not edited and row["muscles_edited"] and row["muscles_revision"] == revision:
+                return False
+            name = f"muscles-r{revision}-{secrets.token_hex(4)}.json"
+            write_atomic(self.folder(project_id) / name, json.dumps(muscles).encode())
+            db.execute("UPDATE projects SET muscles_file = ?, muscles_revision = ?, muscles_edited = ?, "
+                       "updated = ? WHERE id = ?", (name, revision, int(edited), _now(), project_id))
+        self._sweep(project_id)
+        return True
+
+    def muscles(self, project_id: str) -> tuple[dict, int, bool] | None:
+        """(muscle JSON, the revision it was made for, whether the user saved it), or None."""
+        with self._lock:
+            row = self._row(project_id)
+            if row["muscles_file"] is None:
+                return None
+            data = json.loads((self.folder(project_id) / row["muscles_file"]).read_text())
+            return data, row["muscles_revision"], bool(row["muscles_edited"])
 
     # -- takes --------------------------------------------------------------------------
 

@@ -2,10 +2,13 @@
 JavaScript twin in `web/static/js/net/wire.js`, and tests run the two against each other.
 
 - stream frame ``RTDF`` (server -> page, WebSocket): a frame's feature displacements;
+- contraction frame ``RTMC`` (server -> page, WebSocket, muscle mode): a frame's muscle
+  contractions and the expression they show;
 - source points ``RTSP`` (page -> server, WebSocket): one frame of tracked points;
 - mesh arrays ``RTMA`` (GET .../mesh/arrays): vertices and triangles to draw, and uv;
 - rig weights ``RTSW`` (GET .../rig/weights): joint indices and weights per vertex;
-- weight edit ``RTSE`` (PATCH .../rig/weights): painted rows.
+- weight edit ``RTSE`` (PATCH .../rig/weights): painted rows;
+- played muscles ``RTMM`` (GET .../muscles/played): the muscles' morph targets and jaw.
 
 All little-endian; every array starts at a multiple of 4 bytes, so the page views it in
 place (``new Float32Array(buffer, offset, n)``) without copying.
@@ -33,6 +36,46 @@ One WebSocket binary message per frame. Layout (byte offsets):
 
 The header is 32 bytes, a multiple of 4, so the decoder views the payload as a
 Float32Array without copying.
+
+Contraction frame (RTMC)
+------------------------
+What a stream driven by muscles sends instead of RTDF (the page plays the muscles' morph
+targets and jaw, `RTMM`, in its shader): D + E + 2 numbers a frame instead of 3N::
+
+    0   4 bytes  magic b"RTMC"
+    4   uint16   version (1)
+    6   uint16   flags: RTDF's bits (1 lost points, 2 head rotation, 3 last frame)
+    8   uint32   frame index
+    12  uint16   D, dof count (the muscles, then the jaw)
+    14  uint16   E, expression count (`retarget.muscles.expressions.EXPRESSIONS`' order)
+    16  float64  source timestamp, seconds
+    24  float64  publish timestamp, seconds since the Unix epoch
+    32  D float32 contractions, the jaw's last in radians
+    ... E float32 normalised distances to each expression
+    ... float32  confidence of the nearest expression, in [0, 1]
+    ... uint32   index of the nearest expression
+    ... 4 float32 (with flag bit 2 only) the head rotation, as in RTDF
+
+Played muscles (RTMM)
+---------------------
+`retarget.muscles.morphs.MuscleMorphs`, what the page's shader plays::
+
+    offset      size    field
+    0           4       magic b"RTMM"
+    4           4       uint32 format version (1)
+    8           4       uint32 V, vertex count
+    12          4       uint32 M, morph target count
+    16          4       uint32 J, bytes of the JSON header (padded with spaces to a multiple of 4)
+    20          J       UTF-8 JSON: {"names": M target names, "dofs": D dof names (the
+                        targets' muscles then "jaw"), "high": M contractions that weight 1
+                        stands for, "limits": D [low, high], "jaw_pivot": [x, y, z],
+                        "jaw_axis": [x, y, z], "expressions": E names}
+    20+J        12 M V  float32 targets, (M, V, 3) row-major, mesh units
+    ...         4 V     float32 jaw weights, (V,)
+
+A pose c (D,) plays as v = rest + sum_m c_m / high_m targets[m], then the jaw's linear
+blend skinning about the axis through the pivot by the angle c[-1], weighted per vertex
+(`retarget.muscles.morphs.played_displacements`).
 
 Mesh arrays (RTMA)
 ------------------
@@ -90,6 +133,7 @@ Weight edit (RTSE)
 
 from __future__ import annotations
 
+import json
 import struct
 import time
 from dataclasses import dataclass
@@ -97,6 +141,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.muscles.drive import MuscleFrame
+from retarget.muscles.morphs import MuscleMorphs
 from retarget.skin import SkinWeights
 
 MAGIC = b"RTDF"
@@ -165,6 +211,65 @@ def decode_frame(data: bytes) -> Frame:
     q = (np.frombuffer(data, dtype="<f4", offset=HEADER_BYTES + 12 * n, count=4)
          if flags & FLAG_HEAD_ROTATION else None)
     return Frame(d, index, source_time, send_time, flags, q)
+
+
+# -- contraction frames (RTMC): muscle mode ----------------------------------------------
+
+CONTRACTIONS_MAGIC = b"RTMC"
+CONTRACTIONS_VERSION = 1
+_CONTRACTIONS_HEADER = struct.Struct("<4sHHIHHdd")
+
+
+@dataclass(frozen=True)
+class ContractionFrame:
+    """A decoded contraction frame: (D,) contractions, (E,) distances, and its header."""
+
+    contractions: np.ndarray
+    distances: np.ndarray
+    confidence: float
+    label: int
+    frame_index: int
+    source_time: float
+    send_time: float
+    flags: int = 0
+    head_rotation: np.ndarray | None = None
+
+
+def encode_contractions(frame: MuscleFrame, *, frame_index: int, source_time: float, flags: int = 0,
+                        send_time: float | None = None, head_rotation=None) -> bytes:
+    """Bytes of one contraction frame (module docstring) for a `MuscleFrame`."""
+    c = np.asarray(frame.contractions, dtype="<f4")
+    e = np.asarray(frame.distances, dtype="<f4")
+    if c.ndim != 1 or e.ndim != 1 or not (np.isfinite(c).all() and np.isfinite(e).all()):
+        raise ValueError(f"contractions and distances must be finite vectors; got {c.shape} and {e.shape}")
+    if not 0 <= frame.label < len(e):
+        raise ValueError(f"label must index the {len(e)} expressions; got {frame.label}")
+    tail = b""
+    if head_rotation is not None:
+        flags |= FLAG_HEAD_ROTATION
+        tail = np.asarray(head_rotation, dtype="<f4").reshape(4).tobytes()
+    sent = time.time() if send_time is None else send_time
+    header = _CONTRACTIONS_HEADER.pack(CONTRACTIONS_MAGIC, CONTRACTIONS_VERSION, flags, frame_index, len(c),
+                                       len(e), float(source_time), float(sent))
+    return (header + c.tobytes() + e.tobytes() + struct.pack("<fI", frame.confidence, frame.label) + tail)
+
+
+def decode_contractions(data: bytes) -> ContractionFrame:
+    """Parse one contraction frame; ValueError on a bad magic, version or length."""
+    if len(data) < _CONTRACTIONS_HEADER.size:
+        raise ValueError(f"frame is {len(data)} bytes, shorter than its {_CONTRACTIONS_HEADER.size}-byte header")
+    magic, version, flags, index, d, e, source_time, send_time = _CONTRACTIONS_HEADER.unpack_from(data)
+    if magic != CONTRACTIONS_MAGIC or version != CONTRACTIONS_VERSION:
+        raise ValueError(f"not a contraction frame version {CONTRACTIONS_VERSION} (magic {magic!r}, version {version})")
+    body = _CONTRACTIONS_HEADER.size + 4 * (d + e + 2)
+    if len(data) != body + (16 if flags & FLAG_HEAD_ROTATION else 0):
+        raise ValueError(f"contraction frame of {d} dofs and {e} expressions has the wrong length {len(data)}")
+    at = _CONTRACTIONS_HEADER.size
+    c = np.frombuffer(data, "<f4", d, at)
+    dist = np.frombuffer(data, "<f4", e, at + 4 * d)
+    confidence, label = struct.unpack_from("<fI", data, at + 4 * (d + e))
+    q = np.frombuffer(data, "<f4", 4, body) if flags & FLAG_HEAD_ROTATION else None
+    return ContractionFrame(c, dist, confidence, label, index, source_time, send_time, flags, q)
 
 
 # -- source points (RTSP): the browser's tracker -> the server ----------------------------
@@ -255,6 +360,28 @@ def mesh_arrays(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None =
         raise ValueError(f"uv must be ({len(v)}, 2) for {len(v)} vertices; got {uv.shape}")
     flags = ARRAYS_TEXTURED if textured else 0
     return data + struct.pack("<I", flags) + uv.tobytes()
+
+
+# -- played muscles (RTMM) ---------------------------------------------------------------
+
+MORPHS_MAGIC = b"RTMM"
+MORPHS_VERSION = 1
+MORPHS_HEADER = struct.Struct("<4sIIII")
+
+
+def morphs_binary(morphs: MuscleMorphs, dofs, limits, expressions) -> bytes:
+    """The RTMM bytes of the played muscles (module docstring): `dofs` (D,) the model's dof
+    names and `limits` (D, 2) their ranges (the sliders'), `expressions` the names a
+    contraction frame's label indexes."""
+    header = json.dumps({
+        "names": list(morphs.names), "dofs": list(dofs), "high": morphs.high.tolist(),
+        "limits": np.asarray(limits, float).tolist(), "jaw_pivot": morphs.jaw_pivot.tolist(),
+        "jaw_axis": morphs.jaw_axis.tolist(), "expressions": list(expressions)}).encode()
+    header += b" " * (-len(header) % 4)
+    m, v, _ = morphs.targets.shape
+    return (MORPHS_HEADER.pack(MORPHS_MAGIC, MORPHS_VERSION, v, m, len(header)) + header
+            + np.ascontiguousarray(morphs.targets, "<f4").tobytes()
+            + np.ascontiguousarray(morphs.jaw_weights, "<f4").tobytes())
 
 
 # -- rig weights (RTSW) and weight edits (RTSE) ------------------------------------------

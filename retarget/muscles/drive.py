@@ -12,14 +12,34 @@ Units: displacements in the mesh's own; contractions as the model's limits say.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.landmarks import SurfacePoints
+from retarget.muscles.expressions import ExpressionRecogniser, default_recogniser
 from retarget.muscles.ik import MuscleIK
 from retarget.muscles.model import MuscleFace
 
-__all__ = ["MuscleDrive"]
+__all__ = ["MuscleDrive", "MuscleFrame"]
+
+
+@dataclass(frozen=True, eq=False)
+class MuscleFrame:
+    """One frame driven by muscles, as a live player sends it.
+
+    contractions : (D,) float64, the muscles' contractions then the jaw angle (radians).
+    distances : (E,) float64, normalised distances to the recogniser's expressions
+        (`retarget.muscles.expressions`, its ``labels`` order).
+    label : index of the nearest expression in those labels.
+    confidence : in [0, 1], how much nearer the nearest is than the next.
+    """
+
+    contractions: np.ndarray
+    distances: np.ndarray
+    label: int
+    confidence: float
 
 
 class MuscleDrive:
@@ -29,12 +49,15 @@ class MuscleDrive:
     points : the target's N feature points (`SurfacePoints`); each is marked at its nearest
         vertex, where the model is evaluated (the point and that vertex move alike).
     method : the IK solver, "dls" or "transpose" (`retarget.muscles.ik`).
+    recogniser : what `frame` reads expressions with; default `default_recogniser`.
     """
 
-    def __init__(self, model: MuscleFace, points: SurfacePoints, method: str = "dls"):
+    def __init__(self, model: MuscleFace, points: SurfacePoints, method: str = "dls",
+                 recogniser: ExpressionRecogniser | None = None):
         self.model = model
         self.marked = points.nearest_vertices()
         self.ik = MuscleIK(model, self.marked, method)
+        self.recogniser = recogniser or default_recogniser(model.names)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -55,6 +78,21 @@ class MuscleDrive:
             raise RetargetError(f"feature displacements must be (F, {len(self.marked)}, 3); got {d.shape}")
         out = np.stack([self.ik.push(frame) for frame in frames])
         return out[0] if one else out
+
+    def frame(self, feature_displacements, lost=None) -> MuscleFrame:
+        """One live frame: (N, 3) feature displacements -> its contractions (warm-started
+        from the last frame's) and the expression they show.
+
+        lost : (N,) bool, points the source lost this frame (their displacements are
+            placeholders): left out of the solve rather than pulled to rest.
+        """
+        d = np.array(feature_displacements, dtype=np.float64)
+        if lost is not None:
+            d[np.asarray(lost, dtype=bool)] = np.nan
+        c = self.contractions(d)
+        seen = self.recogniser.recognise(c)
+        return MuscleFrame(c, seen.distances[0], self.recogniser.labels.index(str(seen.labels[0])),
+                           float(seen.confidence[0]))
 
     def displacements(self, contractions) -> np.ndarray:
         """(D,) or (F, D) contractions -> (V, 3) or (F, V, 3) float32 vertex displacements."""

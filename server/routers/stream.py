@@ -26,6 +26,11 @@ are JSON text:
   zero displacements) that puts the face back at rest;
 - ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
   regions, groups or points move (empty or null: all);
+- ``{"type": "drive", "drive": "points" | "muscles"}``: what the project's sources are
+  driven by, the running one from its next frame: feature points (RTDF frames) or the
+  project's muscles (`server.routers.muscles.project_muscles`, placed if need be), each
+  frame solved into contractions and an expression (RTMC frames); answered
+  ``{"type": "drive", "drive"}``;
 - ``{"type": "ping", "t": <client time>}``: answered ``{"type": "pong", "t", "server_time"}``.
 
 A malformed control message (or a points message that does not fit) is answered
@@ -52,10 +57,12 @@ from websockets.exceptions import ConnectionClosed
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
+from retarget.muscles.drive import MuscleDrive
 from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
 from retarget.sources.conditioning import ConditionSettings, NeutralMoved
 from server.players import DemoPlayer, LivePlayer, TakePlayer
+from server.routers.muscles import project_muscles
 from server.wire import FLAG_NEUTRAL, decode_points, encode_frame
 from server.store import ProjectNotFound, TakeNotFound
 
@@ -63,6 +70,7 @@ router = APIRouter(tags=["stream"])
 log = logging.getLogger(__name__)
 POLICY_VIOLATION = 1008
 DEFAULT_FPS = 60.0
+DRIVES = ("points", "muscles")
 
 
 @router.websocket("/api/projects/{project_id}/stream")
@@ -172,7 +180,25 @@ def _fps(msg: dict, default: float) -> float:
     return float(fps)
 
 
+def _muscle_drive(store, project_id) -> MuscleDrive:
+    """A new muscle drive (its own warm start) on the project's muscles and landmarks."""
+    project, mesh = store.get(project_id), store.mesh(project_id)
+    model, _ = project_muscles(store, project, mesh)
+    return MuscleDrive(model, landmarks_from_json(store.landmarks(project_id), mesh.vertices, mesh.faces))
+
+
+async def _driven(player, hub: StreamHub, store, project_id):
+    """`player` driven as the project's drive says."""
+    if hub.drive(project_id) == "muscles":
+        player.set_drive(await asyncio.to_thread(_muscle_drive, store, project_id))
+    return player
+
+
 async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
+    return await _driven(await _player(msg, store, project_id, target_points, layout), hub, store, project_id)
+
+
+async def _player(msg: dict, store, project_id, target_points, layout):
     kind = msg.get("source", "demo")
     if kind == "demo":
         return await asyncio.to_thread(DemoPlayer, target_points, layout, _fps(msg, DEFAULT_FPS))
@@ -242,6 +268,15 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         hub.publish(project_id, encode_frame(np.zeros((len(target_points), 3), np.float32),
                                              frame_index=0, source_time=0.0, flags=FLAG_NEUTRAL))
         return {"type": "stopped"}
+    if kind == "drive":
+        drive = msg.get("drive")
+        if drive not in DRIVES:
+            raise ValueError(f'"drive" must be one of {", ".join(map(repr, DRIVES))}; got {drive!r}')
+        hub.set_drive(project_id, drive)
+        if source is not None:
+            source.set_drive(await asyncio.to_thread(_muscle_drive, store, project_id)
+                             if drive == "muscles" else None)
+        return {"type": "drive", "drive": drive}
     if kind == "mask":
         regions = msg.get("regions") or None
         if regions is not None and not (isinstance(regions, list) and all(isinstance(r, str) for r in regions)):
