@@ -10,13 +10,14 @@ import numpy as np
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import load_mesh
 from retarget.muscles import MuscleFace
-from retarget.muscles.drive import MuscleDrive
+from retarget.muscles.drive import MuscleDrive, MuscleFrame
 from retarget.muscles.expressions import EXPRESSIONS
 from retarget.muscles.morphs import muscle_morphs
 from retarget.sample_face import demo_points
 from server.players import DemoPlayer
-from server.wire import (CONTRACTIONS_MAGIC, MORPHS_HEADER, decode_contractions, decode_frame,
-                         encode_frame)
+from server.wire import (CONTRACTIONS_MAGIC, FLAG_HEAD_ROTATION, FLAG_LAST, MORPHS_HEADER,
+                         decode_contractions, decode_frame, encode_contractions, encode_frame)
+from tests.api.test_wire import decode_in_node
 from tests.ws_messages import replies
 
 
@@ -147,3 +148,33 @@ def test_stream_in_muscle_mode_sends_contraction_frames(client, sample_id, capsy
     assert len(first) == 32 + 4 * (22 + 7 + 2) < len(encode_frame(np.zeros((68, 3)), frame_index=0,
                                                                    source_time=0.0))
     assert struct.unpack_from("<H", first, 12)[0] == 22
+
+
+def test_javascript_decodes_contraction_frames_and_played_muscles(client, sample_id, tmp_path):
+    rng = np.random.default_rng(5)
+    muscle = MuscleFrame(rng.normal(size=22), rng.random(7), 4, 0.25)
+    q = np.array([0.1, -0.2, 0.05, 0.97], np.float32)
+    frames = [encode_contractions(muscle, frame_index=2**32 - 1, source_time=-3.25, send_time=1.7e9),
+              encode_contractions(muscle, frame_index=7, source_time=0.5, flags=FLAG_LAST, send_time=1.7e9,
+                                  head_rotation=q)]
+    plain, rotated = decode_in_node(tmp_path, frames, "decode-contractions")
+    for js in (plain, rotated):
+        assert js["bits"] == _bits(muscle.contractions) and js["distanceBits"] == _bits(muscle.distances)
+        assert js["label"] == 4 and js["confidenceBits"] == _bits([0.25]) and js["sendTime"] == 1.7e9
+    assert plain["frameIndex"] == 2**32 - 1 and plain["sourceTime"] == -3.25 and plain["rotationBits"] is None
+    assert rotated["flags"] == FLAG_LAST | FLAG_HEAD_ROTATION and rotated["rotationBits"] == _bits(q)
+    assert "ContractionDecoder" in decode_in_node(tmp_path, [frames[0][:-4]], "decode-contractions")[0]["error"]
+
+    data = client.get(f"/api/projects/{sample_id}/muscles/played").content
+    js, = decode_in_node(tmp_path, [data], "decode-morphs")
+    _, _, v, m, j = MORPHS_HEADER.unpack_from(data)
+    assert (js["nVertices"], js["nTargets"]) == (v, m)
+    assert js["header"] == json.loads(data[MORPHS_HEADER.size:MORPHS_HEADER.size + j])
+    at = MORPHS_HEADER.size + j
+    assert js["targetBits"] == np.frombuffer(data, "<u4", 3 * m * v, at).tolist()
+    assert js["jawBits"] == np.frombuffer(data, "<u4", v, at + 12 * m * v).tolist()
+    assert "MuscleMorphsDecoder" in decode_in_node(tmp_path, [data[:-4]], "decode-morphs")[0]["error"]
+
+
+def _bits(values) -> list[int]:
+    return np.ascontiguousarray(values, dtype="<f4").view(np.uint32).tolist()

@@ -3,6 +3,8 @@
 //   node wire.mjs decode-frames FILE    length-prefixed RTDF frames -> one JSON object each
 //   node wire.mjs decode-mesh FILE      length-prefixed RTMA bodies -> one JSON object each
 //   node wire.mjs decode-weights FILE   length-prefixed RTSW bodies -> one JSON object each
+//   node wire.mjs decode-contractions FILE  length-prefixed RTMC frames -> one JSON object each
+//   node wire.mjs decode-morphs FILE    length-prefixed RTMM bodies -> one JSON object each
 //   node wire.mjs encode-points IN OUT  {points, dims, frameIndex, captureTime} -> RTSP bytes
 //   node wire.mjs encode-edit IN OUT    {version, nJoints, k, vertices, indices, weights} -> RTSE bytes
 //
@@ -11,7 +13,7 @@
 // are exact, and null stands for NaN in encoder input. Encoders exit 3 after printing a
 // refusal's message.
 import { readFileSync, writeFileSync } from 'node:fs';
-import { MeshArraysDecoder, PointsEncoder, RigWeightsDecoder, StreamDecoder, WeightEditEncoder } from '../../web/static/js/net/wire.js';
+import { ContractionDecoder, MeshArraysDecoder, MuscleMorphsDecoder, PointsEncoder, RigWeightsDecoder, StreamDecoder, WeightEditEncoder } from '../../web/static/js/net/wire.js';
 
 const bits = ( floats ) => floats ? Array.from( new Uint32Array( floats.buffer, floats.byteOffset, floats.length ) ) : null;
 
@@ -33,6 +35,20 @@ const decoders = {
 
 		const w = new RigWeightsDecoder().decode( buffer );
 		return { nJoints: w.nJoints, nInfluences: w.nInfluences, indices: Array.from( w.indices ), weightBits: bits( w.weights ) };
+
+	},
+	'decode-contractions': ( buffer ) => {
+
+		const f = new ContractionDecoder().decode( buffer );
+		return { flags: f.flags, frameIndex: f.frameIndex, sourceTime: f.sourceTime, sendTime: f.sendTime, label: f.label,
+			confidenceBits: bits( Float32Array.of( f.confidence ) ), bits: bits( f.contractions ), distanceBits: bits( f.distances ),
+			rotationBits: bits( f.headRotation ) };
+
+	},
+	'decode-morphs': ( buffer ) => {
+
+		const m = new MuscleMorphsDecoder().decode( buffer );
+		return { nVertices: m.nVertices, nTargets: m.nTargets, header: m.header, targetBits: bits( m.targets ), jawBits: bits( m.jawWeights ) };
 
 	},
 };

@@ -5,11 +5,15 @@
  *
  * - `StreamDecoder`: stream frames "RTDF" (server -> page, WebSocket), a frame's feature
  *   displacements;
+ * - `ContractionDecoder`: contraction frames "RTMC" (server -> page, WebSocket, muscle
+ *   mode), a frame's muscle contractions and the expression they show;
  * - `PointsEncoder`: source points "RTSP" (page -> server, WebSocket), one frame of
  *   tracked points;
  * - `MeshArraysDecoder`: mesh arrays "RTMA" (GET .../mesh/arrays);
  * - `RigWeightsDecoder`: rig weights "RTSW" (GET .../rig/weights);
- * - `WeightEditEncoder`: weight edits "RTSE" (PATCH .../rig/weights), painted rows.
+ * - `WeightEditEncoder`: weight edits "RTSE" (PATCH .../rig/weights), painted rows;
+ * - `MuscleMorphsDecoder`: played muscles "RTMM" (GET .../muscles/played), morph targets
+ *   and the jaw joint.
  *
  * All little-endian; every array starts at a multiple of 4 bytes, so a decoder views it in
  * place without copying. Five small codecs in one file, against the one-class-per-file
@@ -110,6 +114,69 @@ export class StreamDecoder {
 			sendTime: view.getFloat64( 24, true ),
 			displacements: new Float32Array( buffer, StreamDecoder.HEADER_BYTES, 3 * count ),
 			headRotation: rotated ? new Float32Array( buffer, StreamDecoder.HEADER_BYTES + 12 * count, 4 ) : null,
+		};
+
+	}
+
+}
+
+/**
+ * Decoder of the stream's contraction frames (muscle mode): RTDF's 32-byte header with
+ * magic "RTMC" and, in place of the point count, uint16 D (dofs) and uint16 E
+ * (expressions); then D float32 contractions (the jaw's last, radians), E float32
+ * normalised expression distances, a float32 confidence, a uint32 expression index and,
+ * with flag bit 2, the head rotation (x, y, z, w). Flags are StreamDecoder's.
+ */
+export class ContractionDecoder {
+
+	static MAGIC = magicNumber( 'RTMC' );
+	static VERSION = 1;
+	static HEADER_BYTES = 32;
+
+	/**
+	 * Decode one frame.
+	 * @param {ArrayBuffer} buffer - the WebSocket message's bytes.
+	 * @returns {{version: number, flags: number, frameIndex: number, sourceTime: number,
+	 *   sendTime: number, contractions: Float32Array, distances: Float32Array,
+	 *   confidence: number, label: number, headRotation: Float32Array|null}} contractions
+	 *   (D) and distances (E) view `buffer`; label indexes the played muscles' expressions.
+	 */
+	decode( buffer ) {
+
+		if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( 'ContractionDecoder: expected an ArrayBuffer.' );
+		if ( buffer.byteLength < ContractionDecoder.HEADER_BYTES ) {
+
+			throw new Error( `ContractionDecoder: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
+
+		}
+
+		const view = new DataView( buffer );
+		if ( view.getUint32( 0, true ) !== ContractionDecoder.MAGIC ) throw new Error( 'ContractionDecoder: not a contraction frame (bad magic).' );
+		const version = view.getUint16( 4, true );
+		if ( version !== ContractionDecoder.VERSION ) throw new Error( `ContractionDecoder: unsupported frame version ${ version }.` );
+		const flags = view.getUint16( 6, true );
+		const d = view.getUint16( 12, true ), e = view.getUint16( 14, true );
+		const rotated = ( flags & StreamDecoder.FLAG_HEAD_ROTATION ) !== 0;
+		const body = ContractionDecoder.HEADER_BYTES + 4 * ( d + e + 2 );
+		const expected = body + ( rotated ? 16 : 0 );
+		if ( buffer.byteLength !== expected ) {
+
+			throw new Error( `ContractionDecoder: frame of ${ d } dofs and ${ e } expressions must be ${ expected } bytes, got ${ buffer.byteLength }.` );
+
+		}
+
+		const at = ContractionDecoder.HEADER_BYTES;
+		return {
+			version,
+			flags,
+			frameIndex: view.getUint32( 8, true ),
+			sourceTime: view.getFloat64( 16, true ),
+			sendTime: view.getFloat64( 24, true ),
+			contractions: new Float32Array( buffer, at, d ),
+			distances: new Float32Array( buffer, at + 4 * d, e ),
+			confidence: view.getFloat32( at + 4 * ( d + e ), true ),
+			label: view.getUint32( at + 4 * ( d + e + 1 ), true ),
+			headRotation: rotated ? new Float32Array( buffer, body, 4 ) : null,
 		};
 
 	}
@@ -270,6 +337,46 @@ export class WeightEditEncoder {
 		new Uint16Array( buffer, header + 4 * r, r * k ).set( rows.indices );
 		new Float32Array( buffer, start, r * k ).set( rows.weights );
 		return buffer;
+
+	}
+
+}
+
+/**
+ * Decoder of the played muscles: a 20-byte header (magic "RTMM", uint32 version, uint32
+ * V, uint32 M targets, uint32 J) followed by J bytes of JSON (names, dofs, high, limits,
+ * jaw_pivot, jaw_axis, expressions), M x V x 3 float32 morph targets and V float32 jaw
+ * weights.
+ */
+export class MuscleMorphsDecoder {
+
+	static HEADER_BYTES = 20;
+
+	/**
+	 * @param {ArrayBuffer} buffer
+	 * @returns {{nVertices: number, nTargets: number, header: object, targets: Float32Array,
+	 *   jawWeights: Float32Array}} header: the JSON; targets (M*V*3, target-major) and
+	 *   jawWeights (V) view `buffer`.
+	 */
+	decode( buffer ) {
+
+		const view = checkedHeader( 'MuscleMorphsDecoder', buffer, 'RTMM', MuscleMorphsDecoder.HEADER_BYTES );
+		const v = view.getUint32( 8, true ), m = view.getUint32( 12, true ), j = view.getUint32( 16, true );
+		const start = MuscleMorphsDecoder.HEADER_BYTES + j;
+		const size = start + 12 * m * v + 4 * v;
+		if ( j % 4 !== 0 || buffer.byteLength !== size ) {
+
+			throw new Error( `MuscleMorphsDecoder: ${ m } targets of ${ v } vertices after a ${ j }-byte header need ${ size } bytes, got ${ buffer.byteLength }.` );
+
+		}
+
+		return {
+			nVertices: v,
+			nTargets: m,
+			header: JSON.parse( new TextDecoder().decode( new Uint8Array( buffer, MuscleMorphsDecoder.HEADER_BYTES, j ) ) ),
+			targets: new Float32Array( buffer, start, 3 * m * v ),
+			jawWeights: new Float32Array( buffer, start + 12 * m * v, v ),
+		};
 
 	}
 
