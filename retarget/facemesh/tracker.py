@@ -18,6 +18,7 @@ toward the camera in the same pixel scale; continuous coordinates (pixel i spans
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -33,7 +34,6 @@ INPUT = 192
 ROI_SCALE = 1.5
 MIN_PRESENCE = 0.5
 EYE_LINE = (33, 263)  # the outer corners of the person's right and left eye
-_CORNERS = np.array([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]])  # of a ROI, in its axes
 
 
 @dataclass(frozen=True)
@@ -115,11 +115,13 @@ class FaceMeshTracker:
         # image and matrix as on the whole frame and the cost does not grow with its size
         if self._rgba.shape[:2] != rgb.shape[:2]:
             self._rgba = np.empty((*rgb.shape[:2], 4), np.uint8)
-        corners = roi.centre + _CORNERS @ axes.T
-        size = np.array(rgb.shape[1::-1])
-        lo = np.clip(np.floor(corners.min(0)).astype(int) - 2, 0, size - 1)
-        hi = np.clip(np.ceil(corners.max(0)).astype(int) + 2, lo + 1, size)
-        rows, cols = slice(lo[1], hi[1]), slice(lo[0], hi[0])
+        # the bounding box is the centre +- half the axes' absolute sums, in plain floats
+        # (as many small numpy calls cost more than the box is worth)
+        (cx, cy), (hx, hy) = roi.centre.tolist(), (np.abs(axes).sum(1) / 2).tolist()
+        height, width = rgb.shape[:2]
+        x0, y0 = min(max(math.floor(cx - hx) - 2, 0), width - 1), min(max(math.floor(cy - hy) - 2, 0), height - 1)
+        cols = slice(x0, min(max(math.ceil(cx + hx) + 2, x0 + 1), width))
+        rows = slice(y0, min(max(math.ceil(cy + hy) + 2, y0 + 1), height))
         cv2.cvtColor(rgb[rows, cols], cv2.COLOR_RGB2RGBA, dst=self._rgba[rows, cols])
         cv2.warpAffine(self._rgba, warp, (INPUT, INPUT), dst=self._crop,
                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
