@@ -1,7 +1,9 @@
-"""`Clip`: one take retargeted, the feature displacements per frame with their timing.
+"""`Clip`: one take retargeted, the feature displacements per frame with their timing;
+`ContractionClip`: the same take driven by muscles, their contractions per frame.
 
-`retarget.performance.take_clip` (or `Performance.play`) makes one from a recorded take the
-way the app plays it; `clip_at_rate` from displacements at a constant rate.
+`retarget.performance.take_clip` (or `Performance.play`) makes a `Clip` from a recorded
+take the way the app plays it; `clip_at_rate` from displacements at a constant rate. A
+`retarget.muscles.drive.MuscleDrive` solves a clip's displacements into contractions.
 """
 
 from __future__ import annotations
@@ -32,19 +34,12 @@ class Clip:
 
     def __post_init__(self):
         d = np.array(self.displacements, dtype=np.float32)
-        t = np.array(self.times, dtype=np.float64)
         if d.ndim != 3 or d.shape[2] != 3 or len(d) == 0:
             raise RetargetError(f"clip {self.name!r}: displacements must have shape (F, N, 3) "
                                 f"with F >= 1; got {d.shape}")
         if not np.isfinite(d).all():
             raise RetargetError(f"clip {self.name!r}: displacements hold NaN or infinite values")
-        if t.shape != (len(d),):
-            raise RetargetError(f"clip {self.name!r}: times must have shape ({len(d)},), one "
-                                f"per frame; got {t.shape}")
-        t32 = t.astype(np.float32)
-        if not np.isfinite(t).all() or (t < 0).any() or (np.diff(t32) <= 0).any():
-            raise RetargetError(f"clip {self.name!r}: times must be finite, >= 0 and strictly "
-                                "increasing (also in float32)")
+        t = _checked_times(self.name, self.times, len(d))
         for array in (d, t):
             array.setflags(write=False)
         object.__setattr__(self, "displacements", d)
@@ -58,6 +53,53 @@ class Clip:
     def duration(self) -> float:
         """Seconds from the first frame to the last."""
         return float(self.times[-1] - self.times[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ContractionClip:
+    """Muscle contractions over time, as a muscle glTF animation holds them
+    (`retarget.gltf.write_muscles_gltf`).
+
+    name : the animation's name.
+    contractions : (F, D) float64, the D dofs of a `retarget.muscles.MuscleFace` per frame
+        (the muscles' contractions, then the jaw angle in radians).
+    times : (F,) float64 seconds, as for `Clip`.
+    """
+
+    name: str
+    contractions: np.ndarray
+    times: np.ndarray
+
+    def __post_init__(self):
+        c = np.array(self.contractions, dtype=np.float64)
+        if c.ndim != 2 or len(c) == 0:
+            raise RetargetError(f"clip {self.name!r}: contractions must have shape (F, D) with "
+                                f"F >= 1; got {c.shape}")
+        if not np.isfinite(c).all():
+            raise RetargetError(f"clip {self.name!r}: contractions hold NaN or infinite values")
+        t = _checked_times(self.name, self.times, len(c))
+        for array in (c, t):
+            array.setflags(write=False)
+        object.__setattr__(self, "contractions", c)
+        object.__setattr__(self, "times", t)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.contractions)
+
+
+def _checked_times(name: str, times, n_frames: int) -> np.ndarray:
+    """(F,) float64 copy of a clip's key times, refused unless one per frame, finite,
+    >= 0 and strictly increasing also in float32 (glTF stores key times in float32)."""
+    t = np.array(times, dtype=np.float64)
+    if t.shape != (n_frames,):
+        raise RetargetError(f"clip {name!r}: times must have shape ({n_frames},), one "
+                            f"per frame; got {t.shape}")
+    t32 = t.astype(np.float32)
+    if not np.isfinite(t).all() or (t < 0).any() or (np.diff(t32) <= 0).any():
+        raise RetargetError(f"clip {name!r}: times must be finite, >= 0 and strictly "
+                            "increasing (also in float32)")
+    return t
 
 
 def clip_at_rate(name: str, displacements, fps: float) -> Clip:

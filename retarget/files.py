@@ -3,7 +3,8 @@
 
 `transfer_files` takes a target mesh and its landmarks, a source's neutral S0 and frames S
 in ``.npy`` files, and writes the deformed target, (F, V, 3) float32 ``.npy``;
-`export_gltf_files` writes the rigged face, and the take animated, as one glTF 2.0 binary.
+`export_gltf_files` writes the rigged face (or the face with its muscles), and the take
+animated, as one glTF 2.0 binary.
 Both read and check their inputs alike (`source_arrays`, `layout_for`, `mask_for`), get
 their skin weights alike (`rig_weights`: read from a rig file or computed) and retarget
 through one `retarget.performance.Performance` (Dutreve et al. 2008 §4).
@@ -22,20 +23,22 @@ import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from retarget.clips import clip_at_rate
+from retarget.clips import ContractionClip, clip_at_rate
 from retarget.errors import RetargetError
-from retarget.gltf import write_gltf
+from retarget.gltf import write_gltf, write_muscles_gltf
 from retarget.gltf.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import Layout, get_layout
 from retarget.mesh import Mesh, load_mesh
 from retarget.muscles import MuscleFace, place_muscles
 from retarget.muscles.drive import MuscleDrive
+from retarget.muscles.morphs import muscle_morphs
 from retarget.performance import Performance
 from retarget.pipeline import DEFAULT_KERNEL, transfer
 from retarget.skin import SkinWeights
@@ -229,8 +232,8 @@ class ExportResult:
     n_vertices, n_points : V and N of the exported face.
     n_frames : F frames of the animation (0 without a source).
     fps : the animation's frame rate.
-    deformation : "skin" or "morph" (see `retarget.gltf.writer`).
-    method : the rig's method.
+    deformation : "skin", "morph" or "muscles" (see `retarget.gltf.writer`).
+    method : the rig's method ("muscles" for the muscles).
     seconds : wall time, weights and retargeting included.
     n_bytes : size of the file written.
     out : the path written.
@@ -250,9 +253,10 @@ class ExportResult:
         """The one-line report `export-gltf` prints."""
         animation = (f", {self.n_frames} frames at {self.fps:g} fps" if self.n_frames
                      else ", no animation")
-        kind = "feature joints of a skin" if self.deformation == "skin" else \
-            "feature joints, morph targets"
-        return (f"exported {self.n_vertices} vertices, {self.n_points} {kind} "
+        kind = {"skin": f"{self.n_points} feature joints of a skin",
+                "morph": f"{self.n_points} feature joints, morph targets",
+                "muscles": "a morph target per muscle and a jaw joint"}[self.deformation]
+        return (f"exported {self.n_vertices} vertices, {kind} "
                 f"({self.method}){animation}: {self.n_bytes / 2**20:.1f} MiB in "
                 f"{self.seconds:.2f} s -> {self.out}")
 
@@ -271,6 +275,8 @@ def export_gltf_files(
     smoothing: float | None = None,
     mask: list[str] | None = None,
     layout: str | None = None,
+    drive: str = "points",
+    muscles=None,
     quiet: bool = False,
 ) -> ExportResult:
     """Write a target mesh, rigged and optionally animated, as a glTF 2.0 binary (.glb).
@@ -284,10 +290,21 @@ def export_gltf_files(
         and exported as one animation named after the frames file, frame f at f / fps.
     kernel, smoothing, mask : the retargeting's (`transfer_files`); they need a source.
     layout : layout name; default the landmarks JSON's ``"layout"``, if any.
+    drive : "points" (the rig above) or "muscles": the face with its muscles as morph
+        targets and a jaw joint (`retarget.gltf.write_muscles_gltf`, no rig), the take's
+        feature motion solved into contractions (as `transfer_files` does).
+    muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the
+        mesh from its landmarks.
 
     Raises `RetargetError` for every refusal, naming the file or option.
     """
     start = time.perf_counter()
+    if drive not in DRIVES:
+        raise RetargetError(f"unknown drive {drive!r}; choose one of {', '.join(DRIVES)}")
+    if drive != "muscles" and muscles is not None:
+        raise RetargetError("--muscles needs --drive muscles")
+    if drive == "muscles" and rig is not None:
+        raise RetargetError("drive 'muscles' exports the muscles, not a rig: drop the rig")
     out = Path(out)
     require_parent(out)
     if (source_neutral is None) != (source_frames is None):
@@ -308,25 +325,38 @@ def export_gltf_files(
     if source_frames is not None:
         s0, frames = source_arrays(source_neutral, source_frames, n)
         active = mask_for(mask, the_layout, n)
-    weights = rig_weights(rig, deformer, mesh, points, the_layout, quiet=quiet)
+    if drive == "muscles":
+        model = muscles_for(muscles, mesh, points, the_layout)
+        morphs = muscle_morphs(model)
+    else:
+        weights = rig_weights(rig, deformer, mesh, points, the_layout, quiet=quiet)
     if source_frames is not None:
         performance = _performance(mesh, points, the_layout, active, kernel or DEFAULT_KERNEL,
                                    smoothing, s0)
-        d = np.empty((len(frames), n, 3), np.float32)
-        chunk = 256
-        with progress_bar(len(frames), "retarget", "frame", quiet) as advance:
-            for i in range(0, len(frames), chunk):
-                d[i:i + chunk] = performance.displacements(frames[i:i + chunk])
-                advance((i + chunk) / len(frames))
-        clips.append(clip_at_rate(Path(source_frames).stem, d, fps))
+        name = Path(source_frames).stem
+        if drive == "muscles":
+            contractions = _contractions(MuscleDrive(model, points), performance, frames, quiet)
+            clips.append(ContractionClip(name, contractions, np.arange(len(frames)) / float(fps)))
+        else:
+            d = np.empty((len(frames), n, 3), np.float32)
+            chunk = 256
+            with progress_bar(len(frames), "retarget", "frame", quiet) as advance:
+                for i in range(0, len(frames), chunk):
+                    d[i:i + chunk] = performance.displacements(frames[i:i + chunk])
+                    advance((i + chunk) / len(frames))
+            clips.append(clip_at_rate(name, d, fps))
+    if drive == "muscles":
+        save = partial(write_muscles_gltf, mesh=mesh, morphs=morphs, clips=clips)
+        deformation, method = "muscles", "muscles"
+    else:
+        save = partial(write_gltf, mesh=mesh, points=points, weights=weights, clips=clips)
+        deformation = "skin" if is_joint_based(weights) else "morph"
+        method = weights.method or ("rig" if rig is not None else deformer)
     written = []
     with progress_bar(100, "glTF", "%", quiet) as advance:
-        write_file(out, lambda f: written.append(
-            write_gltf(f, mesh, points, weights, clips, progress=advance)))
-    return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps,
-                        "skin" if is_joint_based(weights) else "morph",
-                        weights.method or ("rig" if rig is not None else deformer),
-                        time.perf_counter() - start, written[0], out)
+        write_file(out, lambda f: written.append(save(f, progress=advance)))
+    return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps, deformation,
+                        method, time.perf_counter() - start, written[0], out)
 
 
 # ---------------------------------------------------------------------------------------

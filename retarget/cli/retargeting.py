@@ -75,9 +75,7 @@ def add_transfer(commands, parents) -> None:
 
 
 def _transfer(args) -> int:
-    if args.drive == "muscles" and (args.deformer or args.rig):
-        raise RetargetError("--drive muscles makes the motion with the muscles, not a rig: drop "
-                            "--deformer and --rig")
+    _refuse_rig_with_muscles(args)
     result = transfer_files(
         args.target_mesh,
         args.target_landmarks,
@@ -149,7 +147,8 @@ def add_export_gltf(commands, parents) -> None:
         description="Write the target mesh (with its uv, normals and material), a joint per "
         "feature point and the rig (a glTF skin; morph targets for rigs with negative "
         "weights) as a glTF 2.0 binary; with a source, the retargeted take as an animation. "
-        "Units are the mesh's own.")
+        "With --drive muscles: a morph target per muscle and a jaw joint instead, animated by "
+        "the solved contractions. Units are the mesh's own.")
     p.add_argument("--mesh", required=True, metavar="MESH",
                    help="target mesh (obj, ply, stl, off, gltf, glb)")
     p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
@@ -175,10 +174,18 @@ def add_export_gltf(commands, parents) -> None:
                    "or feature indices")
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
                    help="landmark layout (joint names); default: the landmarks JSON's \"layout\"")
+    p.add_argument("--drive", choices=list(DRIVES), default="points",
+                   help="points: feature joints and the rig (default); muscles: a morph target per "
+                   "muscle (and correctives for those the jaw crosses) and a jaw joint, animated by "
+                   "the muscle IK's contractions (Woodward et al.), no rig")
+    p.add_argument("--muscles", metavar="MUSCLES.json",
+                   help="with --drive muscles: muscles from 'retarget muscles' (default: placed from "
+                   "the landmarks)")
     p.set_defaults(run=_export_gltf)
 
 
 def _export_gltf(args) -> int:
+    _refuse_rig_with_muscles(args)
     result = export_gltf_files(
         args.mesh,
         args.landmarks,
@@ -192,10 +199,19 @@ def _export_gltf(args) -> int:
         smoothing=args.smoothing,
         mask=args.mask,
         layout=args.layout,
+        drive=args.drive,
+        muscles=args.muscles,
         quiet=args.quiet,
     )
     print(result.summary())
     return 0
+
+
+def _refuse_rig_with_muscles(args) -> None:
+    """--deformer and --rig name a rig, which --drive muscles does without."""
+    if args.drive == "muscles" and (args.deformer or args.rig):
+        raise RetargetError("--drive muscles makes the motion with the muscles, not a rig: drop "
+                            "--deformer and --rig")
 
 
 # ---------------------------------------------------------------------------------------

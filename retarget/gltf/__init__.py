@@ -9,17 +9,21 @@ feature points as translation-only joints (Dutreve §3), its rig (a glTF skin, o
 targets for rigs with negative weights) and retargeted takes (`retarget.clips.Clip`) as
 animations, as one .glb (`writer` documents the layout and the units); `read_gltf` reads
 such a file back into the mesh, landmarks, skin weights and clips (`reader`);
-`export_mesh_gltf` writes the mesh alone. `glb` is the binary container, `influences`
-the weights as JOINTS_n / WEIGHTS_n, `morph` the weights as morph targets.
+`export_mesh_gltf` writes the mesh alone; `export_muscles_gltf` and `write_muscles_gltf`
+a face driven by its muscles (`retarget.muscles.morphs`: morph targets and a jaw joint)
+with takes of muscle contractions (`retarget.clips.ContractionClip`). `glb` is the
+binary container, `influences` the weights as JOINTS_n / WEIGHTS_n, `morph` the weights
+as morph targets.
 """
 
 import importlib
 
-__all__ = ["RiggedFace", "export_gltf", "export_mesh_gltf", "joint_names", "read_gltf",
-           "write_gltf"]
+__all__ = ["RiggedFace", "export_gltf", "export_mesh_gltf", "export_muscles_gltf", "joint_names",
+           "read_gltf", "write_gltf", "write_muscles_gltf"]
 
 _HOMES = {"RiggedFace": "reader", "read_gltf": "reader", "export_gltf": "writer",
-          "export_mesh_gltf": "writer", "joint_names": "writer", "write_gltf": "writer"}
+          "export_mesh_gltf": "writer", "export_muscles_gltf": "writer", "joint_names": "writer",
+          "write_gltf": "writer", "write_muscles_gltf": "writer"}
 
 
 def __getattr__(name: str):

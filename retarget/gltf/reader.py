@@ -66,6 +66,9 @@ def read_gltf(source) -> RiggedFace:
     gltf = _document(data, label)
     nodes = gltf.doc.nodes or []
     extras = _retarget_extras(gltf)
+    if extras.get("deformation") == "muscles":
+        raise RetargetError(f"{label} is a muscle export (a morph target per muscle and a jaw "
+                            "joint, animated by contractions): it holds no feature-point rig to read")
     mesh_node = _mesh_node(nodes, label)
     primitive = _primitive(gltf, nodes[mesh_node])
     root, features = _feature_nodes(gltf, mesh_node)

@@ -27,6 +27,17 @@ Either way a glTF viewer draws ``v0 + W d_f``, what `retarget.skin.skin_displace
 computes, to float32 rounding; normals are not animated (translation-only joints keep
 them; morph targets carry no NORMAL offsets).
 
+`export_muscles_gltf` and `write_muscles_gltf` write a face driven by its muscles
+(Woodward §4) in the form `retarget.muscles.morphs` plays them: one morph target per
+muscle, named after it, then the correctives (``<muscle>*jaw``), all in
+``mesh.extras.targetNames``; a skin of ``root`` and one ``jaw`` joint, a translation to
+the hinge whose rotation about the hinge axis is the jaw angle, weighted per vertex by the
+jaw's weights (the root takes the rest, as above). A `ContractionClip` is one animation
+keying, per frame, the morph weights c_m / high_m and the correctives' products, and
+the jaw joint's rotation quaternion (LINEAR: slerp about one axis is the angle
+interpolated linearly). glTF morphs, then skins: a viewer draws
+`retarget.muscles.morphs.played_displacements`, to float32 rounding.
+
 Units: the mesh's own, unscaled. glTF's convention is metres and +y up; the sample face
 and the ICT data are centimetres with +y up, so they appear 100 times too large in a
 viewer that trusts the convention. Scaling would change every position and displacement
@@ -38,13 +49,14 @@ the rig's method and the deformation kind for that round trip.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import trimesh
 
 from retarget import __version__
 from retarget.errors import RetargetError
-from retarget.clips import Clip
+from retarget.clips import Clip, ContractionClip
 from retarget.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
 from retarget.gltf.influences import is_joint_based, joint_influences
 from retarget.gltf.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
@@ -53,10 +65,12 @@ from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
 from retarget.material import Material
 from retarget.mesh import Mesh
+from retarget.muscles.morphs import MuscleMorphs
 from retarget.skin import SkinWeights
 
 FORMAT = "retarget-gltf-1"
 ROOT_NAME = "root"
+JAW_NAME = "jaw"
 MESH_NODE, ROOT_NODE, FIRST_FEATURE_NODE = 0, 1, 2
 TRIANGLES = 4
 
@@ -109,6 +123,35 @@ def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, cl
     return n_bytes
 
 
+def export_muscles_gltf(mesh: Mesh, morphs: MuscleMorphs, clips=(), *, progress=None) -> bytes:
+    """The .glb bytes of `mesh` driven by its muscles, with `clips` animated (arguments as
+    for `write_muscles_gltf`)."""
+    built = _built_muscles(mesh, morphs, clips, progress)
+    data = built.glb_bytes()
+    if progress is not None:
+        progress(1.0)
+    return data
+
+
+def write_muscles_gltf(file, mesh: Mesh, morphs: MuscleMorphs, clips=(), *, progress=None) -> int:
+    """Write the .glb of `mesh` driven by its muscles, with `clips` animated, to a binary
+    file object (see the module docstring); returns the number of bytes written.
+
+    mesh : the face, V vertices (units kept).
+    morphs : its muscles' played form (`retarget.muscles.morphs.muscle_morphs`), on V
+        vertices.
+    clips : `ContractionClip` objects of D = M + 1 dofs each, one animation per clip.
+    progress : optional callable taking the fraction done in [0, 1].
+
+    Raises `RetargetError` when the sizes disagree (naming both).
+    """
+    built = _built_muscles(mesh, morphs, clips, progress)
+    n_bytes = built.write(file)
+    if progress is not None:
+        progress(1.0)
+    return n_bytes
+
+
 def export_mesh_gltf(mesh: Mesh) -> bytes:
     """The .glb bytes of `mesh` alone, one node without rig or animation: its positions,
     triangles, normals, uv and material as `export_gltf` writes them, so that
@@ -153,7 +196,7 @@ def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
     step()
     scale = None if skinned else morph_scale(clips)
     if skinned:
-        _add_skin(out, primitive, weights, neutral)
+        _add_skin(out, primitive, weights, neutral, "features")
     else:
         _add_morph_targets(out, doc["meshes"][0], weights, names, scale, step)
     doc["scene"] = 0
@@ -173,6 +216,60 @@ def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
             doc["animations"].append(_animation(out, clip, neutral, scale))
             step()
     return out
+
+
+def _built_muscles(mesh, morphs, clips, progress) -> GlbBuilder:
+    """The document and buffer of the muscle export; progress reaches 0.95."""
+    clips = tuple(clips)
+    _check_muscle_sizes(mesh, morphs, clips)
+    names = list(morphs.names) + list(morphs.corrective_names)
+    report = progress or (lambda fraction: None)
+    steps = 1 + len(names) + len(clips)
+    done = [0]
+
+    def step():
+        done[0] += 1
+        report(0.95 * done[0] / steps)
+
+    out = GlbBuilder(f"retarget {__version__}")
+    doc = out.document
+    primitive = _primitive(out, mesh)
+    doc["meshes"] = [{"name": mesh.name or "face", "primitives": [primitive]}]
+    pivot = morphs.jaw_pivot.astype(np.float32)
+    # the jaw is the skin's one joint beside the root, where a rig's features would be
+    doc["nodes"] = [{"name": mesh.name or "face", "mesh": 0},
+                    {"name": ROOT_NAME, "children": [FIRST_FEATURE_NODE]},
+                    {"name": JAW_NAME, "translation": [float(x) for x in pivot]}]
+    jaw = SkinWeights(np.zeros((mesh.n_vertices, 1), np.int32), morphs.jaw_weights[:, None], 1, "muscles")
+    _add_skin(out, primitive, jaw, pivot[None], JAW_NAME)
+    step()
+    _add_targets(out, doc["meshes"][0], itertools.chain(morphs.targets, morphs.correctives), names, step)
+    doc["scene"] = 0
+    doc["scenes"] = [{
+        "name": mesh.name or "face",
+        "nodes": [MESH_NODE, ROOT_NODE],
+        "extras": {"retarget": {"format": FORMAT, "deformation": "muscles", "method": "muscles"}},
+    }]
+    if clips:
+        doc["animations"] = []
+        for clip in clips:
+            doc["animations"].append(_muscle_animation(out, clip, morphs))
+            step()
+    return out
+
+
+def _check_muscle_sizes(mesh, morphs, clips) -> None:
+    if not isinstance(morphs, MuscleMorphs):
+        raise RetargetError(f"morphs must be a MuscleMorphs; got {type(morphs).__name__}")
+    if morphs.targets.shape[1] != mesh.n_vertices:
+        raise RetargetError(f"the muscles are placed on {morphs.targets.shape[1]} vertices but the "
+                            f"mesh has {mesh.n_vertices}")
+    for clip in clips:
+        if not isinstance(clip, ContractionClip):
+            raise RetargetError(f"clips must be ContractionClip objects; got {type(clip).__name__}")
+        if clip.contractions.shape[1] != len(morphs.names) + 1:
+            raise RetargetError(f"clip {clip.name!r} has {clip.contractions.shape[1]} dofs but the "
+                                f"muscles have {len(morphs.names) + 1} (the muscles and the jaw)")
 
 
 def _check_sizes(mesh, points, weights, clips) -> None:
@@ -254,8 +351,10 @@ def _unit_normals(mesh: Mesh) -> np.ndarray:
     return (n / length[:, None]).astype(np.float32)
 
 
-def _add_skin(out: GlbBuilder, primitive: dict, weights: SkinWeights, neutral: np.ndarray):
-    """JOINTS_n / WEIGHTS_n on the primitive and the skin over root + features."""
+def _add_skin(out: GlbBuilder, primitive: dict, weights: SkinWeights, neutral: np.ndarray,
+              name: str):
+    """JOINTS_n / WEIGHTS_n on the primitive and the skin `name` over root and the joints
+    at `neutral` (N, 3) float32, nodes FIRST_FEATURE_NODE onwards."""
     joints, influence = joint_influences(weights)
     for s in range(joints.shape[1] // 4):
         cols = slice(4 * s, 4 * s + 4)
@@ -269,7 +368,7 @@ def _add_skin(out: GlbBuilder, primitive: dict, weights: SkinWeights, neutral: n
     # glTF matrices are column-major
     ibm = inverse_bind.transpose(0, 2, 1).reshape(n + 1, 16)
     out.document["skins"] = [{
-        "name": "features",
+        "name": name,
         "joints": [ROOT_NODE] + list(range(FIRST_FEATURE_NODE, FIRST_FEATURE_NODE + n)),
         "inverseBindMatrices": out.accessor(ibm),
         "skeleton": ROOT_NODE,
@@ -304,6 +403,41 @@ def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, n
     gltf_mesh["primitives"][0]["targets"] = targets
     gltf_mesh["weights"] = [0.0] * len(targets)
     gltf_mesh["extras"] = {"targetNames": target_names(names), "targetScale": scale}
+
+
+def _add_targets(out: GlbBuilder, gltf_mesh: dict, targets, names: list[str], step) -> None:
+    """Morph targets from (V, 3) offsets in `targets` (an iterable, so that they are never
+    stacked), named `names`; sparse where few vertices move."""
+    accessors = []
+    for offsets in targets:
+        offsets = np.asarray(offsets, dtype=np.float32)                 # (V, 3)
+        v = len(offsets)
+        rows = np.flatnonzero(offsets.any(axis=1))
+        if len(rows) < SPARSE_SHARE * v:
+            index_type = np.uint16 if v <= 65536 else np.uint32
+            accessor = out.sparse_accessor(v, rows.astype(index_type), offsets[rows], bounds=True)
+        else:
+            accessor = out.accessor(offsets, target=ARRAY_BUFFER, bounds=True)
+        accessors.append({"POSITION": accessor})
+        step()
+    gltf_mesh["primitives"][0]["targets"] = accessors
+    gltf_mesh["weights"] = [0.0] * len(accessors)
+    gltf_mesh["extras"] = {"targetNames": list(names)}
+
+
+def _muscle_animation(out: GlbBuilder, clip: ContractionClip, morphs: MuscleMorphs) -> dict:
+    """One animation: the jaw joint's rotation by each frame's jaw angle about the hinge
+    axis, and the mesh's morph weights (muscles, then correctives), LINEAR."""
+    times = out.accessor(clip.times.astype(np.float32), bounds=True)
+    weights, angle = morphs.weights(clip.contractions)                   # (F, M), (F,)
+    keyed = np.hstack([weights, morphs.corrective_weights(clip.contractions)])
+    half = 0.5 * angle
+    rotation = np.column_stack([np.sin(half)[:, None] * morphs.jaw_axis, np.cos(half)])  # (F, 4) xyzw
+    samplers = [{"input": times, "output": out.accessor(output.astype(np.float32)), "interpolation": "LINEAR"}
+                for output in (rotation, keyed.ravel())]
+    channels = [{"sampler": 0, "target": {"node": FIRST_FEATURE_NODE, "path": "rotation"}},
+                {"sampler": 1, "target": {"node": MESH_NODE, "path": "weights"}}]
+    return {"name": clip.name, "samplers": samplers, "channels": channels}
 
 
 def _animation(out: GlbBuilder, clip: Clip, neutral: np.ndarray, scale: float | None) -> dict:

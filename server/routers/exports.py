@@ -1,6 +1,7 @@
 """A project as a glTF 2.0 binary, and a project from one.
 
     GET  /api/projects/{id}/export.glb[?takes=<id>,<id>|all][&settings=<JSON>][&regions=<a>,<b>]
+                                       [&drive=points|muscles]
     POST /api/projects/import          multipart: file (.glb), name (optional)
 
 The export (`retarget.gltf.export_gltf`) holds the project's mesh, landmarks and the rig
@@ -11,7 +12,10 @@ frames retargeted as the take player plays them (`retarget.performance.take_clip
 by ``settings``, the Performance panel's ConditionSettings JSON, defaults when absent;
 ``regions`` moves only those regions, groups or points). It answers as an attachment
 named after the project. A plain request: the sample face with a 30 s take at 30 fps
-exports in well under a second.
+exports in well under a second. With ``drive=muscles`` it holds the project's muscles
+instead of the rig (`retarget.gltf.export_muscles_gltf`: a morph target per muscle and a
+jaw joint; the rig is not needed), each take's feature motion solved into contractions by
+the muscle IK (`retarget.muscles.drive.MuscleDrive`, from the take's first frame).
 
 The import reads a .glb this app exported (`retarget.gltf.read_gltf`) into a new
 project: its mesh (stored as a mesh-only .glb, `retarget.gltf.export_mesh_gltf`), its
@@ -27,18 +31,23 @@ from __future__ import annotations
 
 import json
 import re
+from typing import Literal
 
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile, status
 
+from retarget.clips import ContractionClip
 from retarget.errors import RetargetError
-from retarget.gltf import export_gltf
+from retarget.gltf import export_gltf, export_muscles_gltf
 from retarget.landmarks import landmarks_from_json
+from retarget.muscles.drive import MuscleDrive
+from retarget.muscles.morphs import muscle_morphs
 from retarget.performance import take_clip
 from server.deps import IsolationDep, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.limits import body_limit
 from server.readers import imported_project
 from server.routers.meshes import read_capped, upload_extension
+from server.routers.muscles import project_muscles
 
 router = APIRouter(tags=["exports"])
 
@@ -51,11 +60,13 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                    takes: str = Query(default="", description="take ids, comma-separated, or 'all'"),
                    settings: str = Query(default="", description="ConditionSettings JSON"),
                    regions: str = Query(default="", description="regions that move, comma-separated"),
+                   drive: Literal["points", "muscles"] = Query(
+                       default="points", description="points: the rig; muscles: the muscles"),
                    ) -> Response:
     """The project rigged and animated as a .glb download (see the module docstring)."""
     landmarks = store.landmarks(project["id"])
     weights = store.rig(project["id"])
-    if landmarks is None or weights is None:
+    if landmarks is None or (weights is None and drive == "points"):
         missing = "landmarks" if landmarks is None else "rig"
         raise HTTPException(status.HTTP_409_CONFLICT,
                             f"project {project['name']!r} has no {missing} yet: place the landmarks "
@@ -72,7 +83,16 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                                    conditioning, regions=moving))
         except RetargetError as exc:
             raise RetargetError(f"take {info['name']!r}: {exc}") from exc
-    data = export_gltf(mesh, points, weights, clips)
+    if drive == "muscles":
+        model, _ = project_muscles(store, project, mesh)
+        muscles = MuscleDrive(model, points)
+        solved = []
+        for clip in clips:
+            muscles.reset()
+            solved.append(ContractionClip(clip.name, muscles.contractions(clip.displacements), clip.times))
+        data = export_muscles_gltf(mesh, muscle_morphs(model), solved)
+    else:
+        data = export_gltf(mesh, points, weights, clips)
     return Response(data, media_type=GLB_MEDIA_TYPE, headers={
         "Content-Disposition": f'attachment; filename="{_file_name(project["name"])}.glb"'})
 

@@ -1,6 +1,7 @@
 """Export a project as glTF and import one (server/routers/exports.py): the export
 validates with the Khronos validator and holds the project's mesh, landmarks, rig (painted
-included) and takes as animations retargeted as the take player plays them; importing it
+included) and takes as animations retargeted as the take player plays them (with
+drive=muscles: its muscles, animated by the contractions solved from them); importing it
 gives a project with the same mesh, landmarks and weights; bad input is refused with its
 reason and makes no project."""
 
@@ -13,8 +14,14 @@ import trimesh
 from fastapi.testclient import TestClient
 
 from retarget.gltf import read_gltf
+from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
+                                       node_transforms, posed_vertices)
+from retarget.gltf.document import GltfDocument
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
+from retarget.muscles import MuscleFace
+from retarget.muscles.drive import MuscleDrive
+from retarget.muscles.morphs import muscle_morphs, played_displacements
 from retarget.sample_face import demo_weights, sample_face
 from retarget.sources.conditioning import ConditionSettings
 from server.app import create_app
@@ -151,6 +158,36 @@ def test_a_painted_ellipsoid_rig_exports_as_a_skin(app, client, sample, exported
     face = read_gltf(r.content)
     assert face.deformation == "skin"
     np.testing.assert_allclose(face.weights.dense(), painted.dense(), atol=1e-6)
+
+
+def test_drive_muscles_exports_the_muscles_animated_by_the_takes_contractions(app, client, sample, exported):
+    """drive=muscles: a morph target per muscle and a jaw joint, each frame the played form
+    of the contractions the muscle IK solves from the take as the player plays it."""
+    pid, take = sample
+    r = export(client, pid, takes="all", drive="muscles")
+    assert r.status_code == 200, r.text
+    info = assert_valid_gltf(write(r.content, exported[1].parent / "muscles.glb"))["info"]
+    assert info["hasSkins"] and info["hasMorphTargets"] and info["animationCount"] == 1
+    store = app.state.store
+    mesh = store.mesh(pid)
+    points = landmarks_from_json(store.landmarks(pid), mesh.vertices, mesh.faces)
+    model = MuscleFace.from_json(client.get(f"/api/projects/{pid}/muscles").json(), mesh.vertices)
+    d, times = played(app, pid, take["id"])
+    contractions = MuscleDrive(model, points).contractions(d)
+    gltf = GltfDocument(r.content, "muscles.glb", None)
+    assert gltf.doc.meshes[0].extras["targetNames"][:model.n_muscles] == list(model.names[:-1])
+    (instance,) = mesh_instances(gltf)
+    channels = animation_channels(gltf, gltf.doc.animations[0])
+    k = int(np.argmax(np.abs(contractions[:, :-1]).sum(1)))      # the take's widest frame
+    at = times[k:k + 1]
+    drawn = posed_vertices(gltf, instance, np.arange(mesh.n_vertices),
+                           node_transforms(gltf, gltf.doc.nodes, channels, at),
+                           animated_weights(gltf, channels, at), at)[0]
+    np.testing.assert_allclose(drawn - mesh.vertices,
+                               played_displacements(muscle_morphs(model), model.rest, contractions[k]),
+                               atol=1e-4)
+    r = export(client, pid, drive="bones")
+    assert r.status_code == 422 and "drive" in r.text
 
 
 def write(data: bytes, path):
