@@ -9,7 +9,10 @@ for a SkinnedMesh `applyBoneTransform` on top). They must equal, within 1e-4 of 
 size, both the library's linear blend skinning (`retarget.skin.skin_displacements`) and
 our app's skinning shader (`SkinnedFace.deformedPositions()`) on the project's rig with
 the clip's feature displacements at that time. three.js reads one JOINTS_0/WEIGHTS_0 set
-(four influences), so the skin must need no second set.
+(four influences), so the skin must need no second set. The muscle export
+(``drive=muscles``: a morph target per muscle and corrective, a jaw joint) must play in
+three.js as glTF defines it (`retarget.gltf.animation`, which
+tests/unit/test_export_muscles.py ties to the muscles' played form).
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ import numpy as np
 import pytest
 
 from retarget.gltf import read_gltf
+from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
+                                       node_transforms, posed_vertices)
 from retarget.gltf.document import GltfDocument
 from retarget.sample_face import demo_weights, sample_face
 from retarget.skin import SkinWeights, skin_displacements
@@ -203,6 +208,28 @@ def test_three_js_plays_the_export_as_our_app_draws_it(server, page, sample):
     loaded = _three_matches_ours(page, server, pid, take)
     assert loaded["skinned"] and loaded["morphs"] == 0
     assert loaded["skinAttributes"] == ["skinIndex", "skinWeight"]
+
+    # the muscles: morph targets then the jaw joint's skin, as glTF defines them
+    url = f"/api/projects/{pid}/export.glb?takes={take['id']}&drive=muscles"
+    gltf = GltfDocument(server.read(url), "muscles", None)
+    loaded = page.evaluate("(url) => check.load(url)", url)
+    assert loaded["skinned"] and loaded["morphs"] == len(gltf.doc.meshes[0].extras["targetNames"]) > 21
+    (instance,) = mesh_instances(gltf)
+    channels = animation_channels(gltf, gltf.doc.animations[0])
+    (keys, weights), = [(c[2], c[3]) for c in channels if c[1] == "weights"]
+    key = min(int(np.abs(weights).sum(1).argmax()), len(keys) - 2)   # the widest pose
+    rest = instance["positions"].astype(np.float64)
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    for t in (keys[key], 0.5 * (keys[key] + keys[key + 1])):
+        at = np.array([t], dtype=np.float64)
+        expected = posed_vertices(gltf, instance, np.arange(len(rest)),
+                                  node_transforms(gltf, gltf.doc.nodes, channels, at),
+                                  animated_weights(gltf, channels, at), at)[0]
+        three = _decoded(page.evaluate("(t) => check.posed(t)", float(t)))
+        print(f"muscles, t = {t:.4f} s: |three.js - glTF| = {np.abs(three - expected).max() / size:.1e} "
+              f"of the mesh size (moved up to {np.abs(expected - rest).max() / size:.3f})")
+        assert np.abs(expected - rest).max() / size > 0.01
+        assert np.abs(three - expected).max() / size < TOLERANCE
 
 
 def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
