@@ -64,18 +64,21 @@ Played muscles (RTMM)
     0           4       magic b"RTMM"
     4           4       uint32 format version (1)
     8           4       uint32 V, vertex count
-    12          4       uint32 M, morph target count
+    12          4       uint32 T = M + C, morph target count: M muscles, C correctives
     16          4       uint32 J, bytes of the JSON header (padded with spaces to a multiple of 4)
-    20          J       UTF-8 JSON: {"names": M target names, "dofs": D dof names (the
-                        targets' muscles then "jaw"), "high": M contractions that weight 1
-                        stands for, "limits": D [low, high], "jaw_pivot": [x, y, z],
-                        "jaw_axis": [x, y, z], "expressions": E names}
-    20+J        12 M V  float32 targets, (M, V, 3) row-major, mesh units
+    20          J       UTF-8 JSON: {"names": T target names (the muscles', then the
+                        correctives' ``<muscle>*jaw``), "dofs": D = M + 1 dof names (the
+                        muscles then "jaw"), "high": M contractions that weight 1 stands
+                        for, "corrective_of": C muscle indices, "limits": D [low, high],
+                        "jaw_limits": [low, high], "jaw_pivot": [x, y, z], "jaw_axis":
+                        [x, y, z], "expressions": E names}
+    20+J        12 T V  float32 targets, (T, V, 3) row-major, mesh units
     ...         4 V     float32 jaw weights, (V,)
 
-A pose c (D,) plays as v = rest + sum_m c_m / high_m targets[m], then the jaw's linear
-blend skinning about the axis through the pivot by the angle c[-1], weighted per vertex
-(`retarget.muscles.morphs.played_displacements`).
+A pose c (D,) plays as v = rest + sum_t weight_t targets[t], weight_m = c_m / high_m for
+a muscle and weight_(corrective of m) = weight_m c[-1] / jaw_limits[1], then the jaw's
+linear blend skinning about the axis through the pivot by the angle c[-1], weighted per
+vertex (`retarget.muscles.morphs.played_displacements`).
 
 Mesh arrays (RTMA)
 ------------------
@@ -374,13 +377,16 @@ def morphs_binary(morphs: MuscleMorphs, dofs, limits, expressions) -> bytes:
     names and `limits` (D, 2) their ranges (the sliders'), `expressions` the names a
     contraction frame's label indexes."""
     header = json.dumps({
-        "names": list(morphs.names), "dofs": list(dofs), "high": morphs.high.tolist(),
-        "limits": np.asarray(limits, float).tolist(), "jaw_pivot": morphs.jaw_pivot.tolist(),
+        "names": [*morphs.names, *morphs.corrective_names], "dofs": list(dofs), "high": morphs.high.tolist(),
+        "corrective_of": morphs.corrective_of.tolist(), "limits": np.asarray(limits, float).tolist(),
+        "jaw_limits": morphs.jaw_limits.tolist(), "jaw_pivot": morphs.jaw_pivot.tolist(),
         "jaw_axis": morphs.jaw_axis.tolist(), "expressions": list(expressions)}).encode()
     header += b" " * (-len(header) % 4)
     m, v, _ = morphs.targets.shape
-    return (MORPHS_HEADER.pack(MORPHS_MAGIC, MORPHS_VERSION, v, m, len(header)) + header
+    c = len(morphs.corrective_of)
+    return (MORPHS_HEADER.pack(MORPHS_MAGIC, MORPHS_VERSION, v, m + c, len(header)) + header
             + np.ascontiguousarray(morphs.targets, "<f4").tobytes()
+            + np.ascontiguousarray(morphs.correctives, "<f4").tobytes()
             + np.ascontiguousarray(morphs.jaw_weights, "<f4").tobytes())
 
 

@@ -75,20 +75,22 @@ def test_played_form_binary_decodes_to_muscle_morphs(client, sample_id):
     answer = client.get(f"/api/projects/{sample_id}/muscles/played")
     assert answer.status_code == 200 and answer.headers["content-type"] == "application/octet-stream"
     data = answer.content
-    magic, version, v, m, j = MORPHS_HEADER.unpack_from(data)
-    assert (magic, version, v, m) == (b"RTMM", 1, mesh.n_vertices, 21) and j % 4 == 0
+    magic, version, v, t, j = MORPHS_HEADER.unpack_from(data)
+    m, c = len(morphs.names), len(morphs.corrective_of)
+    assert (magic, version, v, t) == (b"RTMM", 1, mesh.n_vertices, m + c) and m == 21 and c > 0 and j % 4 == 0
     header = json.loads(data[MORPHS_HEADER.size:MORPHS_HEADER.size + j])
-    assert header["names"] == list(morphs.names) and header["dofs"] == list(model.names)
+    assert header["names"] == [*morphs.names, *morphs.corrective_names] and header["dofs"] == list(model.names)
+    assert header["corrective_of"] == morphs.corrective_of.tolist()
     assert header["expressions"] == list(EXPRESSIONS)
-    np.testing.assert_allclose(header["high"], morphs.high)
-    np.testing.assert_allclose(header["limits"], model.limits)
-    np.testing.assert_allclose(header["jaw_pivot"], morphs.jaw_pivot)
-    np.testing.assert_allclose(header["jaw_axis"], morphs.jaw_axis)
+    for key, value in (("high", morphs.high), ("limits", model.limits), ("jaw_limits", morphs.jaw_limits),
+                       ("jaw_pivot", morphs.jaw_pivot), ("jaw_axis", morphs.jaw_axis)):
+        np.testing.assert_allclose(header[key], value)
     at = MORPHS_HEADER.size + j
-    targets = np.frombuffer(data, "<f4", m * v * 3, at).reshape(m, v, 3)
-    weights = np.frombuffer(data, "<f4", v, at + 12 * m * v)
-    assert len(data) == at + 12 * m * v + 4 * v
-    np.testing.assert_array_equal(targets, morphs.targets)
+    targets = np.frombuffer(data, "<f4", t * v * 3, at).reshape(t, v, 3)
+    weights = np.frombuffer(data, "<f4", v, at + 12 * t * v)
+    assert len(data) == at + 12 * t * v + 4 * v
+    np.testing.assert_array_equal(targets[:m], morphs.targets)
+    np.testing.assert_array_equal(targets[m:], morphs.correctives)
     np.testing.assert_array_equal(weights, morphs.jaw_weights)
 
 

@@ -55,7 +55,7 @@ export class App {
 	/**
 	 * The panels, each a view of part of the page.
 	 * @param {{bar: object, upload: object, marks: object, rig: object, mouth: object,
-	 *   paint: object, sources: object, live: object, exports: object}} panels
+	 *   paint: object, muscles: object, sources: object, live: object, exports: object}} panels
 	 */
 	setPanels( panels ) {
 
@@ -222,6 +222,7 @@ export class App {
 		this.projectSettings.cancel(); // what was not sent belongs to this project
 		this.rig.clear();
 		this.mouth.clear();
+		this.muscles.clear();
 		this.live.close();
 		this.sources.stopWebcam();
 		this.exports.setProject( null );
@@ -309,6 +310,7 @@ export class App {
 		this.face?.setRig( null );
 		this.face?.setHeatmap( null );
 		this.paint.setRig( null, null );
+		this.muscles.clear(); // placed anew from the new landmarks
 		this._showSavedLandmarks( this.project );
 		this.mouth.load( this.project, this.ticket() ).catch( ( error ) => this.errors.show( error ) );
 		this.rig.update();

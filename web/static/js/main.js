@@ -23,6 +23,7 @@ import { LandmarksPanel } from './panels/LandmarksPanel.js';
 import { LivePanel } from './panels/LivePanel.js';
 import { MeshUpload } from './panels/MeshUpload.js';
 import { MouthPanel } from './panels/MouthPanel.js';
+import { MusclesPanel } from './panels/MusclesPanel.js';
 import { PaintPanel } from './panels/PaintPanel.js';
 import { PerformancePanel } from './panels/PerformancePanel.js';
 import { ProjectBar } from './panels/ProjectBar.js';
@@ -57,6 +58,7 @@ app.setPanels( {
 	rig: new RigPanel( app ),
 	mouth: new MouthPanel( app ),
 	paint: new PaintPanel( app ),
+	muscles: new MusclesPanel( app ),
 	sources: new PerformancePanel( app ),
 	live: new LivePanel( app ),
 	exports: new ExportPanel( app ),

@@ -1,4 +1,4 @@
-import { StreamDecoder } from './wire.js';
+import { ContractionDecoder, StreamDecoder } from './wire.js';
 
 const BACKOFF_MIN_MS = 250;
 const BACKOFF_MAX_MS = 5000;
@@ -13,11 +13,13 @@ const LATENCY_FRAMES = 300;
  * - 'hello'   detail: the server's hello JSON ({type, project, n_points, layout, source});
  * - 'frame'   detail: a decoded frame (StreamDecoder.decode; its displacements view the
  *             message's bytes);
+ * - 'contractions' detail: a decoded contraction frame of a source driven by muscles
+ *             (ContractionDecoder.decode);
  * - 'message' detail: any other JSON the server sends (started, stopped, mask, pong, error);
  * - 'status'  detail: {state: 'connecting'|'open'|'reconnecting'|'closed', reason?}.
  *
  * After a dropped connection it reconnects with exponential backoff (0.25 s doubling to 5 s)
- * and re-sends the last start and mask controls, since the server stops a project's source
+ * and re-sends the last start, mask and drive controls, since the server stops a project's source
  * when its last viewer leaves. It does not reconnect after `close()` or when the server
  * refuses the project (close code 1008, e.g. no landmarks yet): that reason is the 'closed'
  * status's `reason`.
@@ -37,12 +39,13 @@ export class StreamClient extends EventTarget {
 		this.state = 'idle';
 
 		this._decoder = new StreamDecoder();
+		this._contractions = new ContractionDecoder();
 		this._socket = null;
 		this._closed = false;
 		this._attempts = 0; // connections lost since the last hello
 		this._reconnectTimer = null;
 		this._queue = []; // controls sent before the socket opened, other than start and mask
-		this._replayed = { mask: null, start: null, settings: null }; // the last ones sent, for a reconnect
+		this._replayed = { mask: null, drive: null, start: null, settings: null }; // the last ones sent, for a reconnect
 
 		this._frames = 0;
 		this._arrivals = []; // performance.now() of the frames received in the last second, ms
@@ -68,7 +71,7 @@ export class StreamClient extends EventTarget {
 		this._closed = true;
 		clearTimeout( this._reconnectTimer );
 		this._queue.length = 0;
-		this._replayed = { mask: null, start: null, settings: null };
+		this._replayed = { mask: null, drive: null, start: null, settings: null };
 		const socket = this._socket;
 		this._socket = null;
 		if ( socket !== null ) {
@@ -176,9 +179,9 @@ export class StreamClient extends EventTarget {
 	_onOpen() {
 
 		this._setState( 'open' );
-		// mask first, so the first frames after a start are already masked
-		const { mask, start, settings } = this._replayed;
-		for ( const text of [ mask, start, settings, ...this._queue ] ) {
+		// mask and drive first, so the first frames after a start are already masked and driven
+		const { mask, drive, start, settings } = this._replayed;
+		for ( const text of [ mask, drive, start, settings, ...this._queue ] ) {
 
 			if ( text !== null ) this._socket.send( text );
 
@@ -192,12 +195,13 @@ export class StreamClient extends EventTarget {
 
 		if ( event.data instanceof ArrayBuffer ) {
 
-			const frame = this._decoder.decode( event.data );
+			const muscles = new DataView( event.data ).getUint32( 0, true ) === ContractionDecoder.MAGIC;
+			const frame = ( muscles ? this._contractions : this._decoder ).decode( event.data );
 			this._frames ++;
 			const now = performance.now();
 			this._arrivals.push( now );
 			this._forgetArrivalsBefore( now - FPS_WINDOW_MS );
-			this.dispatchEvent( new CustomEvent( 'frame', { detail: frame } ) );
+			this.dispatchEvent( new CustomEvent( muscles ? 'contractions' : 'frame', { detail: frame } ) );
 			return;
 
 		}

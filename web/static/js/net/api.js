@@ -1,4 +1,4 @@
-import { MeshArraysDecoder, RigWeightsDecoder, WeightEditEncoder } from './wire.js';
+import { MeshArraysDecoder, MuscleMorphsDecoder, RigWeightsDecoder, WeightEditEncoder } from './wire.js';
 
 /**
  * The server's REST API (server/routers/*.py), as promise-returning functions; binary
@@ -203,6 +203,17 @@ export const api = {
 
 	/** @returns {Promise<{method: string, n_vertices: number, n_joints: number, n_influences: number}>} */
 	rig: ( id ) => request( 'GET', `/api/projects/${ id }/rig` ),
+
+	/**
+	 * The project's muscles as the page plays them (the "RTMM" format of server/wire.py),
+	 * placed from the saved landmarks the first time they are asked for.
+	 * @returns {Promise<{nVertices: number, nTargets: number, header: object, targets: Float32Array, jawWeights: Float32Array}>}
+	 */
+	async musclesPlayed( id ) {
+
+		return new MuscleMorphsDecoder().decode( await request( 'GET', `/api/projects/${ id }/muscles/played`, { binary: true } ) );
+
+	},
 
 	/**
 	 * The rig's skin weights (the "RTSW" format of server/wire.py).

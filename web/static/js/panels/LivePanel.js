@@ -9,7 +9,9 @@ const STATS_MS = 250;
 /**
  * The Live panel (index.html #live-panel) and the project's stream: *Play* starts the
  * Performance panel's source, *Stop* stops it; frames pose the face and the markers (and
- * turn the face with the performer's head when the conditioning says so); the status
+ * turn the face with the performer's head when the conditioning says so), or, driven by
+ * muscles, pose the face's muscles and feed the expression readout and the Muscles
+ * panel's sliders; the status
  * badge, frame rate and latency; the region toggles, a view of the page's RegionMask
  * (`app.regions`), whose `movingRegions()` the stream's mask is. The feature points hide
  * while a source plays (PointsToggle, the view's *Show points*).
@@ -26,6 +28,8 @@ export class LivePanel {
 		this.stream = null;
 		/** Whether a source is playing on the stream. */
 		this.streaming = false;
+		/** (D) the contractions on the face from the last contraction frame, or null. */
+		this.lastContractions = null;
 		this.points = new PointsToggle( app.picker );
 		this._events = new AbortController();
 		this._stats = setInterval( () => this._showStats(), STATS_MS );
@@ -60,6 +64,19 @@ export class LivePanel {
 			app.face.setDisplacements( frame.displacements );
 			app.face.setHeadRotation( frame.headRotation ); // a source's head pose, when the conditioning applies it
 			app.picker.setDisplacements( frame.displacements );
+			stream.markApplied( frame );
+			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
+
+		} );
+		stream.addEventListener( 'contractions', ( event ) => {
+
+			if ( stream !== this.stream || ! app.face?.muscles ) return; // the muscles are loading
+			const frame = event.detail;
+			app.face.setContractions( frame.contractions );
+			app.face.setHeadRotation( frame.headRotation );
+			this.lastContractions = Float32Array.from( frame.contractions ); // the frame views the message
+			app.sources.expressions.push( frame );
+			app.muscles.show( frame.contractions );
 			stream.markApplied( frame );
 			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
 
@@ -145,7 +162,7 @@ export class LivePanel {
 		if ( ! project ) return 'Create a project first.';
 		if ( ! project.mesh ) return 'Upload a mesh first.';
 		if ( ! project.landmarks ) return `Place and save the ${ landmarks.layout?.n_points ?? '' } landmarks first (${ landmarks.placedCount } placed).`;
-		if ( ! project.rig ) return 'Compute the rig first: the stream moves the feature points, the rig carries them to the skin.';
+		if ( ! project.rig && this.app.sources.drive !== 'muscles' ) return 'Compute the rig first (or drive by muscles): the stream moves the feature points, the rig carries them to the skin.';
 		return '';
 
 	}
@@ -184,8 +201,11 @@ export class LivePanel {
 		}
 
 		if ( ! this.stream ) this.connect();
+		const drive = this.app.sources.drive;
+		if ( drive === 'muscles' ) await this.app.muscles.load();
 		const start = await this.app.sources.startMessage();
 		this.sendMask();
+		this.stream.send( { type: 'drive', drive } ); // a new stream (new landmarks) knows none yet
 		this.stream.send( start );
 
 	}

@@ -1,6 +1,7 @@
 import { PointsEncoder } from '../net/wire.js';
 import { ConditioningForm } from './ConditioningForm.js';
 import { $, guarded } from './dom.js';
+import { ExpressionReadout } from './ExpressionReadout.js';
 import { NeutralCapture } from './NeutralCapture.js';
 import { Recorder } from './Recorder.js';
 import { SourceStatus } from './SourceStatus.js';
@@ -12,7 +13,10 @@ import { TakeList } from './TakeList.js';
  * built-in demo, the webcam tracked in this page, or a recorded take) and the start
  * message for it; around it the project's takes (TakeList), new takes (TakeImport),
  * recording (Recorder) and the conditioning (ConditioningForm, a view of the page's
- * ConditioningSettings, which every start carries).
+ * ConditioningSettings, which every start carries), and what drives the face: its
+ * feature points (the rig) or its muscles (*Drive by*, saved with the project; the
+ * server solves each frame into contractions, the shader plays them, and the expression
+ * they show is read out live: ExpressionReadout).
  *
  * The webcam is tracked here, in the page (tracking/). Its neutral is captured after a
  * countdown (NeutralCapture): no points go out before it ends, so the performer's rest
@@ -35,6 +39,7 @@ export class PerformancePanel {
 		this.recorder = new Recorder( app, this.status );
 		this.conditioning = new ConditioningForm( app.conditioning );
 		this.capture = new NeutralCapture();
+		this.expressions = new ExpressionReadout();
 		this._sending = true; // whether tracked points go out (not during the first countdown)
 		this._pointIndex = 0; // the index of the webcam's next points message
 		this._neutralFrom = 0; // _pointIndex when the last neutral capture was asked for
@@ -68,6 +73,48 @@ export class PerformancePanel {
 
 	}
 
+	/**
+	 * What drives the face: 'points' (the feature points, through the rig) or 'muscles'.
+	 * @returns {'points'|'muscles'}
+	 */
+	get drive() {
+
+		return $( 'drive-muscles' ).checked ? 'muscles' : 'points';
+
+	}
+
+	/**
+	 * Drive the face by its feature points or its muscles: the muscles are loaded first
+	 * (placed by the server on first need), then the stream (a playing source from its
+	 * next frame) is told, and the choice saved with the project. A failure goes back to
+	 * the feature points and rejects.
+	 * @param {'points'|'muscles'} drive
+	 */
+	async setDrive( drive ) {
+
+		const app = this.app;
+		$( drive === 'muscles' ? 'drive-muscles' : 'drive-points' ).checked = true;
+		this.expressions.setVisible( drive === 'muscles' );
+		app.live.update();
+		try {
+
+			if ( drive === 'muscles' ) await app.muscles.load();
+
+		} catch ( error ) {
+
+			$( 'drive-points' ).checked = true;
+			this.expressions.setVisible( false );
+			app.live.update();
+			throw error;
+
+		}
+
+		if ( this.drive !== drive ) return; // switched back meanwhile
+		app.stream?.send( { type: 'drive', drive } );
+		if ( app.projectId && ( app.project?.settings?.drive ?? 'points' ) !== drive ) app.projectSettings.schedule( app.projectId, 'drive', () => this.drive );
+
+	}
+
 	/** The project changed (or none): list its takes, show its conditioning. */
 	async setProject( project ) {
 
@@ -79,7 +126,8 @@ export class PerformancePanel {
 		this.app.conditioning.load( project?.settings?.conditioning ?? null );
 		this.setLayout( this.app.layouts?.find( ( l ) => l.name === project?.landmarks?.layout ) ?? ( project ? this.app.landmarks.layout : null ) );
 		if ( ! project ) return;
-		await this.list.refresh();
+		const drive = project.settings?.drive === 'muscles' && project.landmarks && this.app.face ? 'muscles' : 'points';
+		await Promise.all( [ this.list.refresh(), this.setDrive( drive ).catch( ( error ) => this.app.errors.show( error ) ) ] );
 
 	}
 
@@ -340,6 +388,7 @@ export class PerformancePanel {
 
 		}, { signal } );
 		$( 'recapture-neutral' ).addEventListener( 'click', () => this._captureNeutral(), { signal } );
+		$( 'drive-switch' ).addEventListener( 'change', guarded( this.app.errors, () => this.setDrive( this.drive ) ), { signal } );
 
 	}
 

@@ -11,17 +11,18 @@ import {
 	Texture,
 	UniformsLib,
 	UniformsUtils,
+	Vector3,
 	WebGLRenderer,
 } from 'three';
 
 import { GPUSkinWeights } from './GPUSkinWeights.js';
 import { ShaderLoader } from './ShaderLoader.js';
-import { VertexPasses, exactTexture } from './VertexPasses.js';
+import { SKIN_TEXTURE_WIDTH, VertexPasses, exactTexture } from './VertexPasses.js';
 import { redraw } from './Viewer.js';
 
 const MAX_JOINTS = 4096; // the displacement texture is one row
 const MAX_VERTICES = 2 ** 24; // vertex indices are stored in float32 textures, exact up to 2^24
-const SHADER_FILES = [ 'skinning.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 'normal_pass.vert', 'texel_pass.frag', 'face.vert', 'face.frag' ];
+const SHADER_FILES = [ 'skinning.glsl', 'muscles.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 'normal_pass.vert', 'texel_pass.frag', 'face.vert', 'face.frag' ];
 
 /**
  * A face mesh skinned on the GPU by its feature points (Dutreve et al. 2008, §3.1: feature
@@ -38,6 +39,10 @@ const SHADER_FILES = [ 'skinning.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 
  * default biharmonic rig weights every vertex by every joint) in an RGBA32F texture
  * (GPUSkinWeights). Both upload once per rig, and painting (`updateWeights`) uploads only
  * the span of rows it changed; a pose updates only the N-texel displacement texture.
+ *
+ * Driven by muscles instead (`setMuscles`, then `setContractions`), the same skinning
+ * pass plays the muscles' morph targets and jaw joint (web/shaders/muscles.glsl): a pose
+ * updates only T weights and an angle, and `setDisplacements` goes back to the rig.
  *
  * A mesh with uv may be drawn with its base-colour texture (`setTexture`, `setTextured`);
  * the heat map is drawn over it all the same.
@@ -114,7 +119,16 @@ export class SkinnedFace {
 			displacementTexture: { value: null },
 			skinWeightTexture: { value: null },
 			skinQuads: { value: 0 },
+			// muscles.glsl's, used once setMuscles defines MUSCLE_TARGETS
+			muscleDrive: { value: false },
+			muscleTargetTexture: { value: null },
+			muscleWeights: { value: new Float32Array( 1 ) },
+			jawPivot: { value: new Vector3() },
+			jawAxis: { value: new Vector3( 1, 0, 0 ) },
+			jawAngle: { value: 0 },
 		};
+		/** @type {import('../model/PlayedMuscles.js').PlayedMuscles|null} the muscles (`setMuscles`). */
+		this.muscles = null;
 
 		this._passes = new VertexPasses( geometry, faces, shaders, this._skinUniforms );
 		this._weights = new GPUSkinWeights( geometry, this._passes, this._skinUniforms );
@@ -158,6 +172,7 @@ export class SkinnedFace {
 
 		this._displacements = null; // Float32Array( 4 * skinQuads * 4 ), RGBA texels
 		this._rigUploaded = false; // the rig's attributes or texture reached the GPU
+		this._rigDefine = null; // 'SKIN_SPARSE', 'SKIN_DENSE' or null
 		this._setDefine( null );
 
 	}
@@ -274,6 +289,14 @@ export class SkinnedFace {
 	 */
 	setDisplacements( displacements ) {
 
+		if ( this._skinUniforms.muscleDrive.value ) {
+
+			this._skinUniforms.muscleDrive.value = false; // the feature points drive again
+			this._version ++;
+			redraw( this.mesh );
+
+		}
+
 		if ( this._displacements === null ) return;
 		const texels = this._displacements;
 		if ( displacements === null ) {
@@ -299,6 +322,73 @@ export class SkinnedFace {
 		}
 
 		this._skinUniforms.displacementTexture.value.needsUpdate = true;
+		this._version ++;
+		redraw( this.mesh );
+
+	}
+
+	/**
+	 * Set (or with null, remove) the face's muscles, played from then on by
+	 * `setContractions`. Uploads the morph targets once (an RGBA32F texture, a vertex's
+	 * targets adjacent) and the jaw weights (a vertex attribute).
+	 * @param {import('../model/PlayedMuscles.js').PlayedMuscles|null} muscles - for this mesh.
+	 */
+	setMuscles( muscles ) {
+
+		const uniforms = this._skinUniforms;
+		uniforms.muscleTargetTexture.value?.dispose();
+		uniforms.muscleTargetTexture.value = null;
+		uniforms.muscleDrive.value = false;
+		this.muscles = null;
+		if ( muscles !== null ) {
+
+			const v = this.nVertices, t = muscles.nTargets;
+			if ( muscles.nVertices !== v ) throw new RangeError( `SkinnedFace.setMuscles: the muscles are for ${ muscles.nVertices } vertices, the face has ${ v }.` );
+			const height = Math.ceil( v * t / SKIN_TEXTURE_WIDTH );
+			const texels = new Float32Array( 4 * SKIN_TEXTURE_WIDTH * height );
+			// (T, V, 3) target-major in, vertex-major texels out: a vertex reads its T adjacent
+			for ( let k = 0; k < t; k ++ ) {
+
+				for ( let i = 0; i < v; i ++ ) {
+
+					const from = 3 * ( k * v + i ), to = 4 * ( i * t + k );
+					texels[ to ] = muscles.targets[ from ];
+					texels[ to + 1 ] = muscles.targets[ from + 1 ];
+					texels[ to + 2 ] = muscles.targets[ from + 2 ];
+
+				}
+
+			}
+
+			uniforms.muscleTargetTexture.value = exactTexture( texels, SKIN_TEXTURE_WIDTH, height );
+			uniforms.muscleWeights.value = new Float32Array( t );
+			uniforms.jawPivot.value.fromArray( muscles.jawPivot );
+			uniforms.jawAxis.value.fromArray( muscles.jawAxis );
+			uniforms.jawAngle.value = 0;
+			this._setJawWeights( muscles.jawWeights );
+			this.muscles = muscles;
+
+		}
+
+		this._setDefine( this._rigDefine );
+		this._version ++;
+		redraw( this.mesh );
+
+	}
+
+	/**
+	 * Pose the face by its muscles (`setMuscles` first), such as a contraction frame's or
+	 * the Muscles panel's sliders; `setDisplacements` goes back to the feature points.
+	 * @param {ArrayLike<number>} contractions - (D) the muscles' contractions, then the jaw
+	 *   angle in radians (`muscles.dofs` order).
+	 */
+	setContractions( contractions ) {
+
+		if ( this.muscles === null ) throw new Error( 'SkinnedFace.setContractions: the face has no muscles (setMuscles first).' );
+		const uniforms = this._skinUniforms;
+		this.muscles.weights( contractions, uniforms.muscleWeights.value );
+		uniforms.jawAngle.value = this.muscles.jawAngle( contractions );
+		uniforms.muscleDrive.value = true;
 		this._version ++;
 		redraw( this.mesh );
 
@@ -421,6 +511,7 @@ export class SkinnedFace {
 	dispose() {
 
 		this._disposeRigTextures();
+		this._skinUniforms.muscleTargetTexture.value?.dispose();
 		this.setTexture( null );
 		this.mesh.geometry.dispose();
 		this.mesh.material.dispose();
@@ -435,15 +526,34 @@ export class SkinnedFace {
 
 	}
 
+	/** The rig's define on both materials, and the muscles' on the skinning pass. */
 	_setDefine( define ) {
 
+		this._rigDefine = define;
 		const defines = define === null ? {} : { [ define ]: '' };
-		for ( const material of [ this.mesh.material, this._passes.skinMaterial ] ) {
+		this.mesh.material.defines = defines;
+		this.mesh.material.needsUpdate = true;
+		const skin = this._passes.skinMaterial;
+		skin.defines = this.muscles === null ? defines : { ...defines, MUSCLE_TARGETS: this.muscles.nTargets };
+		skin.needsUpdate = true;
 
-			material.defines = defines;
-			material.needsUpdate = true;
+	}
+
+	/** The jaw weights as the skinning pass's `jawWeight` attribute (made once per face). */
+	_setJawWeights( weights ) {
+
+		const geometry = this.mesh.geometry;
+		if ( ! geometry.hasAttribute( 'jawWeight' ) ) {
+
+			const attribute = new BufferAttribute( new Float32Array( this.nVertices ), 1 );
+			geometry.setAttribute( 'jawWeight', attribute );
+			this._passes.setSkinAttribute( 'jawWeight', attribute );
 
 		}
+
+		const attribute = geometry.getAttribute( 'jawWeight' );
+		attribute.array.set( weights );
+		attribute.needsUpdate = true;
 
 	}
 

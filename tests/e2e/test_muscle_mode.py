@@ -1,0 +1,71 @@
+"""Muscle mode in the page (issue 15): *Drive by: muscles* while the demo plays, the face
+drawn from the played muscles in the shader exactly as `played_displacements` of the
+contractions received, the live expression readout, and a Muscles panel slider posing the
+face with no server round trip."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from retarget.muscles import MuscleFace
+from retarget.muscles.expressions import EXPRESSIONS
+from retarget.muscles.morphs import muscle_morphs, played_displacements
+from tests.e2e.conftest import open_project, wait_face_moves
+from tests.waits import scaled_ms
+
+TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal: float32 on the GPU against float64
+
+_POSE = """() => ({c: Array.from(window.app.live.lastContractions),
+                   v: Array.from(window.app.face.deformedPositions())})"""
+
+
+def test_drive_by_muscles_plays_the_contractions_and_reads_the_expression(server, page):
+    sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
+    open_project(page, server, sample["id"])
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
+    page.click("#play")
+    page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=scaled_ms(30_000))
+
+    page.check("#drive-muscles")
+    page.wait_for_function("() => window.app.live.lastContractions !== null", timeout=scaled_ms(30_000))
+    wait_face_moves(page, 0.05)
+
+    arrays = server.read(f"/api/projects/{sample['id']}/mesh/arrays")
+    n = int(np.frombuffer(arrays, "<u4", 1, 8)[0])
+    rest = np.frombuffer(arrays, "<f4", 3 * n, 16).reshape(n, 3).astype(np.float64)
+    model = MuscleFace.from_json(server.api("GET", f"/api/projects/{sample['id']}/muscles"), rest)
+    morphs = muscle_morphs(model)
+    diagonal = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+
+    pose = page.evaluate(_POSE)
+    c = np.array(pose["c"])
+    assert c.shape == (22,) and np.abs(c).max() > 1e-3
+    drawn = np.array(pose["v"]).reshape(n, 3) - rest
+    expected = played_displacements(morphs, rest, c)
+    assert np.abs(expected).max() > 0.05
+    assert np.abs(drawn - expected).max() < TOLERANCE * diagonal
+
+    page.wait_for_function("names => names.includes(document.getElementById('expression-label').textContent)",
+                           arg=list(EXPRESSIONS), timeout=scaled_ms(10_000))
+    assert page.is_visible("#expression-chart")
+    assert page.inner_text("#expression-confidence").endswith("%")
+
+    # stopped, the face rests; a slider then poses it in the shader alone
+    page.click("#stop")
+    page.wait_for_function("""(n) => { const v = window.app.face.deformedPositions(),
+        r = window.app.face.mesh.geometry.attributes.position.array;
+        for (let i = 0; i < 3 * n; i ++) if (Math.abs(v[i] - r[i]) > 1e-6) return false; return true; }""",
+                           arg=n, polling=200, timeout=scaled_ms(10_000))
+    page.click("#muscle-dofs summary")
+    page.wait_for_selector("#muscle-sliders input[data-dof='jaw']")
+    page.click("#muscles-reset")  # the sliders followed the last frame played
+    pose = page.evaluate("""() => { const s = document.querySelector("#muscle-sliders input[data-dof='jaw']");
+        s.value = 0.3; s.dispatchEvent(new Event('input'));
+        return {c: Array.from(document.querySelectorAll('#muscle-sliders input'), (e) => Number(e.value)),
+                v: Array.from(window.app.face.deformedPositions())}; }""")
+    opened = np.array(pose["c"])
+    assert opened[-1] > 0.29 and not opened[:-1].any()
+    drawn = np.array(pose["v"]).reshape(n, 3) - rest
+    expected = played_displacements(morphs, rest, opened)
+    assert np.abs(expected).max() > 0.3
+    assert np.abs(drawn - expected).max() < TOLERANCE * diagonal
