@@ -195,7 +195,7 @@ export class StreamClient extends EventTarget {
 
 		if ( event.data instanceof ArrayBuffer ) {
 
-			const muscles = new DataView( event.data ).getUint32( 0, true ) === ContractionDecoder.MAGIC;
+			const muscles = event.data.byteLength >= 4 && new DataView( event.data ).getUint32( 0, true ) === ContractionDecoder.MAGIC;
 			const frame = ( muscles ? this._contractions : this._decoder ).decode( event.data );
 			this._frames ++;
 			const now = performance.now();
