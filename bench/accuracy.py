@@ -121,7 +121,10 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
     Rows: "found" (each identity's own placement: what a user gets), "matched" (B's points
     at A's surface locations, which ICT's shared topology allows: placement made perfectly
     consistent, so the row separates the placement's cost from the transfer's), "true"
-    (B's own points' true motion: the deformer's floor with 468 joints).
+    (B's own points' true motion: the deformer's floor with 468 joints). The "found" row
+    also carries how far apart the two placements are: B's points carried onto A's surface
+    through ICT's shared topology against A's own (mm, mean and p95), the disagreement
+    that separates "found" from "matched".
     """
     from retarget.facemesh.placement import find_face_mesh
     from retarget.facemesh.tracker import FaceMeshTracker
@@ -134,6 +137,8 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
     on_a = find_face_mesh(mesh_from_arrays(src0, model.faces), tracker).points
     on_b = find_face_mesh(mesh_from_arrays(tgt0, model.faces), tracker).points
     s0, s = on_a.positions(src0), on_a.positions(src0 + offsets)
+    # (468,) mm: the same face-mesh point placed on A and on B, compared on A's surface
+    apart = np.linalg.norm(on_b.positions(src0) - s0, axis=1) * 10.0
     rows = []
     for label, target in (("found", on_b), ("matched", on_a)):
         t = time.perf_counter()
@@ -150,6 +155,7 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
                      "leak_upper": float("nan"), "leak_lower": float("nan"),
                      **error_figures(pred, truth, tgt0, report)})
         if label == "found":
+            rows[-1].update(apart_mean=float(apart.mean()), apart_p95=float(np.percentile(apart, 95)))
             pred = tgt0 + skin_displacements(matrix, target.positions(truth) - t0)
             rows.append({**rows[-1], "kernel": "-", "condition": "true", "fit_ms": float("nan"),
                          "frame_ms": float("nan"), "transfer_ms": float("nan"),
@@ -171,6 +177,9 @@ def print_rows(rows: list[dict]) -> None:
         if "transfer_ms" in r and np.isfinite(r["transfer_ms"]):
             print(f"{r['setup']}: the space transform alone (the server's per-frame work; the browser "
                   f"skins): {r['transfer_ms']:.3f} ms a frame")
+        if "apart_mean" in r and r["condition"] != "true":
+            print(f"{r['setup']}: A's and B's placements of the same point, compared on A's surface: "
+                  f"{r['apart_mean']:.2f} mm apart (p95 {r['apart_p95']:.2f})")
     print("errors in mm over the ICT face area; rel% = sum |error| / sum |true displacement|;\n"
           "rig s: weights for the 11k-vertex face; fit ms: the space transform; frame ms: transform\n"
           "+ skinning of one frame (medians of 50; run bench/speed.py on an idle core for speed figures)")
