@@ -100,7 +100,8 @@ def test_bad_fps_mid_stream_is_an_error_and_frames_keep_coming(app, sample_id):
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
         ws.receive_json()
         ws.send_json({"type": "start", "fps": 120})
-        assert replies(ws, 1) == [{"type": "started", "source": "demo", "fps": 120.0, "recording": False}]
+        assert replies(ws, 1) == [{"type": "started", "source": "demo", "fps": 120.0, "recording": False,
+                                  "drive": "points"}]
         before = binary_frames(ws, 2)[-1].frame_index
         for fps in (None, "fast", [60], 0, 1e6):
             ws.send_json({"type": "start", "fps": fps})

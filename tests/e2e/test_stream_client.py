@@ -61,7 +61,7 @@ def test_frames_and_stats(server, client_page):
     log = _log(page)
     assert [s["state"] for s in log["statuses"]] == ["connecting", "open"]
     assert log["hello"]["project"] == project_id and log["hello"]["n_points"] == 68
-    assert {"type": "started", "source": "demo", "fps": 30.0, "recording": False} in log["messages"]
+    assert {"type": "started", "source": "demo", "fps": 30.0, "recording": False, "drive": "points"} in log["messages"]
     assert log["lastFrame"]["count"] == 68 and log["lastFrame"]["n"] == 3 * 68
 
     stats = page.evaluate("client.stats")
