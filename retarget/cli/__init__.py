@@ -29,6 +29,9 @@ Subcommands (``retarget <command> --help`` for the details):
     The target mesh rigged (feature points as joints of a glTF skin, or morph targets
     for rigs with negative weights) and, given a source, the retargeted take animated,
     as one glTF 2.0 binary (`retarget.gltf`).
+``arkit``
+    ARKit's 52 blendshapes generated on a face from its landmarks (`retarget.arkit`): one
+    dense morph target per ARKit name, as an ``.npz``.
 ``landmarks``
     A face mesh's feature points in a layout found with no clicks (`retarget.facemesh`:
     MediaPipe's face mesh on pictures of the mesh, carried back onto the surface), with a
@@ -48,8 +51,8 @@ command and adds it to this parser, so the library never imports the web stack; 
 retarget.cli`` runs the library's commands alone.
 
 One module per command family: `retargeting` (transfer, rig, export-gltf, demo), `sources`
-(track, condition, calibrate), `mouth` (open-mouth), `landmarks`, `muscles` (muscles,
-recognise), `layouts`; `parser` holds what their parsers share. The
+(track, condition, calibrate), `arkit`, `mouth` (open-mouth), `landmarks`, `muscles`
+(muscles, recognise), `layouts`; `parser` holds what their parsers share. The
 work is the library's (`retarget.files` reads, checks and writes the files).
 
 The CLI only parses, calls the library and serialises. Every refusal (a `RetargetError`,
@@ -65,7 +68,7 @@ import os
 import sys
 
 from retarget import __version__
-from retarget.cli import landmarks, layouts, mouth, muscles, retargeting, sources
+from retarget.cli import arkit, landmarks, layouts, mouth, muscles, retargeting, sources
 from retarget.cli.parser import PROG, Parser, UsageError, quiet_option
 from retarget.errors import RetargetError
 
@@ -92,6 +95,7 @@ def build_parser() -> Parser:
     sources.add_condition(commands, quiet)
     sources.add_calibrate(commands, quiet)
     retargeting.add_export_gltf(commands, quiet)
+    arkit.add_arkit(commands, quiet)
     mouth.add_open_mouth(commands)
     landmarks.add_landmarks(commands)
     muscles.add_muscles(commands)

@@ -49,6 +49,11 @@ Accepted files
     ``"times": [...]`` (seconds), ``"layout": "<name>"`` and ``"units": "..."``; with a
     layout, ``"names"`` may be left out (the layout's points, in its order). A lost
     point is ``null`` or a row of ``null``.
+ARKit weights (``.csv`` or ``.json`` whose columns or ``"weights"`` name ARKit shapes)
+    a Live Link Face CSV take or a plain table of named ARKit weights per frame
+    (`retarget.sources.arkit_curves`): the ARKit reference face making each frame's
+    expression, as `layout`'s points (default ``ibug68``), cm, turned by the head rotation
+    when the file has one. Weights must be finite and in [0, 1].
 ``.npy``
     an (F, N, 2|3) float array of a layout's points (N = the layout's N), or of the 68
     iBUG points (N = 68), or of a MediaPipe face mesh (N = 468 or 478); needs `layout`.
@@ -109,6 +114,7 @@ import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.layouts import LAYOUTS, from_ibug68, from_mediapipe468, get_layout
+from retarget.sources.arkit_curves import arkit_curves, arkit_take
 from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.gltf_take import gltf_points
 from retarget.sources.obj_sequence import obj_sequence_points
@@ -194,6 +200,10 @@ def _read(kind: str, data: bytes, label: str, folder, layout, fps, labelled_vert
     if kind == "c3d":
         return _read_c3d(data, label, fps)
     text = _text(data, label)
+    if kind in ("csv", "json"):
+        curves = arkit_curves(text, kind, label, fps)
+        if curves is not None:  # ARKit weights: the reference face making them, in the layout
+            return arkit_take(curves, layout or "ibug68")
     reader = {"csv": _read_csv, "json": _read_json, "trc": _read_trc}[kind]
     return reader(text, label, fps, layout)
 

@@ -1,0 +1,56 @@
+"""``retarget arkit``: ARKit's 52 blendshapes generated on a face from its landmarks
+(`retarget.arkit.shapes`), one dense morph target per ARKit name."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from retarget.arkit.shapes import arkit_shapes
+from retarget.errors import RetargetError
+from retarget.files import layout_for, read_landmarks, read_mesh, require_parent, rig_weights, write_file
+from retarget.layouts import LAYOUTS
+from retarget.weights import DEFAULT_METHOD, METHODS
+
+__all__ = ["add_arkit"]
+
+
+def add_arkit(commands, parents) -> None:
+    p = commands.add_parser(
+        "arkit", parents=parents, help="generate ARKit's 52 blendshapes on a face",
+        description="Generate ARKit's 52 blendshapes (eyeBlinkLeft ... tongueOut; Left is the "
+        "subject's left) on a face mesh from its landmarks: the reference face's motion of each "
+        "shape at the feature points, carried onto the face by the RBF space transform and its "
+        "rig. Writes an .npz with names (52,) and deltas (52, V, 3) float32 vertex displacements "
+        "in the mesh's units, and at_points (52, N, 3) the feature points' displacements.")
+    p.add_argument("mesh", metavar="MESH", help="the face mesh")
+    p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
+    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
+                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    p.add_argument("--rig", metavar="RIG.npz", help="skin weights from 'retarget rig' (default: computed)")
+    p.add_argument("--deformer", choices=list(METHODS), default=DEFAULT_METHOD, metavar="NAME",
+                   help=f"deformer of the computed rig (default: {DEFAULT_METHOD})")
+    p.add_argument("--out", required=True, metavar="SHAPES.npz", help="the shapes, written here")
+    p.set_defaults(run=_arkit)
+
+
+def _arkit(args) -> int:
+    out = Path(args.out)
+    require_parent(out)
+    mesh = read_mesh(args.mesh)
+    points = read_landmarks(args.landmarks, mesh)
+    layout = layout_for(args.layout, points)
+    if layout is None:
+        raise RetargetError("the shapes need the landmarks' layout: give --layout or a \"layout\" "
+                            "in the landmarks JSON")
+    rig = rig_weights(args.rig, args.deformer, mesh, points, layout, quiet=args.quiet)
+    shapes = arkit_shapes(mesh.vertices, mesh.faces, points, layout, rig)
+    write_file(out, shapes.save)
+    largest = np.linalg.norm(shapes.deltas, axis=2).max(axis=1)
+    top = np.argsort(-largest)[:3]
+    print(f"made {len(shapes.names)} ARKit shapes on {mesh.name or args.mesh} ({mesh.n_vertices} "
+          f"vertices, {layout.name}): largest motion "
+          + ", ".join(f"{shapes.names[k]} {largest[k]:.3g}" for k in top)
+          + f" (mesh units) -> {out}")
+    return 0
