@@ -272,10 +272,11 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         drive = msg.get("drive")
         if drive not in DRIVES:
             raise ValueError(f'"drive" must be one of {", ".join(map(repr, DRIVES))}; got {drive!r}')
+        # made first: muscles that cannot be placed refuse the switch and change nothing
+        muscles = await asyncio.to_thread(_muscle_drive, store, project_id) if drive == "muscles" else None
         hub.set_drive(project_id, drive)
         if source is not None:
-            source.set_drive(await asyncio.to_thread(_muscle_drive, store, project_id)
-                             if drive == "muscles" else None)
+            source.set_drive(muscles)
         return {"type": "drive", "drive": drive}
     if kind == "mask":
         regions = msg.get("regions") or None
