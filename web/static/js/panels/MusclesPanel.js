@@ -119,9 +119,10 @@ export class MusclesPanel {
 		} );
 		$( 'muscle-sliders' ).replaceChildren( ...this._sliders.map( ( slider ) => {
 
-			const label = document.createElement( 'label' );
+			const label = document.createElement( 'label' ), name = document.createElement( 'span' );
 			label.className = 'muscle';
-			label.append( slider.dataset.dof.replace( /_/g, ' ' ), slider );
+			name.textContent = name.title = slider.dataset.dof.replace( /_/g, ' ' );
+			label.append( name, slider );
 			return label;
 
 		} ) );
