@@ -20,7 +20,8 @@ each identity anew (MediaPipe's placement differences between two faces included
    (`Retargeter`, as any take), and B's 52 weights solved per frame from the retargeted
    feature displacements (`ArkitSolver` on B's `at_points`): time per frame (median and
    95th percentile, warm-started), mean absolute weight error against the input weights
-   (the round trip), and the fit's residual (relative to the motion).
+   (the round trip), and the fit's residual (relative to the motion); ``--noise-mm``
+   adds a tracker's jitter to the retargeted points first.
 Needs ../shared/data/ict_face.
 """
 
@@ -78,6 +79,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--pairs", type=int, default=2, help="identity pairs (A, B)")
     parser.add_argument("--frames", type=int, default=300)
+    parser.add_argument("--noise-mm", type=float, default=0.0,
+                        help="Gaussian noise added to every retargeted point coordinate (tracker jitter)")
     parser.add_argument("--layout", default="ibug68", choices=("ibug68", "ibug51", "dutreve22", "mediapipe468"))
     parser.add_argument("--method", default=DEFAULT_METHOD, choices=list(METHODS), help="B's rig")
     parser.add_argument("--found", action="store_true", help="mediapipe468: find the points on A and "
@@ -117,6 +120,7 @@ def main() -> None:
         weights = smooth_take(args.frames, rng)
         ref = arkit_reference(layout)
         displacements = Retargeter().fit(ref.neutral, points.positions(b)).displacements(ref.points(weights))
+        displacements = displacements + rng.normal(0.0, args.noise_mm / 10.0, displacements.shape)
         solver = ArkitSolver(shipped.at_points)
         solved = np.empty_like(weights)
         for f, d in enumerate(displacements):
@@ -131,7 +135,8 @@ def main() -> None:
     per_shape = np.where(moving, np.mean(errors, axis=0), np.nan)
     order = np.argsort(-np.nan_to_num(per_shape, nan=-1))
     print(f"\nlayout {layout.name} ({layout.n_points} points), {args.pairs} identity pairs, seed {args.seed}, "
-          f"rig {args.method}" + (", points found on each identity" if args.found else ""))
+          f"rig {args.method}" + (", points found on each identity" if args.found else "")
+          + (f", {args.noise_mm} mm noise" if args.noise_mm else ""))
     print(f"shapes A -> B: mean relative error {100 * np.nanmean(per_shape):.1f} % over the "
           f"{int(moving.sum())} shapes ICT has (target <= 25 %), median {100 * np.nanmedian(per_shape):.1f} %")
     print("worst: " + ", ".join(f"{ARKIT_NAMES[k]} {100 * per_shape[k]:.0f} %" for k in order[:8]))

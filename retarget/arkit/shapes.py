@@ -50,7 +50,8 @@ class ArkitShapes:
         if w.shape[-1:] != (len(self.names),) or w.ndim > 2:
             raise RetargetError(f"weights must have shape ({len(self.names)},) or (F, {len(self.names)}); "
                                 f"got {w.shape}")
-        return (np.asarray(vertices, dtype=np.float32) + np.tensordot(w, self.deltas, axes=1)).astype(np.float32)
+        posed = np.asarray(vertices, dtype=np.float32) + np.tensordot(w, self.deltas, axes=1)
+        return posed.astype(np.float32)
 
     def save(self, path) -> None:
         """Write an ``.npz`` with ``names`` (52,) str, ``deltas`` (52, V, 3) float32 and

@@ -7,30 +7,41 @@ Eurographics 2014 STAR, §5; Seol et al., "Spacetime Expression Cloning for Blen
 ToG 2012, for the non-negative, bounded weights):
 
     min_w  ½ |B w - d|²  + ½ λ Σ_k G_kk w_k²                         (ridge)
+                          + τ Σ_k sqrt(G_kk ḡ) w_k                       (sparsity)
                           + ½ σ Σ_(l,r) mirror pairs s_lr (w_l - w_r)²   (no left/right split)
     s.t.   0 <= w_k <= 1,   w_i w_j = 0 for antagonists (i, j)
 
-B (3N, 52) holds the shapes' displacements of N points (feature points, or vertices),
-d (3N,) the frame's, G = BᵀB and s_lr = sqrt(G_ll G_rr), so every term is measured in the
-shapes' own sizes and the weights need no units. The ridge is relative (a shape alone is
-biased by 1 / (1 + λ)) and keeps shapes the points cannot tell apart (the eye-look shapes
-at 68 points) from running off; the mirror term makes a symmetric expression use both
-sides' shapes equally rather than one side's twice over. Antagonists (smile and frown,
-blink and wide, jaw left and right, ...) move the same skin opposite ways, so both on
-would cancel each other to fit noise: they are kept exclusive, by fixing the weaker of a
-co-active pair at 0 and solving again (a greedy step for the complementarity constraint;
-no bias at all while they are not both on, unlike a co-activation penalty, which is
-indefinite and would need a ridge on every shape to stay convex).
+B (3N, 52) holds the shapes' displacements of N points (feature points, or vertices), d
+(3N,) the frame's, G = BᵀB, ḡ its mean diagonal and s_lr = sqrt(G_ll G_rr), so every
+term is measured in the shapes' own sizes and the weights need no units. The ridge is
+relative (a shape alone is biased by 1 / (1 + λ)) and keeps shapes the points cannot
+tell apart (the eye-look shapes at 68 points) from running off; the mirror term makes a
+symmetric expression use both sides' shapes equally rather than one side's twice over.
+The sparsity term is an L1 penalty (the weights are non-negative, so it is linear): a
+soft threshold, τ in weight for a shape of typical size and more for a small one (noise
+of a given size on the points makes a spurious weight inversely proportional to the
+shape's size, hence sqrt(G_kk ḡ) rather than G_kk, which would also make a big shape
+dearer than small ones imitating it), so a tracker's jitter does not flicker dozens of
+tiny weights on and off (which would also cost the solver a step each). Antagonists
+(smile and frown, blink and wide, jaw left and right, ...) move the same skin opposite
+ways, so both on would cancel each other to fit noise: they are kept exclusive, by
+fixing the weaker of a co-active pair at 0 and solving again (a greedy step for the
+complementarity constraint; no bias at all while they are not both on, unlike a co-
+activation penalty, which is indefinite and would need a ridge on every shape to stay
+convex).
 
 Solve: the quadratic ``½ wᵀ H w - cᵀ w`` with H = G + ridge + mirror term fixed once
-(`ArkitSolver.__init__`) and c = Bᵀd per frame, by a primal active-set method for box
-constraints (Nocedal & Wright, Numerical Optimization, §16.5): free weights take the
-exact minimiser with the others held at their bounds, a step that would leave [0, 1]
-stops at the first bound it meets and fixes that weight, and bound weights whose
-gradient points inward are freed, the most promising first (Lawson & Hanson, "Solving
-Least Squares Problems", ch. 23). Warm-started from the previous frame's weights, a
-smooth take needs one or two linear solves a frame, and the inverses of the free blocks
-are cached per free set, so a frame costs a few 52 x 52 products.
+(`ArkitSolver.__init__`) and c = Bᵀd - τ sqrt(diag(G) ḡ) per frame, by a primal active-
+set method for box constraints (Nocedal & Wright, Numerical Optimization, §16.5): free
+weights take the exact minimiser with the others held at their bounds, a minimiser
+outside [0, 1] is clipped into it with every clipped weight fixed when that lowers the
+objective (projected Newton, Bertsekas 1982), else approached until the first weight
+meets its bound, which is fixed, and bound weights whose gradient points inward are
+freed: at a frame's first check all of them (from the previous frame's weights only a
+few change), then the most promising one at a time (Lawson & Hanson, "Solving Least
+Squares Problems", ch. 23, so the steps cannot cycle). A smooth take needs one or two
+linear solves a frame, and the inverses of the free blocks are cached per free set, so a
+frame costs a few 52 x 52 products.
 """
 
 from __future__ import annotations
@@ -74,8 +85,9 @@ class ArkitSolver:
     ----------
     shapes_at_points : (52, N, 3) float, each shape's displacements at N points (feature
         points: `ArkitShapes.at_points`; or vertices: `ArkitShapes.deltas`), any units.
-    ridge : λ, relative ridge (default 1e-3).
-    symmetry : σ, the left/right difference charge of `MIRROR_PAIRS` (default 0.01).
+    ridge : λ, relative ridge (default 1e-4).
+    symmetry : σ, the left/right difference charge of `MIRROR_PAIRS` (default 1e-3).
+    sparsity : τ, the soft threshold on every weight (default 0.01).
     exclusive : keep `ANTAGONISTS` exclusive (default True).
 
     `solve` is per frame and keeps the last weights as the next frame's start; `reset`
@@ -83,7 +95,7 @@ class ArkitSolver:
     """
 
     def __init__(self, shapes_at_points, *, ridge: float = 1e-4, symmetry: float = 1e-3,
-                 sparsity: float = 0.005, exclusive: bool = True):
+                 sparsity: float = 0.01, exclusive: bool = True):
         b = np.asarray(shapes_at_points, dtype=np.float64)
         k = len(ARKIT_NAMES)
         if b.ndim != 3 or b.shape[0] != k or b.shape[2] != 3 or b.shape[1] == 0:
@@ -100,7 +112,7 @@ class ArkitSolver:
         self.shapes_ = b.reshape(k, -1)                        # Bᵀ, (52, 3N)
         gram = self.shapes_ @ self.shapes_.T
         self.hessian_ = self._hessian(gram)
-        self.threshold_ = sparsity * np.diag(gram)
+        self.threshold_ = self._threshold(gram)
         self._inverses: dict[bytes, np.ndarray] = {}
         self.reset()
 
@@ -117,6 +129,11 @@ class ArkitSolver:
             h[[i, j], [i, j]] += s
             h[[i, j], [j, i]] -= s
         return h
+
+    def _threshold(self, gram: np.ndarray) -> np.ndarray:
+        """(52,) the sparsity term's coefficients τ sqrt(G_kk ḡ) (module docstring)."""
+        diag = np.diag(gram)
+        return self.sparsity * np.sqrt(diag * diag.mean())
 
     def reset(self) -> None:
         """Forget the previous frame: the next solve starts from all weights 0."""
@@ -141,23 +158,24 @@ class ArkitSolver:
             kept = np.repeat(finite.reshape(-1, 3).all(axis=1), 3)
             b = self.shapes_[:, kept]
             gram = b @ b.T
-            self.weights_ = self._fit(self._hessian(gram), b @ d[kept] - self.sparsity * np.diag(gram), None)
+            c = b @ d[kept] - self._threshold(gram)
+            self.weights_ = self._fit(self._hessian(gram), c, None)
         return self.weights_.copy()
 
     def _fit(self, h: np.ndarray, c: np.ndarray, inverses: dict | None) -> np.ndarray:
         """The box QP from the previous weights, then antagonists made exclusive: while a
         pair is on together, its weaker one is held at 0 and the QP solved again."""
         off = np.zeros(len(c), dtype=bool)
-        w = _box_qp(h, c, self.weights_, off, inverses)
         if not self.exclusive:
-            return w
+            return _box_qp(h, c, self.weights_, off, inverses)
+        w = _box_qp(h, c, self.weights_, off, inverses, self._antagonists)
         a, b = self._antagonists
         for _ in range(a.size):
             both = (w[a] > 0) & (w[b] > 0)
             if not both.any():
                 break
             off[np.where(w[a] < w[b], a, b)[both]] = True
-            w = _box_qp(h, c, np.where(off, 0.0, w), off, inverses)
+            w = _box_qp(h, c, np.where(off, 0.0, w), off, inverses, self._antagonists)
         return w
 
     def solve_frames(self, displacements) -> np.ndarray:
@@ -170,10 +188,12 @@ class ArkitSolver:
 
 
 def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
-            inverses: dict | None, max_steps: int = 200) -> np.ndarray:
+            inverses: dict | None, exclusive: np.ndarray | None = None,
+            max_steps: int = 200) -> np.ndarray:
     """argmin ½ wᵀ h w - cᵀ w over 0 <= w <= 1 (and w = 0 where `off`) for positive
     definite (K, K) h and (K,) c, by the primal active-set method from `start` (module
-    docstring). `inverses` caches the free blocks' inverses by free set (None: no cache)."""
+    docstring). `inverses` caches the free blocks' inverses by free set (None: no cache).
+    `exclusive` (2, P) index pairs: a weight at 0 is not freed while its partner is on."""
     tol = 1e-12 * max(float(np.abs(np.diag(h)).max()), 1e-300)
     w = np.clip(start, 0.0, 1.0)
     # the previous frame's support starts free; bound weights are freed one at a time below
@@ -190,7 +210,14 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
             w = target
             grad = h @ w - c
             # bound weights whose gradient points into the box would lower the objective
-            gain = np.where((low & ~off & (grad < -tol)) | (high & (grad > tol)), grad * grad / np.diag(h), 0.0)
+            inward = (low & ~off & (grad < -tol)) | (high & (grad > tol))
+            if exclusive is not None:
+                a, b = exclusive
+                partner_on = np.zeros(len(w), dtype=bool)
+                np.logical_or.at(partner_on, a, w[b] > 0)
+                np.logical_or.at(partner_on, b, w[a] > 0)
+                inward &= ~(low & partner_on)
+            gain = np.where(inward, grad * grad / np.diag(h), 0.0)
             if not gain.any():
                 return w
             if first:
@@ -205,7 +232,15 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
                 best = int(np.argmax(gain))
                 low[best] = high[best] = False
             continue
-        # step toward the free minimiser until the first weight meets its bound; fix it
+        # the free minimiser leaves the box: clipped, if that lowers the objective, with
+        # every weight it clipped fixed at once (projected Newton, Bertsekas 1982) ...
+        clipped = np.clip(target, 0.0, 1.0)
+        if _objective(h, c, clipped) < _objective(h, c, w):
+            low |= free & (target < 0.0)
+            high |= free & (target > 1.0)
+            w = clipped
+            continue
+        # ... else toward it until the first weight meets its bound, which is fixed
         step = target - w
         f = np.flatnonzero(free)
         s = step[f]
@@ -220,6 +255,11 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
         else:
             w[hit], high[hit] = 1.0, True
     return w
+
+
+def _objective(h: np.ndarray, c: np.ndarray, w: np.ndarray) -> float:
+    """½ wᵀ h w - cᵀ w."""
+    return float(w @ (0.5 * (h @ w) - c))
 
 
 def _inverse(h: np.ndarray, free: np.ndarray, cache: dict | None) -> np.ndarray:

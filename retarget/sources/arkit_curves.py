@@ -112,7 +112,8 @@ def head_rotations(angles: np.ndarray) -> np.ndarray:
     """(F, 3, 3) float64 rotation matrices ``Ry(yaw) Rx(pitch) Rz(roll)`` for (F, 3) yaw,
     pitch, roll in radians (module docstring)."""
     yaw, pitch, roll = (np.asarray(angles, dtype=np.float64)[:, i] for i in range(3))
-    cy, sy, cp, sp, cr, sr = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
     one, zero = np.ones_like(yaw), np.zeros_like(yaw)
     ry = np.stack([np.stack([cy, zero, sy], -1), np.stack([zero, one, zero], -1),
                    np.stack([-sy, zero, cy], -1)], -2)
@@ -236,7 +237,8 @@ def _timecodes(codes: list[str], numbers: list[int], label: str, fps) -> tuple[n
     times -= times[0]
     back = np.flatnonzero(np.diff(times) < 0)
     if len(back):
-        raise RetargetError(f"{label}: row {numbers[back[0] + 1]}: the timecode {codes[back[0] + 1]!r} goes back "
+        raise RetargetError(f"{label}: row {numbers[back[0] + 1]}: the timecode "
+                            f"{codes[back[0] + 1]!r} goes back "
                             f"from {codes[back[0]]!r}")
     return times, rate, assumed
 
@@ -258,7 +260,8 @@ def _from_json(text: str, label: str, fps) -> ArkitCurves | None:
     if not isinstance(rows, list) or not rows:
         raise RetargetError(f'{label}: "weights" must be a non-empty list of frames')
     if len(rows) * len(ARKIT_NAMES) > MAX_TAKE_VALUES:
-        raise RetargetError(f"{label}: {len(rows)} frames exceed the {MAX_TAKE_VALUES} values a take may hold")
+        raise RetargetError(f"{label}: {len(rows)} frames exceed the {MAX_TAKE_VALUES} values a take "
+                            "may hold")
     ignored: set[str] = set()
     weights = np.zeros((len(rows), len(ARKIT_NAMES)))
     if all(isinstance(r, dict) for r in rows):
@@ -277,7 +280,8 @@ def _from_json(text: str, label: str, fps) -> ArkitCurves | None:
     else:
         names = doc.get("names")
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-            raise RetargetError(f'{label}: rows of "weights" that are lists need "names", a list of strings')
+            raise RetargetError(f'{label}: rows of "weights" that are lists need "names", a list of '
+                                'strings')
         index = [arkit_index(n) for n in names]
         if max(index, default=-1) < 0:
             raise RetargetError(f'{label}: "names" holds none of the 52 ARKit names')
@@ -287,7 +291,8 @@ def _from_json(text: str, label: str, fps) -> ArkitCurves | None:
         for f, row in enumerate(rows):
             if not isinstance(row, list) or len(row) != len(names):
                 got = len(row) if isinstance(row, list) else type(row).__name__
-                raise RetargetError(f'{label}: frame {f} of "weights" has {got} values, "names" {len(names)}')
+                raise RetargetError(f'{label}: frame {f} of "weights" has {got} values, "names" '
+                                    f'{len(names)}')
             for j, k in enumerate(index):
                 if k >= 0:
                     weights[f, k] = _json_number(row[j], label, f"frame {f}, {names[j]!r}")
