@@ -7,6 +7,7 @@ import struct
 
 import numpy as np
 
+from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import load_mesh
 from retarget.muscles import MuscleFace
@@ -180,3 +181,32 @@ def test_javascript_decodes_contraction_frames_and_played_muscles(client, sample
 
 def _bits(values) -> list[int]:
     return np.ascontiguousarray(values, dtype="<f4").view(np.uint32).tolist()
+
+
+def test_new_landmarks_place_the_muscles_anew_unless_the_user_saved_his(client, sample_id):
+    """Saves the sample's landmarks again, which drops its rig (no later test needs it)."""
+    store, url = client.app.state.store, f"/api/projects/{sample_id}/muscles"
+    client.put(url, json=client.get(url).json())  # the user's
+    landmarks = client.get(f"/api/projects/{sample_id}/landmarks").json()
+    assert client.put(f"/api/projects/{sample_id}/landmarks", json=landmarks).status_code == 200
+    kept = client.get(url).json()
+    assert kept["edited"] is True  # outlives the landmarks change (it fits the mesh)
+    revision = client.get(f"/api/projects/{sample_id}").json()["revision"]
+    assert store.put_muscles(sample_id, kept, revision=revision, edited=False)  # placed over older edits
+    assert client.put(f"/api/projects/{sample_id}/landmarks", json=landmarks).status_code == 200
+    placed = client.get(url).json()
+    assert placed["edited"] is False and store.muscles(sample_id)[1] == revision + 1
+
+
+def test_a_drive_that_cannot_be_made_is_refused_and_changes_nothing(client, sample_id, monkeypatch):
+    import server.routers.stream as stream
+
+    def refuse(store, project_id):
+        raise RetargetError("placing muscles needs six iBUG points")
+
+    monkeypatch.setattr(stream, "_muscle_drive", refuse)
+    with client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "drive", "drive": "muscles"})
+        assert "six iBUG points" in ws.receive_json()["detail"]
+        assert client.app.state.hub.drive(sample_id) == "points"
