@@ -8,7 +8,8 @@ them with the project; a later landmarks change places them again unless the use
 his own (`ProjectStore.put_muscles` never lets placed muscles replace those).
 
 ``PUT`` stores the user's muscles: what `MuscleFace.from_json` reads on the project's
-mesh, refused with 422 and the library's reason otherwise.
+mesh, Table 1's 21 muscles (`retarget.muscles.dof_names`: the expressions are read from
+them), refused with 422 and the reason otherwise.
 
 ``GET .../muscles/played`` answers ``application/octet-stream``: `server.wire`'s RTMM
 format, the muscles as the page's shader plays them
@@ -24,7 +25,7 @@ from fastapi import APIRouter, Body, HTTPException, Response, status
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import Mesh
-from retarget.muscles import MuscleFace, place_muscles
+from retarget.muscles import MuscleFace, dof_names, place_muscles
 from retarget.muscles.expressions import EXPRESSIONS
 from retarget.muscles.morphs import muscle_morphs
 from server.deps import MeshDep, ProjectDep, StoreDep
@@ -74,7 +75,15 @@ def get_muscles(project: ProjectDep, mesh: MeshDep, store: StoreDep) -> dict:
 def put_muscles(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                 body: dict[str, Any] = Body(examples=[{"version": 1, "muscles": [], "jaw": {}}])) -> dict:
     """Validate the muscles on the mesh and store them as the user's; answers them."""
-    model = MuscleFace.from_json(body, mesh.vertices)
+    try:
+        model = MuscleFace.from_json(body, mesh.vertices)
+    except RetargetError:
+        raise
+    except (AttributeError, TypeError, ValueError, KeyError, IndexError) as exc:  # a value of the wrong kind
+        raise RetargetError(f"muscle JSON is malformed: {exc!r}") from None
+    if model.names != dof_names():
+        raise RetargetError(f"muscles must be Table 1's {len(dof_names()) - 1}, in its order "
+                            f"({', '.join(dof_names()[:-1])}); got {', '.join(model.names[:-1])}")
     store.put_muscles(project["id"], model.to_json(), revision=project["revision"], edited=True)
     return _answer(model, True)
 

@@ -48,6 +48,8 @@ def test_put_validates_and_placement_never_overwrites_it(client, sample_id):
                         ({**body, "muscles": [{**body["muscles"][0], "kind": "spring"}]}, "kind must be"),
                         ({**body, "jaw": {**body["jaw"], "weights": {**body["jaw"]["weights"], "n_vertices": 3}}},
                          "3 vertices"),
+                        ({"muscles": ["x"], "jaw": {}}, "malformed"),
+                        ({**body, "muscles": body["muscles"][:3]}, "Table 1's 21"),
                         ([1, 2], "")):
         answer = client.put(url, json=bad)
         assert answer.status_code == 422, answer.text
