@@ -187,15 +187,12 @@ def _muscle_drive(store, project_id) -> MuscleDrive:
     return MuscleDrive(model, landmarks_from_json(store.landmarks(project_id), mesh.vertices, mesh.faces))
 
 
-async def _driven(player, hub: StreamHub, store, project_id):
-    """`player` driven as the project's drive says."""
+async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
+    """The player `msg` asks for, driven as the project's drive says."""
+    player = await _player(msg, store, project_id, target_points, layout)
     if hub.drive(project_id) == "muscles":
         player.set_drive(await asyncio.to_thread(_muscle_drive, store, project_id))
     return player
-
-
-async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
-    return await _driven(await _player(msg, store, project_id, target_points, layout), hub, store, project_id)
 
 
 async def _player(msg: dict, store, project_id, target_points, layout):
