@@ -14,10 +14,12 @@ from retarget.muscles import MuscleFace
 from retarget.muscles.drive import MuscleDrive, MuscleFrame
 from retarget.muscles.expressions import EXPRESSIONS
 from retarget.muscles.morphs import muscle_morphs
-from retarget.sample_face import demo_points
+from retarget.sample_face import EXPRESSION_NAMES, demo_points, posed_vertices, sample_face
 from server.players import DemoPlayer
+from server.routers import stream
 from server.wire import (CONTRACTIONS_MAGIC, FLAG_HEAD_ROTATION, FLAG_LAST, MORPHS_HEADER,
-                         decode_contractions, decode_frame, encode_contractions, encode_frame)
+                         decode_contractions, decode_frame, encode_contractions, encode_frame,
+                         encode_points)
 from tests.api.test_wire import decode_in_node
 from tests.ws_messages import replies
 
@@ -201,8 +203,6 @@ def test_new_landmarks_place_the_muscles_anew_unless_the_user_saved_his(client, 
 
 
 def test_a_drive_that_cannot_be_made_is_refused_and_changes_nothing(client, sample_id, monkeypatch):
-    import server.routers.stream as stream
-
     def refuse(store, project_id):
         raise RetargetError("placing muscles needs six iBUG points")
 
@@ -212,3 +212,26 @@ def test_a_drive_that_cannot_be_made_is_refused_and_changes_nothing(client, samp
         ws.send_json({"type": "drive", "drive": "muscles"})
         assert "six iBUG points" in ws.receive_json()["detail"]
         assert client.app.state.hub.drive(sample_id) == "points"
+
+
+def test_a_live_source_driven_by_muscles_sends_contraction_frames(client, sample_id):
+    face = sample_face(1)
+    weights = np.zeros(len(EXPRESSION_NAMES))
+    weights[EXPRESSION_NAMES.index("jawOpen")] = 1.0
+    neutral = face.vertices[face.landmarks68].astype(np.float32)
+    opened = posed_vertices(face, weights)[face.landmarks68].astype(np.float32)
+    with client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "drive", "drive": "muscles"})
+        ws.send_json({"type": "start", "source": "live", "dims": 3,
+                      "settings": {"neutral": {"mode": "frame", "frame": 0}, "filter": "none"}})
+        assert [r["type"] for r in replies(ws, 2)] == ["drive", "started"]
+        for i, points in enumerate([neutral] + [opened] * 4):
+            ws.send_bytes(encode_points(points, frame_index=i, capture_time=i / 30))
+        last = None
+        while last is None or last.frame_index < 4:
+            message = ws.receive()
+            if message.get("bytes") is not None:
+                last = decode_contractions(message["bytes"])
+        ws.send_json({"type": "stop"})
+    assert last.contractions[-1] > 0.1  # the performer's open mouth opens the target's jaw
