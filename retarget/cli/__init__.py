@@ -95,7 +95,7 @@ def build_parser() -> Parser:
     sources.add_condition(commands, quiet)
     sources.add_calibrate(commands, quiet)
     retargeting.add_export_gltf(commands, quiet)
-    arkit.add_arkit(commands, quiet)
+    arkit.add_arkit(commands)
     mouth.add_open_mouth(commands)
     landmarks.add_landmarks(commands)
     muscles.add_muscles(commands)

@@ -9,30 +9,30 @@ import numpy as np
 
 from retarget.arkit.shapes import arkit_shapes
 from retarget.errors import RetargetError
-from retarget.files import layout_for, read_landmarks, read_mesh, require_parent, rig_weights, write_file
+from retarget.files import layout_for, read_landmarks, read_mesh, read_rig, require_parent, write_file
 from retarget.layouts import LAYOUTS
-from retarget.weights import DEFAULT_METHOD, METHODS
 
 __all__ = ["add_arkit"]
 
 
-def add_arkit(commands, parents) -> None:
+def add_arkit(commands) -> None:
     p = commands.add_parser(
-        "arkit", parents=parents, help="generate ARKit's 52 blendshapes on a face",
+        "arkit", help="generate ARKit's 52 blendshapes on a face",
         description="Generate ARKit's 52 blendshapes (eyeBlinkLeft ... tongueOut; Left is the "
         "subject's left) on a face mesh from its landmarks: the reference face's motion of each "
-        "shape at the feature points, carried onto the face by the RBF space transform and its "
-        "rig. Writes an .npz with names (52,) and deltas (52, V, 3) float32 vertex displacements "
-        "in the mesh's units, and at_points (52, N, 3) the feature points' displacements.")
+        "shape, carried onto the face by the RBF space transform and a rig: the one given with --rig "
+        "(on the landmarks), else the shapes' own (the reference's 468 face-mesh points carried onto "
+        "the surface, an RBF rig). Writes an .npz with names (52,) and deltas (52, V, 3) float32 "
+        "vertex displacements in the mesh's units, and at_points (52, N, 3) the feature points' "
+        "displacements.")
     p.add_argument("mesh", metavar="MESH", help="the face mesh")
     p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
                    help="landmark layout; default: the landmarks JSON's \"layout\"")
-    p.add_argument("--rig", metavar="RIG.npz", help="skin weights from 'retarget rig' (default: computed)")
-    p.add_argument("--deformer", choices=list(METHODS), default=DEFAULT_METHOD, metavar="NAME",
-                   help=f"deformer of the computed rig (default: {DEFAULT_METHOD})")
+    p.add_argument("--rig", metavar="RIG.npz", help="skin weights from 'retarget rig' to make the "
+                   "shapes with (default: the shapes' own rig)")
     p.add_argument("--out", required=True, metavar="SHAPES.npz", help="the shapes, written here")
-    p.set_defaults(run=_arkit)
+    p.set_defaults(run=_arkit, quiet=True)
 
 
 def _arkit(args) -> int:
@@ -44,7 +44,7 @@ def _arkit(args) -> int:
     if layout is None:
         raise RetargetError("the shapes need the landmarks' layout: give --layout or a \"layout\" "
                             "in the landmarks JSON")
-    rig = rig_weights(args.rig, args.deformer, mesh, points, layout, quiet=args.quiet)
+    rig = None if args.rig is None else read_rig(args.rig, mesh, points.n_points)
     shapes = arkit_shapes(mesh.vertices, mesh.faces, points, layout, rig)
     write_file(out, shapes.save)
     largest = np.linalg.norm(shapes.deltas, axis=2).max(axis=1)

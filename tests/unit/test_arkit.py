@@ -324,7 +324,7 @@ def test_cli_arkit_writes_the_shapes(face, shapes, tmp_path, capsys):
     rig.save(tmp_path / "rig.npz")
     out = tmp_path / "shapes.npz"
     assert main(["arkit", str(tmp_path / "face.obj"), "--landmarks", str(tmp_path / "t0.json"),
-                 "--rig", str(tmp_path / "rig.npz"), "--out", str(out), "-q"]) == 0
+                 "--rig", str(tmp_path / "rig.npz"), "--out", str(out)]) == 0
     assert "made 52 ARKit shapes" in capsys.readouterr().out
     with np.load(out) as z:
         assert tuple(z["names"]) == ARKIT_NAMES
@@ -333,3 +333,19 @@ def test_cli_arkit_writes_the_shapes(face, shapes, tmp_path, capsys):
     assert main(["arkit", str(tmp_path / "face.obj"), "--landmarks", str(tmp_path / "bare.json"),
                  "--out", str(out)]) == 2
     assert "give --layout" in capsys.readouterr().err
+
+
+def test_default_rig_carries_the_dense_reference(face, shapes):
+    """Without a rig the shapes come from the reference's 468 face-mesh points carried onto
+    the face: the same motion where the layout's points are, and no motion lost."""
+    f, points, rig = face
+    dense = arkit_shapes(f.vertices, f.faces, points, "ibug68")
+    assert dense.deltas.shape == shapes.deltas.shape and not dense.deltas[K["tongueOut"]].any()
+    assert np.array_equal(dense.at_points, shapes.at_points)
+    at = points.positions(dense.deltas.astype(np.float64))               # (52, 68, 3)
+    scale = np.abs(dense.at_points).max(axis=(1, 2), keepdims=True) + 1e-9
+    assert np.median(np.abs(at - dense.at_points) / scale) < 0.05
+    size = np.linalg.norm(dense.deltas, axis=2)
+    blink = size[K["eyeBlinkLeft"]]
+    assert (blink * f.vertices[:, 0]).sum() / blink.sum() > 2.0
+    assert dense.deltas[K["jawOpen"], f.landmarks68[8], 1] < -2.0
