@@ -198,7 +198,7 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
     w = np.clip(start, 0.0, 1.0)
     # the previous frame's support starts free; bound weights are freed one at a time below
     low, high = (w <= 0.0) | off, (w >= 1.0) & ~off
-    first = True
+    wholesale = True
     for _ in range(max_steps):
         free = ~(low | high)
         held = high.astype(np.float64)              # the bound weights' values: 0 or 1
@@ -220,12 +220,12 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
             gain = np.where(inward, grad * grad / np.diag(h), 0.0)
             if not gain.any():
                 return w
-            if first:
+            if wholesale:
                 # from a warm start a few weights change at once (a frame's noise): free all
                 # that would lower the objective, as projected methods do
                 low &= gain == 0
                 high &= gain == 0
-                first = False
+                wholesale = False
             else:
                 # then the one whose release lowers the objective most (Lawson & Hanson's rule:
                 # one at a time, so the steps cannot cycle)
@@ -246,11 +246,11 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
         s = step[f]
         with np.errstate(divide="ignore", invalid="ignore"):
             room = np.where(s < 0, -w[f] / s, np.where(s > 0, (1.0 - w[f]) / s, np.inf))
-        first = int(np.argmin(room))
-        alpha = min(1.0, max(float(room[first]), 0.0))
+        blocking = int(np.argmin(room))
+        alpha = min(1.0, max(float(room[blocking]), 0.0))
         w = np.clip(w + alpha * step, 0.0, 1.0)
-        hit = f[first]
-        if s[first] < 0:
+        hit = f[blocking]
+        if s[blocking] < 0:
             w[hit], low[hit] = 0.0, True
         else:
             w[hit], high[hit] = 1.0, True

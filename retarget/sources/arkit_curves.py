@@ -59,6 +59,7 @@ _TIME_COLUMNS = ("time", "time_s", "timestamp", "t")
 _FRAME_COLUMNS = ("frame", "frame#", "frame_index", "index")
 _TIMECODE = re.compile(r"^\s*(\d+):(\d{1,2}):(\d{1,2})[:;.](\d+(?:\.\d*)?)\s*$")
 _MAX_CELL = 64  # characters: longer cells cannot be numbers worth reading
+_BLOCK_ROWS = 4096  # rows converted to numbers at once
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,26 +155,31 @@ def _from_csv(text: str, label: str, fps) -> ArkitCurves | None:
     ignored = [n for j, n in enumerate(names) if j not in used and n.lower() not in
                ("blendshapecount", *_FRAME_COLUMNS)]
     numeric = sorted(set(shapes) | {j for j in head_cols if j >= 0} | ({time_col} - {-1}))
-    width = len(names)
-    values, codes, numbers = [], [], []
+    width, columns = len(names), [names[j] for j in numeric]
+    blocks, pending, codes, numbers = [], [], [], []
     try:
         for number, row in enumerate(reader, start=2):
             if not any(cell.strip() for cell in row):
                 continue  # a blank line (a trailing newline pair)
             if len(row) != width:
                 raise RetargetError(f"{label}: row {number} has {len(row)} cells, the header {width}")
-            if (len(values) + 1) * len(numeric) > MAX_TAKE_VALUES:
-                raise RetargetError(f"{label}: row {number} takes the table past {MAX_TAKE_VALUES} values; "
-                                    "split the take")
-            values.append([row[j] for j in numeric])
+            if (len(numbers) + 1) * len(numeric) > MAX_TAKE_VALUES:
+                raise RetargetError(f"{label}: row {number} takes the table past {MAX_TAKE_VALUES} "
+                                    "values; split the take")
+            pending.append([row[j] for j in numeric])
             numbers.append(number)
             if live_link:
                 codes.append(row[timecode_col])
+            if len(pending) == _BLOCK_ROWS:  # hold a block of rows as strings, not the file
+                blocks.append(_numbers(pending, numbers[-len(pending):], label, columns))
+                pending = []
     except csv.Error as exc:
-        raise RetargetError(f"{label}: not CSV past row {len(values) + 1}: {exc}") from None
-    if not values:
+        raise RetargetError(f"{label}: not CSV past row {len(numbers) + 1}: {exc}") from None
+    if not numbers:
         raise RetargetError(f"{label}: the header is not followed by any frame")
-    table = _numbers(values, numbers, label, [names[j] for j in numeric])
+    if pending:
+        blocks.append(_numbers(pending, numbers[-len(pending):], label, columns))
+    table = np.concatenate(blocks)
     column = {j: i for i, j in enumerate(numeric)}
     weights = np.zeros((len(table), len(ARKIT_NAMES)))
     for j, k in shapes.items():

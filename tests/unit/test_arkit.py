@@ -266,6 +266,10 @@ def test_plain_csv_and_json_weights():
     assert np.allclose(take.points[1], ref.points(np.eye(52)[K["jawOpen"]]), atol=1e-4)
     doc = {"names": ["jawOpen", "eyeBlinkRight"], "weights": [[0.2, 0.3]], "head": [[0, 0.1, 0]]}
     assert read_take(json.dumps(doc).encode(), filename="w.json").n_frames == 1
+    # read a block of rows at a time
+    long = "jawOpen\n" + "0.25\n" * 5000
+    take = read_take(long.encode(), filename="long.csv", fps=60)
+    assert take.n_frames == 5000 and np.allclose(take.points[-1], take.points[0])
     # a landmark table is still read as one
     landmark = "frame,a_x,a_y\n0,1,2\n"
     assert read_take(landmark.encode(), filename="l.csv").names == ("a",)
