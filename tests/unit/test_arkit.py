@@ -353,3 +353,13 @@ def test_default_rig_carries_the_dense_reference(face, shapes):
     blink = size[K["eyeBlinkLeft"]]
     assert (blink * f.vertices[:, 0]).sum() / blink.sum() > 2.0
     assert dense.deltas[K["jawOpen"], f.landmarks68[8], 1] < -2.0
+
+
+def test_solver_on_vertex_displacements(shapes):
+    """The solver fits vertex displacements as well: a face posed by its own morph targets
+    gives its weights back."""
+    weights = np.zeros(52)
+    weights[[K["jawOpen"], K["mouthSmileLeft"], K["browInnerUp"]]] = [0.4, 0.8, 0.6]
+    posed = np.tensordot(weights, shapes.deltas, axes=1)
+    solved = ArkitSolver(shapes.deltas).solve(posed)
+    assert np.abs(solved - weights).max() < 0.03
