@@ -9,6 +9,9 @@
       encode         `server.wire.encode_frame`
       publish        `StreamHub.publish` to one viewer's Mailbox, and to 50
       total          the three together (publish to one viewer)
+(a') The same frames driven by muscles (issue 15): `MuscleDrive.frame` (the muscle IK,
+    warm-started, and the expression read out) and `server.wire.encode_contractions`
+    timed per frame, and the bytes a frame takes both ways.
 (b) A real server: `retarget serve` in a subprocess (a fresh temp data dir, so the
     built-in 68-point sample project is made on start) on a free port; one `websockets`
     client opens /api/projects/{id}/stream, sends {"type": "start", "source": "demo",
@@ -240,6 +243,44 @@ def in_process(frames: int, fps: float) -> None:
           f"{max(b.backlog for b in [box, *boxes])} (dropped {box.dropped})")
 
 
+def muscle_mode(frames: int, fps: float) -> None:
+    from retarget.landmarks import landmarks_from_json
+    from retarget.muscles import place_muscles
+    from retarget.muscles.drive import MuscleDrive
+    from retarget.sample_face import sample_face
+    from server.players import DemoPlayer
+    from server.wire import encode_contractions, encode_frame
+
+    face = sample_face(1)
+    points = landmarks_from_json({"vertex_indices": np.asarray(face.landmarks68).tolist()}, face.vertices,
+                                 face.faces)
+    t0 = time.perf_counter()
+    model = place_muscles(face.vertices, face.faces, points, "ibug68")
+    placed = time.perf_counter() - t0
+    source = DemoPlayer(face.vertices[face.landmarks68], "ibug68", fps)
+    drive = MuscleDrive(model, points)
+    clock = time.perf_counter_ns
+    parts = {k: np.empty(frames) for k in ("ik", "encode")}
+    lost = np.zeros(68, bool)
+    for i in range(-50, frames):  # 50 warm-up frames
+        d = source.displacements(i % 100000)
+        t0 = clock()
+        seen = drive.frame(d, lost)
+        t1 = clock()
+        frame = encode_contractions(seen, frame_index=i % 100000, source_time=i / fps)
+        t2 = clock()
+        if i >= 0:
+            parts["ik"][i] = (t1 - t0) / 1e6
+            parts["encode"][i] = (t2 - t1) / 1e6
+    points_bytes = len(encode_frame(d, frame_index=0, source_time=0.0))
+    print(f"(a') muscle mode, {frames} frames: bytes a frame, feature points {points_bytes}, "
+          f"muscles {len(frame)} ({len(seen.contractions)} contractions, {len(seen.distances)} "
+          f"expression distances, confidence, label); +16 either way with a head rotation")
+    print(f"  {'MuscleDrive.frame (IK, read)':<28} {fmt(stats(parts['ik']))}")
+    print(f"  {'encode_contractions':<28} {fmt(stats(parts['encode']))}")
+    print(f"  muscles placed on the sample face (once per project): {1e3 * placed:.0f} ms")
+
+
 # -- (b) a real server -------------------------------------------------------------------
 
 async def _receive(ws_url: str, project: str, seconds: float, fps: float, compression):
@@ -306,6 +347,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     print(f"machine: {machine()}")
     in_process(args.frames, args.fps)
+    muscle_mode(args.frames, args.fps)
     if not args.skip_server:
         real_server(args.seconds, args.fps, None if args.compression == "none" else "deflate")
     print(f"machine at the end: {machine()}")
