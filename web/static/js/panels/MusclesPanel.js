@@ -18,6 +18,7 @@ export class MusclesPanel {
 
 		this.app = app;
 		this._loading = null; // Promise of the shown project's PlayedMuscles
+		this._face = null; // the SkinnedFace they were loaded onto
 		this._sliders = [];
 		this._events = new AbortController();
 		const signal = this._events.signal;
@@ -44,14 +45,15 @@ export class MusclesPanel {
 
 		const app = this.app;
 		if ( ! app.face || ! app.project?.landmarks ) return Promise.reject( new Error( 'Muscles need a mesh with saved landmarks: they are placed from them.' ) );
-		if ( this._loading === null ) {
+		if ( this._loading === null || this._face !== app.face ) {
 
 			const current = app.ticket(), face = app.face;
+			this._face = face;
 			$( 'muscles-note' ).textContent = 'Placing the muscles…';
-			this._loading = api.musclesPlayed( app.projectId ).then( ( decoded ) => {
+			const loading = api.musclesPlayed( app.projectId ).then( ( decoded ) => {
 
 				const muscles = new PlayedMuscles( decoded );
-				if ( current() && app.face === face ) {
+				if ( current() && app.face === face && this._loading === loading ) { // not cleared meanwhile
 
 					face.setMuscles( muscles );
 					this._build( muscles );
@@ -62,12 +64,14 @@ export class MusclesPanel {
 				return muscles;
 
 			} );
-			this._loading.catch( () => {
+			loading.catch( () => {
 
+				if ( this._loading !== loading ) return;
 				this._loading = null; // a later call tries again
 				$( 'muscles-note' ).textContent = '';
 
 			} );
+			this._loading = loading;
 
 		}
 
@@ -89,9 +93,10 @@ export class MusclesPanel {
 	/** Forget the muscles (another project, or new landmarks: placed anew). */
 	clear() {
 
-		this._loading = null;
+		this._loading = this._face = null;
 		this._sliders = [];
 		this.app.face?.setMuscles( null );
+		this.app.sources.expressions.setExpressions( [] ); // the old muscles' readings
 		$( 'muscle-sliders' ).replaceChildren();
 		$( 'muscles-note' ).textContent = '';
 
