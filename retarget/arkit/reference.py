@@ -20,8 +20,9 @@ motion of the ICT generic neutral face at weight 1:
   (`retarget.facemesh.placement.find_face_mesh`, once, in the script).
 
 Axes are ICT's: +y up, +z out of the face, +x toward the subject's left. A layout whose
-points are all iBUG points reads the first table at its ``ibug68`` indices; the dense
-``mediapipe468`` reads the second at its ``mediapipe468`` indices.
+points are all iBUG points reads the first table at its ``ibug68`` indices; the
+face-mesh layouts (``mediapipe468``, and ``mediapipe68``, whose iBUG points are read off
+the face mesh) read the second at their ``mediapipe468`` indices.
 
 From ICT's 53 shapes to ARKit's 52 (`ICT_SOURCES`): ICT names a one-sided shape
 ``<base>_L`` / ``<base>_R`` with ``_L`` acting on +x, the subject's left, so ``_L`` is
@@ -140,9 +141,9 @@ def arkit_reference(layout: Layout | str) -> ArkitReference:
     if not isinstance(layout, Layout):
         raise RetargetError(f"layout must be a Layout or a layout name, got {layout!r}")
     table = _table()
-    if layout.has_ibug68:
+    if layout.has_ibug68 and not layout.name.startswith("mediapipe"):
         rows, key = list(layout.ibug68), "ibug68"
-    else:
+    else:  # face-mesh points (mediapipe68 reads the 68 iBUG points off the face mesh)
         rows, key = list(layout.mediapipe468), "mediapipe468"
     neutral = table[f"{key}_neutral"][rows]
     motion = table[f"{key}_motion"][:, rows]

@@ -73,6 +73,10 @@ def test_reference_table_is_small_licensed_and_left_is_the_subjects_left():
         assert np.isfinite(ref.motion).all()
         assert not ref.motion[K["tongueOut"]].any()
         assert np.count_nonzero(np.abs(ref.motion).max(axis=(1, 2)) > 0) == 51
+    # the face-mesh layouts read the face-mesh table (mediapipe68: the iBUG points off the mesh)
+    dense = arkit_reference("mediapipe468")
+    rows = list(get_layout("mediapipe68").mediapipe468)
+    assert np.array_equal(arkit_reference("mediapipe68").motion, dense.motion[:, rows])
     ref = arkit_reference("ibug68")
     lay = get_layout("ibug68")
     for side, x_sign in (("Left", 1), ("Right", -1)):
