@@ -194,7 +194,8 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
     definite (K, K) h and (K,) c, by the primal active-set method from `start` (module
     docstring). `inverses` caches the free blocks' inverses by free set (None: no cache).
     `exclusive` (2, P) index pairs: a weight at 0 is not freed while its partner is on."""
-    tol = 1e-12 * max(float(np.abs(np.diag(h)).max()), 1e-300)
+    diagonal = np.diag(h)
+    tol = 1e-12 * max(float(diagonal.max()), 1e-300)
     w = np.clip(start, 0.0, 1.0)
     # the previous frame's support starts free; bound weights are freed one at a time below
     low, high = (w <= 0.0) | off, (w >= 1.0) & ~off
@@ -214,10 +215,10 @@ def _box_qp(h: np.ndarray, c: np.ndarray, start: np.ndarray, off: np.ndarray,
             if exclusive is not None:
                 a, b = exclusive
                 partner_on = np.zeros(len(w), dtype=bool)
-                np.logical_or.at(partner_on, a, w[b] > 0)
-                np.logical_or.at(partner_on, b, w[a] > 0)
+                partner_on[a[w[b] > 0]] = True
+                partner_on[b[w[a] > 0]] = True
                 inward &= ~(low & partner_on)
-            gain = np.where(inward, grad * grad / np.diag(h), 0.0)
+            gain = np.where(inward, grad * grad / diagonal, 0.0)
             if not gain.any():
                 return w
             if wholesale:
