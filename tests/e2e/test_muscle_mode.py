@@ -1,7 +1,8 @@
 """Muscle mode in the page (issue 15): *Drive by: muscles* while the demo plays, the face
 drawn from the played muscles in the shader exactly as `played_displacements` of the
-contractions received, the live expression readout, and a Muscles panel slider posing the
-face with no server round trip."""
+contractions received, the live expression readout, a Muscles panel slider posing the
+face with no server round trip, and a muscle's insertion dragged on the view, saved and
+played anew."""
 
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal: float32 on the GPU agai
 
 _POSE = """() => ({c: Array.from(window.app.live.lastContractions),
                    v: Array.from(window.app.face.deformedPositions())})"""
+_SLIDERS = """() => ({c: Array.from(document.querySelectorAll('#muscle-sliders input'), (e) => Number(e.value)),
+                     v: Array.from(window.app.face.deformedPositions())})"""
 
 
 def test_drive_by_muscles_plays_the_contractions_and_reads_the_expression(server, page):
@@ -59,13 +62,33 @@ def test_drive_by_muscles_plays_the_contractions_and_reads_the_expression(server
     page.click("#muscle-dofs summary")
     page.wait_for_selector("#muscle-sliders input[data-dof='jaw']")
     page.click("#muscles-reset")  # the sliders followed the last frame played
-    pose = page.evaluate("""() => { const s = document.querySelector("#muscle-sliders input[data-dof='jaw']");
-        s.value = 0.3; s.dispatchEvent(new Event('input'));
-        return {c: Array.from(document.querySelectorAll('#muscle-sliders input'), (e) => Number(e.value)),
-                v: Array.from(window.app.face.deformedPositions())}; }""")
+    page.evaluate("""() => { const s = document.querySelector("#muscle-sliders input[data-dof='jaw']");
+        s.value = 0.3; s.dispatchEvent(new Event('input')); }""")
+    pose = page.evaluate(_SLIDERS)
     opened = np.array(pose["c"])
     assert opened[-1] > 0.29 and not opened[:-1].any()
     drawn = np.array(pose["v"]).reshape(n, 3) - rest
     expected = played_displacements(morphs, rest, opened)
     assert np.abs(expected).max() > 0.3
     assert np.abs(drawn - expected).max() < TOLERANCE * diagonal
+
+    # dragging the zygomatic's insertion saves the muscles as the user's and plays them anew
+    page.select_option("#muscle-edit", "zygomatic_major_left")
+    page.wait_for_function("() => window.app.muscles.editor.handles !== null", timeout=scaled_ms(10_000))
+    at = page.evaluate("""() => { const h = window.app.muscles.editor.handles.handles.get('insertion');
+        window.playedBefore = window.app.face.muscles;
+        return window.app.viewer.project(h.getWorldPosition(h.position.clone()).toArray()); }""")
+    page.mouse.move(at["x"], at["y"])
+    page.mouse.down()
+    page.mouse.move(at["x"] + 30, at["y"] + 20, steps=4)
+    page.mouse.up()
+    page.wait_for_function("() => window.app.face.muscles !== window.playedBefore", timeout=scaled_ms(15_000))
+    saved = server.api("GET", f"/api/projects/{sample['id']}/muscles")
+    moved = next(m for m in saved["muscles"] if m["name"] == "zygomatic_major_left")
+    placed = next(m for m in model.to_json()["muscles"] if m["name"] == "zygomatic_major_left")
+    assert saved["edited"] is True and np.linalg.norm(np.subtract(moved["insertion"], placed["insertion"])) > 0.1
+    assert moved["origin"] == placed["origin"]
+    pose = page.evaluate(_SLIDERS)
+    edited = muscle_morphs(MuscleFace.from_json(saved, rest))
+    drawn = np.array(pose["v"]).reshape(n, 3) - rest
+    assert np.abs(drawn - played_displacements(edited, rest, np.array(pose["c"]))).max() < TOLERANCE * diagonal

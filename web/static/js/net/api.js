@@ -205,6 +205,15 @@ export const api = {
 	rig: ( id ) => request( 'GET', `/api/projects/${ id }/rig` ),
 
 	/**
+	 * The project's muscles as geometry (GET .../muscles: `MuscleFace.to_json` plus names,
+	 * limits and whether the user saved them), placed from the saved landmarks on first need.
+	 */
+	muscles: ( id ) => request( 'GET', `/api/projects/${ id }/muscles` ),
+
+	/** Save edited muscle geometry (PUT .../muscles); answers it as GET does. */
+	putMuscles: ( id, muscles ) => request( 'PUT', `/api/projects/${ id }/muscles`, { json: muscles } ),
+
+	/**
 	 * The project's muscles as the page plays them (the "RTMM" format of server/wire.py),
 	 * placed from the saved landmarks the first time they are asked for.
 	 * @returns {Promise<{nVertices: number, nTargets: number, header: object, targets: Float32Array, jawWeights: Float32Array}>}

@@ -23,11 +23,13 @@ export class ExpressionReadout {
 	}
 
 	/**
-	 * Show the readout for these expressions, emptied (a project's muscles were loaded).
+	 * Show the readout for these expressions, emptied unless they are the ones shown (a
+	 * project's muscles were loaded, or played anew after an edit).
 	 * @param {string[]} names - (E) expression names, the frames' distance order.
 	 */
 	setExpressions( names ) {
 
+		if ( names.join() === this._names.join() ) return; // the same muscles played anew: keep the history
 		this._names = names;
 		this._history = new Float32Array( HISTORY * names.length );
 		this._count = 0;
