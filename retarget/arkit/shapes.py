@@ -17,11 +17,11 @@ Which rig:
 - **Default**: the rig that makes the best shapes. A layout of a few dozen points cannot
   say how a blink rolls the lid between two lid points (on the ICT face model, 68 points
   through the default biharmonic rig leave 44 % of the shapes' motion wrong, the lids
-  worst); so the reference's 468 face-mesh points are carried onto the face by the same
-  space transform, snapped to its surface, and drive a dense RBF rig (Zhang et al. §2.1,
-  `retarget.weights.rbf`) with their own reference motion: 26 % on ICT
-  (``bench/arkit.py``), about a second for an 11k-vertex face. A face placed in the
-  ``mediapipe468`` layout uses its own 468 points.
+  worst); so the reference's 468 face-mesh points are placed on the face by a space
+  transform from the layout's points, snapped to its surface, and drive a dense RBF rig
+  (Zhang et al. §2.1, `retarget.weights.rbf`) with their own reference motion: 24.5 % on
+  ICT over three identity pairs (``bench/arkit.py``), about a second for an 11k-vertex
+  face. A face placed in the ``mediapipe468`` layout uses its own 468 points.
 
 `ArkitShapes.at_points` is always the layout's point motion, what the solver
 (`retarget.arkit.solve`) fits a frame's feature displacements with.
