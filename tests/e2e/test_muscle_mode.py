@@ -1,23 +1,33 @@
 """Muscle mode in the page (issue 15): *Drive by: muscles* while the demo plays, the face
 drawn from the played muscles in the shader exactly as `played_displacements` of the
 contractions received, the live expression readout, a Muscles panel slider posing the
-face with no server round trip, and a muscle's insertion dragged on the view, saved and
-played anew."""
+face with no server round trip, a muscle's insertion dragged on the view, saved and
+played anew, and the export following the drive."""
 
 from __future__ import annotations
+
+import json
+import struct
 
 import numpy as np
 
 from retarget.muscles import MuscleFace
 from retarget.muscles.expressions import EXPRESSIONS
 from retarget.muscles.morphs import muscle_morphs, played_displacements
-from tests.e2e.conftest import open_project, wait_face_moves
+from tests.e2e.conftest import open_project
 from tests.waits import scaled_ms
 
 TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal: float32 on the GPU against float64
 
-_POSE = """() => ({c: Array.from(window.app.live.lastContractions),
-                   v: Array.from(window.app.face.deformedPositions())})"""
+# the contractions on the face and its vertices as drawn, read together once it has moved
+# more than `cm` somewhere (the demo passes through rest)
+_MOVED_POSE = """(cm) => {
+    const face = window.app.face, rest = face.mesh.geometry.attributes.position.array;
+    const c = window.app.live.lastContractions, v = face.deformedPositions();
+    let most = 0;
+    for (let i = 0; i < rest.length; i ++) most = Math.max(most, Math.abs(v[i] - rest[i]));
+    return c !== null && most > cm ? {c: Array.from(c), v: Array.from(v)} : null;
+}"""
 _SLIDERS = """() => ({c: Array.from(document.querySelectorAll('#muscle-sliders input'), (e) => Number(e.value)),
                      v: Array.from(window.app.face.deformedPositions())})"""
 
@@ -30,8 +40,7 @@ def test_drive_by_muscles_plays_the_contractions_and_reads_the_expression(server
     page.wait_for_function("() => window.app.stream.stats.frames > 5", timeout=scaled_ms(30_000))
 
     page.check("#drive-muscles")
-    page.wait_for_function("() => window.app.live.lastContractions !== null", timeout=scaled_ms(30_000))
-    wait_face_moves(page, 0.05)
+    pose = page.wait_for_function(_MOVED_POSE, arg=0.05, polling=200, timeout=scaled_ms(30_000)).json_value()
 
     arrays = server.read(f"/api/projects/{sample['id']}/mesh/arrays")
     n = int(np.frombuffer(arrays, "<u4", 1, 8)[0])
@@ -40,7 +49,6 @@ def test_drive_by_muscles_plays_the_contractions_and_reads_the_expression(server
     morphs = muscle_morphs(model)
     diagonal = float(np.linalg.norm(rest.max(0) - rest.min(0)))
 
-    pose = page.evaluate(_POSE)
     c = np.array(pose["c"])
     assert c.shape == (22,) and np.abs(c).max() > 1e-3
     drawn = np.array(pose["v"]).reshape(n, 3) - rest
@@ -92,3 +100,11 @@ def test_drive_by_muscles_plays_the_contractions_and_reads_the_expression(server
     edited = muscle_morphs(MuscleFace.from_json(saved, rest))
     drawn = np.array(pose["v"]).reshape(n, 3) - rest
     assert np.abs(drawn - played_displacements(edited, rest, np.array(pose["c"]))).max() < TOLERANCE * diagonal
+
+    # the export follows the drive: a morph target per muscle (and corrective), named after it
+    with page.expect_download() as download:
+        page.click("#export-gltf")
+    glb = open(download.value.path(), "rb").read()
+    length, = struct.unpack_from("<I", glb, 12)
+    names = json.loads(glb[20:20 + length])["meshes"][0]["extras"]["targetNames"]
+    assert names[:21] == list(model.names[:-1]) and "orbicularis_oris*jaw" in names

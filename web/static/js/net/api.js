@@ -344,14 +344,15 @@ export const api = {
 
 	/**
 	 * The project as a glTF binary (server/routers/exports.py), its takes as animations.
-	 * @param {{takes?: string, settings?: object|null, regions?: string[]|null}} [options] -
+	 * @param {{takes?: string, settings?: object|null, regions?: string[]|null, drive?: string}} [options] -
 	 *   takes: ids joined by commas, or 'all'; settings: ConditionSettings JSON; regions: the
-	 *   regions that move (null: all).
+	 *   regions that move (null: all); drive: 'points' (the rig) or 'muscles' (a morph
+	 *   target per muscle and a jaw joint).
 	 * @returns {Promise<{blob: Blob, filename: string}>} the file and the server's name for it
 	 */
-	async exportGltf( id, { takes = '', settings = null, regions = null } = {} ) {
+	async exportGltf( id, { takes = '', settings = null, regions = null, drive = 'points' } = {} ) {
 
-		const query = new URLSearchParams( { takes } );
+		const query = new URLSearchParams( { takes, drive } );
 		if ( settings ) query.set( 'settings', JSON.stringify( settings ) );
 		if ( regions ) query.set( 'regions', regions.join( ',' ) );
 		const response = await request( 'GET', `/api/projects/${ id }/export.glb?${ query }`, { raw: true } );

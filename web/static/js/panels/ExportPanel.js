@@ -5,8 +5,9 @@ import { $ } from './dom.js';
  * The Export panel (index.html #export-panel): download the project as a glTF binary
  * (GET /api/projects/{id}/export.glb: mesh, landmarks and the rig in use, with the chosen
  * takes as animations, retargeted with the project's conditioning settings and region
- * mask, the same objects the stream plays with: `app.conditioning`, `app.regions`), and
- * import such a file as a new project, which is then opened.
+ * mask, the same objects the stream plays with: `app.conditioning`, `app.regions`; driven
+ * as the Performance panel's *Drive by* says: the rig, or the muscles as morph targets and
+ * a jaw joint), and import such a file as a new project, which is then opened.
  *
  * The panel holds no maths: the server retargets and writes the file. Refusals show the
  * server's reason in the panel's note and the page's error banner.
@@ -77,7 +78,7 @@ export class ExportPanel {
 		this._note( count ? `Retargeting ${ count } take${ count > 1 ? 's' : '' } and writing the glTF…` : 'Writing the glTF…' );
 		try {
 
-			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions() } );
+			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions(), drive: this.app.sources.drive } );
 			const link = document.createElement( 'a' );
 			link.href = URL.createObjectURL( blob );
 			link.download = filename;
