@@ -469,8 +469,11 @@ class MuscleFace:
             ids = np.asarray(sparse["vertex_indices"], dtype=np.int64)
             if len(ids) and (ids.min() < 0 or ids.max() >= len(rest)):
                 raise RetargetError("jaw weights: vertex index outside the mesh")
+            values = np.asarray(sparse["values"], dtype=np.float64)
+            if ids.ndim != 1 or values.shape != ids.shape:
+                raise RetargetError(f"jaw weights: {values.size} values for {ids.size} vertex indices")
             weights = np.zeros(len(rest))
-            weights[ids] = np.asarray(sparse["values"], dtype=np.float64)
+            weights[ids] = values
             jaw = Jaw(j["hinge_right"], j["hinge_left"], weights, tuple(j["limits"]))
         except (KeyError, TypeError, ValueError) as e:
             if isinstance(e, RetargetError):

@@ -152,6 +152,10 @@ def test_json_round_trip(model, face):
     np.testing.assert_array_equal(again.limits, model.limits)
     with pytest.raises(RetargetError, match="vertices"):
         MuscleFace.from_json(data, face.vertices[:100])
+    one_value = json.loads(json.dumps(data))
+    one_value["jaw"]["weights"]["values"] = [1.0]  # not one weight for every jaw vertex
+    with pytest.raises(RetargetError, match="1 values for"):
+        MuscleFace.from_json(one_value, face.vertices)
 
 
 def test_units_and_orientation_follow_the_mesh(model, face):
