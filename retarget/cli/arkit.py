@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from retarget.arkit.shapes import arkit_shapes
+from retarget.cli.parser import layout_option
 from retarget.errors import RetargetError
 from retarget.files import layout_for, read_landmarks, read_mesh, read_rig, require_parent, write_file
-from retarget.layouts import LAYOUTS
 
 __all__ = ["add_arkit"]
 
@@ -27,8 +27,7 @@ def add_arkit(commands) -> None:
         "displacements.")
     p.add_argument("mesh", metavar="MESH", help="the face mesh")
     p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    layout_option(p)
     p.add_argument("--rig", metavar="RIG.npz", help="skin weights from 'retarget rig' to make the "
                    "shapes with (default: the shapes' own rig)")
     p.add_argument("--out", required=True, metavar="SHAPES.npz", help="the shapes, written here")

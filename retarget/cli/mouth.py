@@ -5,10 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from retarget.cli.parser import PROG
+from retarget.cli.parser import PROG, layout_option
 from retarget.errors import RetargetError
 from retarget.files import layout_for, read_landmarks, read_mesh, require_parent, write_json
-from retarget.layouts import LAYOUTS
 from retarget.lips import opened_mouth
 from retarget.mesh import save_mesh
 
@@ -30,8 +29,7 @@ def add_open_mouth(commands) -> None:
                    help="the opened mesh, written here (obj, ply, off, gltf, glb)")
     p.add_argument("--landmarks-out", required=True, metavar="T0_OPENED.json",
                    help="the landmarks on the opened mesh, written here")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    layout_option(p)
     p.set_defaults(run=_open_mouth, quiet=True)
 
 

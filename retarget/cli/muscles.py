@@ -9,11 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from retarget.cli.parser import PROG, positive_float
+from retarget.cli.parser import PROG, layout_option, positive_float
 from retarget.errors import RetargetError
 from retarget.files import (contractions_files, layout_for, muscles_for, read_landmarks, read_mesh,
                             read_npy, require_parent, write_json)
-from retarget.layouts import LAYOUTS
 from retarget.muscles import MUSCLE_TABLE, dof_names, linearisation_error
 from retarget.muscles.expressions import default_recogniser
 from retarget.pipeline import DEFAULT_KERNEL
@@ -30,8 +29,7 @@ def add_muscles(commands) -> None:
         f"'{PROG} transfer --drive muscles --muscles' (edit it to move a muscle).")
     p.add_argument("mesh", metavar="MESH", help="the face mesh")
     p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    layout_option(p)
     p.add_argument("--out", required=True, metavar="MUSCLES.json", help="the muscles, written here")
     p.set_defaults(run=_muscles, quiet=True)
 
@@ -62,8 +60,7 @@ def add_recognise(commands, parents) -> None:
     p.add_argument("--source-neutral", metavar="S0.npy", help="with source points: their neutral")
     p.add_argument("--target-mesh", metavar="MESH", help="with source points: the face they drive")
     p.add_argument("--target-landmarks", metavar="T0.json", help="with source points: its landmarks")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    layout_option(p)
     p.add_argument("--muscles", metavar="MUSCLES.json", help="muscles from 'retarget muscles' "
                    "(default: placed from the landmarks)")
     p.add_argument("--kernel", choices=list(KERNELS), default=DEFAULT_KERNEL, metavar="NAME",

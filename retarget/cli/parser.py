@@ -8,7 +8,9 @@ import argparse
 
 import numpy as np
 
-__all__ = ["PROG", "Parser", "UsageError", "non_negative_float", "positive_float",
+from retarget.layouts import LAYOUTS
+
+__all__ = ["PROG", "Parser", "UsageError", "layout_option", "non_negative_float", "positive_float",
            "positive_int", "quiet_option"]
 
 PROG = "retarget"
@@ -41,6 +43,13 @@ def quiet_option() -> Parser:
     quiet.add_argument("-q", "--quiet", action="store_true",
                        help="hide the progress bars on stderr")
     return quiet
+
+
+def layout_option(parser, what: str = "landmark layout") -> None:
+    """``--layout NAME``, for the commands that read a landmarks JSON: which layout its points
+    follow when the JSON does not say."""
+    parser.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
+                        help=f"{what}; default: the landmarks JSON's \"layout\" (`{PROG} layouts` lists them)")
 
 
 def _number(cast, *, minimum: float, strict: bool, what: str):

@@ -12,8 +12,7 @@ from retarget.errors import RetargetError
 from retarget.files import (DRIVES, computed_weights, export_gltf_files, layout_for, read_landmarks,
                             read_mesh, require_parent, transfer_files, write_file, write_json,
                             write_npy)
-from retarget.cli.parser import PROG, non_negative_float, positive_float, positive_int
-from retarget.layouts import LAYOUTS
+from retarget.cli.parser import PROG, layout_option, non_negative_float, positive_float, positive_int
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING
 from retarget.rbf import KERNELS
@@ -59,9 +58,7 @@ def add_transfer(commands, parents) -> None:
     p.add_argument("--mask", nargs="+", action="extend", metavar="NAME",
                    help="partial retargeting: move only these regions, groups, point names "
                    "or feature indices (their union); names need a layout")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help=f"landmark layout ({', '.join(LAYOUTS)}); default: the landmarks "
-                   "JSON's \"layout\"")
+    layout_option(p)
     p.add_argument("--drive", choices=list(DRIVES), default="points",
                    help="points: feature points as skinning joints (default); muscles: their motion "
                    "solved into the 21 muscles' contractions and the jaw (Woodward et al.), no rig")
@@ -114,8 +111,7 @@ def add_rig(commands, parents) -> None:
     p.add_argument("--k", type=positive_int, metavar="K",
                    help="influences kept per vertex (default: the method's own, 4 for "
                    "ellipsoid and geodesic, all for the others)")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="landmark layout; default: the landmarks JSON's \"layout\"")
+    layout_option(p)
     p.set_defaults(run=_rig)
 
 
@@ -172,8 +168,7 @@ def add_export_gltf(commands, parents) -> None:
     p.add_argument("--mask", nargs="+", action="extend", metavar="NAME",
                    help="partial retargeting: move only these regions, groups, point names "
                    "or feature indices")
-    p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="landmark layout (joint names); default: the landmarks JSON's \"layout\"")
+    layout_option(p, "landmark layout (joint names)")
     p.add_argument("--drive", choices=list(DRIVES), default="points",
                    help="points: feature joints and the rig (default); muscles: a morph target per "
                    "muscle (and correctives for those the jaw crosses) and a jaw joint, animated by "

@@ -176,18 +176,8 @@ def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
     names = joint_names(points)
     neutral = points.positions(mesh.vertices).astype(np.float32)  # (N, 3)
     skinned = is_joint_based(weights)
-    report = progress or (lambda fraction: None)
-    steps = 1 + len(clips) + (0 if skinned else points.n_points)
-    done = [0]
-
-    def step():
-        done[0] += 1
-        report(0.95 * done[0] / steps)
-
-    out = GlbBuilder(f"retarget {__version__}")
-    doc = out.document
-    primitive = _primitive(out, mesh)
-    doc["meshes"] = [{"name": mesh.name or "face", "primitives": [primitive]}]
+    step = _stepper(progress, 1 + len(clips) + (0 if skinned else points.n_points))
+    out, doc, primitive = _face_document(mesh)
     doc["nodes"] = [{"name": mesh.name or "face", "mesh": 0},
                     {"name": _root_name(names),
                      "children": list(range(FIRST_FEATURE_NODE, FIRST_FEATURE_NODE + len(names)))}]
@@ -223,18 +213,8 @@ def _built_muscles(mesh, morphs, clips, progress) -> GlbBuilder:
     clips = tuple(clips)
     _check_muscle_sizes(mesh, morphs, clips)
     names = list(morphs.names) + list(morphs.corrective_names)
-    report = progress or (lambda fraction: None)
-    steps = 1 + len(names) + len(clips)
-    done = [0]
-
-    def step():
-        done[0] += 1
-        report(0.95 * done[0] / steps)
-
-    out = GlbBuilder(f"retarget {__version__}")
-    doc = out.document
-    primitive = _primitive(out, mesh)
-    doc["meshes"] = [{"name": mesh.name or "face", "primitives": [primitive]}]
+    step = _stepper(progress, 1 + len(names) + len(clips))
+    out, doc, primitive = _face_document(mesh)
     pivot = morphs.jaw_pivot.astype(np.float32)
     # the jaw is the skin's one joint beside the root, where a rig's features would be
     doc["nodes"] = [{"name": mesh.name or "face", "mesh": 0},
@@ -256,6 +236,27 @@ def _built_muscles(mesh, morphs, clips, progress) -> GlbBuilder:
             doc["animations"].append(_muscle_animation(out, clip, morphs))
             step()
     return out
+
+
+def _stepper(progress, steps: int):
+    """A callable reporting one more of `steps` steps done to `progress` (which reaches 0.95:
+    writing the file is left)."""
+    report = progress or (lambda fraction: None)
+    done = [0]
+
+    def step():
+        done[0] += 1
+        report(0.95 * done[0] / steps)
+
+    return step
+
+
+def _face_document(mesh: Mesh) -> tuple[GlbBuilder, dict, dict]:
+    """A new document holding the face's mesh: the builder, its document and the primitive."""
+    out = GlbBuilder(f"retarget {__version__}")
+    primitive = _primitive(out, mesh)
+    out.document["meshes"] = [{"name": mesh.name or "face", "primitives": [primitive]}]
+    return out, out.document, primitive
 
 
 def _check_muscle_sizes(mesh, morphs, clips) -> None:

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import re
 from dataclasses import dataclass
 
@@ -47,6 +46,7 @@ import numpy as np
 from retarget.arkit.reference import ARKIT_NAMES, arkit_index, arkit_reference
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
+from retarget.sources.json_text import json_document
 from retarget.sources.take import MAX_TAKE_VALUES, Take
 
 __all__ = ["ArkitCurves", "arkit_curves", "arkit_take", "LIVE_LINK_FPS"]
@@ -254,12 +254,7 @@ def _timecodes(codes: list[str], numbers: list[int], label: str, fps) -> tuple[n
 def _from_json(text: str, label: str, fps) -> ArkitCurves | None:
     if '"weights"' not in text:
         return None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise RetargetError(f"{label} is not JSON: {exc}") from None
-    except RecursionError:
-        raise RetargetError(f"{label} is nested too deeply to be read as JSON") from None
+    doc = json_document(text, label)
     if not isinstance(doc, dict) or "weights" not in doc:
         return None
     rows = doc["weights"]

@@ -100,7 +100,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import os
 import re
@@ -115,6 +114,7 @@ import numpy as np
 from retarget.errors import RetargetError
 from retarget.layouts import LAYOUTS, from_ibug68, from_mediapipe468, get_layout
 from retarget.sources.arkit_curves import arkit_curves, arkit_take
+from retarget.sources.json_text import json_document
 from retarget.sources.c3d_header import c3d_layout
 from retarget.sources.gltf_take import gltf_points
 from retarget.sources.obj_sequence import obj_sequence_points
@@ -139,11 +139,6 @@ each); parsing 256 MiB of OBJ text takes tens of seconds, which is the point of 
 bound (`retarget.sources.obj_sequence` bounds the rest)."""
 
 _MAX_NUMBER_CHARS = 64  # longer cells cannot be numbers worth reading
-_MAX_JSON_DEPTH = 64  # a take is 4 deep; json.loads recurses once per level
-_JSON_STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"')
-_JSON_STEPS = np.zeros(256, np.int8)  # +1 for [ and {, -1 for ] and }
-_JSON_STEPS[[ord("["), ord("{")]] = 1
-_JSON_STEPS[[ord("]"), ord("}")]] = -1
 _AXIS_COLUMN = re.compile(r"^(.+?)[_.: ]([xyzXYZ])$")
 _FRAME_COLUMNS = ("frame", "frame#", "frame_index", "index")
 _TIME_COLUMNS = ("time", "time_s", "timestamp", "t")
@@ -464,17 +459,7 @@ def _csv_rows(reader, label: str):
 
 
 def _read_json(text: str, label: str, fps, layout) -> Take:
-    depth = _json_depth(text)
-    if depth > _MAX_JSON_DEPTH:
-        raise RetargetError(
-            f"{label} is nested too deeply: {depth} levels of [ and {{ (a take has 4; at most "
-            f"{_MAX_JSON_DEPTH} are read)")
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise RetargetError(f"{label} is not JSON: {exc}") from None
-    except RecursionError:
-        raise RetargetError(f"{label} is nested too deeply to be read as JSON") from None
+    doc = json_document(text, label)
     if not isinstance(doc, dict) or "frames" not in doc:
         raise RetargetError(f'{label}: a JSON take is an object with "frames" (and "names" or "layout")')
     frames = doc["frames"]
@@ -543,15 +528,6 @@ def _read_json(text: str, label: str, fps, layout) -> Take:
     if file_layout is not None and layout is None:
         take = take.to_layout(file_layout)
     return take
-
-
-def _json_depth(text: str) -> int:
-    """How deep [ and { nest in a JSON text, its strings skipped: a cheap scan made before
-    `json.loads` builds anything (or recurses once per level)."""
-    bare = np.frombuffer(_JSON_STRING.sub('""', text).encode("utf-8", "replace"), np.uint8)
-    steps = _JSON_STEPS[bare]
-    steps = steps[steps != 0]
-    return int(np.cumsum(steps, dtype=np.int32).max(initial=0))
 
 
 def _read_npy(data: bytes, label: str, layout, fps) -> Take:

@@ -10,6 +10,7 @@ properties are checked on the real model (`place_muscles` on the built-in sample
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import least_squares
 import pytest
 
 from retarget.errors import RetargetError
@@ -152,10 +153,18 @@ def test_respects_limits_when_target_asks_for_more(face, method):
     beyond = truth.copy()
     beyond[[0, 5]] = high[[0, 5]] + 0.8 * (high - low)[[0, 5]]   # more than the muscle can give
     beyond[-1] = high[-1] * 1.5                                   # the jaw past its hinge's range
-    result = solve(sub, sub.rest + sub.displacements(beyond), method=method)
+    wanted = sub.displacements(beyond)
+    result = solve(sub, sub.rest + wanted, method=method)
     assert np.all(result.c >= low) and np.all(result.c <= high)
-    # The best answer within range puts those DOFs at (or very near) their upper bound.
-    assert np.all(result.c[[0, 5, -1]] > high[[0, 5, -1]] - 0.05 * (high - low)[[0, 5, -1]])
+    # The answer is the best one within range: as good as a general bounded least-squares
+    # solver's (SciPy's trust-region reflective), and the DOFs pushed past their range end
+    # at the bound (not those the jaw's pull on the muscles' zones lets stop short of it).
+    def residual(c):
+        return (sub.displacements(c) - wanted).ravel()
+
+    best = least_squares(residual, truth, bounds=(low, high), jac=lambda c: sub.jacobian(c).reshape(-1, len(low)))
+    assert np.linalg.norm(residual(result.c)) <= np.linalg.norm(residual(best.x)) * (1 + 1e-3)
+    assert result.c[-1] > high[-1] - 0.05 * (high - low)[-1]
     # And a target below the range (negative contractions) stops at the lower bound.
     below = solve(sub, sub.rest - 0.5 * sub.displacements(truth), method=method)
     assert np.all(below.c >= low) and np.all(below.c <= high)

@@ -7,7 +7,7 @@ import { api } from './api.js';
  * `conditioning` settings, the `held_regions`.
  *
  * A key's value is asked for when it is sent, so it is always the newest. Keys scheduled
- * together go in one request.
+ * together go in one request, and requests go in order, one at a time.
  */
 export class ProjectSettings {
 
@@ -22,6 +22,9 @@ export class ProjectSettings {
 		this._onError = onError;
 		this._pending = new Map(); // key -> {projectId, value: () => *}
 		this._timer = 0;
+		// saves go one after another: two PATCHes in flight at once may reach the server
+		// in either order, and an older draft landing last would lose the newer points
+		this._sending = Promise.resolve();
 
 	}
 
@@ -78,7 +81,7 @@ export class ProjectSettings {
 		}
 
 		this._pending.clear();
-		await Promise.all( [ ...byProject ].map( async ( [ id, settings ] ) => {
+		const send = () => Promise.all( [ ...byProject ].map( async ( [ id, settings ] ) => {
 
 			try {
 
@@ -91,6 +94,9 @@ export class ProjectSettings {
 			}
 
 		} ) );
+		// an unloading page cannot wait for an earlier save: keepalive requests go at once
+		this._sending = keepalive ? send() : this._sending.then( send );
+		await this._sending;
 
 	}
 
