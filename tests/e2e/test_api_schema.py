@@ -45,7 +45,7 @@ def _run(server: Server, config: Path, *extra: str) -> str:
     result = subprocess.run(
         [str(SCHEMATHESIS), "--config-file", str(config), "run", f"{server.url}/openapi.json",
          "--checks", "all", "--exclude-checks", EXCLUDED, "--phases", "examples,coverage,fuzzing",
-         "--max-examples", "8", "--seed", "11", "--generation-deterministic", "--workers", "2",
+         "--max-examples", "5", "--seed", "11", "--generation-deterministic", "--workers", "2",
          "--request-timeout", "60", "--no-color", *extra],
         capture_output=True, text=True, timeout=600)
     out = result.stdout + result.stderr

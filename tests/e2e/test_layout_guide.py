@@ -15,6 +15,12 @@ _IDENTITY = np.array([-0.3, 0.5, 0.1, 0.4, -0.6])
 
 
 @pytest.fixture(scope="module")
+def server(module_server):
+    """One server for these tests: each uploads a face of its own and reads only that."""
+    return module_server
+
+
+@pytest.fixture(scope="module")
 def face_file(tmp_path_factory):
     return write_face_file(tmp_path_factory.mktemp("meshes"), "guide_face.obj", _IDENTITY)
 

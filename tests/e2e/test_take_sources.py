@@ -22,6 +22,13 @@ NOT_A_VIDEO = ("is not a video OpenCV can open (unknown format, or a damaged or 
                "MP4 whose index was never written cannot be read)")
 
 
+@pytest.fixture(scope="module")
+def server(module_server):
+    """One server for these tests: the first only fails an upload, the second adds a take to
+    the sample project, the third makes a project of its own; none reads what another left."""
+    return module_server
+
+
 def _sample(server) -> str:
     return next(p for p in server.api("GET", "/api/projects") if p["rig"])["id"]
 
