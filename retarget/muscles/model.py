@@ -398,7 +398,7 @@ class MuscleFace:
         (a muscle is linear in its own contraction, §7.2 eq. 14: its field where the jaw
         has put the vertex). The jaw column is the rotation's exact rate (§7.2 eq. 15,
         tangent to the axis, times the vertex's weight) plus how the muscles' fields change
-        along it, a central difference over `_JAW_STEP` radians (0 off the jaw)."""
+        along it, a forward difference over `_JAW_STEP` radians (0 off the jaw)."""
         c = self._dofs(c)
         out = np.zeros((len(self.rest), 3, self.n_dof))
         out[:, :, :-1] = self._fields0.transpose(1, 2, 0)
@@ -406,12 +406,14 @@ class MuscleFace:
             moved, rate = self._jaw_moved(c[-1])
             pairs = self._jaw_pairs
             at, step = moved[pairs.point], _JAW_STEP * rate[pairs.point]
-            f = pairs.fields(np.stack([at, at + step, at - step]))
+            # a forward difference: the fields at `at` are needed anyway, and at a step of
+            # 1e-6 rad its truncation error (~1e-6 relative) is far below what the IK resolves
+            f = pairs.fields(np.stack([at, at + step]))
             if c[-1] != 0:
                 # every muscle that reaches a jaw vertex over the jaw's range has a pair
                 # there, so this overwrites all of the rest-pose fields that change
                 out[self._jawed[pairs.point], :, pairs.muscle] = f[0]
-            out[self._jawed, :, -1] = rate + self._summed(c, (f[1] - f[2]) / (2 * _JAW_STEP))
+            out[self._jawed, :, -1] = rate + self._summed(c, (f[1] - f[0]) / _JAW_STEP)
         return out
 
     def restricted(self, vertex_ids) -> "MuscleFace":
