@@ -91,8 +91,9 @@ def _recognise(args) -> int:
                             f"source points; got {frames.shape}")
     if not np.isfinite(contractions).all():
         raise RetargetError(f"frames {args.frames!r}: contractions must be finite")
-    recognition = default_recogniser(names).recognise(contractions)
-    labels = list(default_recogniser(names).labels)
+    recogniser = default_recogniser(names)
+    recognition = recogniser.recognise(contractions)
+    labels = list(recogniser.labels)
     try:
         with open(out, "w", newline="") as f:
             w = csv.writer(f)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -202,9 +203,15 @@ def paper_presets(names) -> ExpressionRecogniser:
 def default_recogniser(names) -> ExpressionRecogniser:
     """The recogniser the product uses: the fitted presets shipped with the package
     (`PRESETS_FILE`), or the paper's hand-written ones where no fitted file matches `names`."""
-    names = tuple(names)
-    if PRESETS_FILE.exists():
-        fitted = ExpressionRecogniser.from_json(json.loads(PRESETS_FILE.read_text()))
-        if fitted.names == names:
-            return fitted
+    fitted = _shipped()
+    if fitted is not None and fitted.names == tuple(names):
+        return fitted
     return paper_presets(names)
+
+
+@lru_cache(maxsize=1)
+def _shipped() -> ExpressionRecogniser | None:
+    """The fitted presets file, read once (every muscle-driven player asks for it)."""
+    if not PRESETS_FILE.exists():
+        return None
+    return ExpressionRecogniser.from_json(json.loads(PRESETS_FILE.read_text()))
