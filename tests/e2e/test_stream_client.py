@@ -64,8 +64,10 @@ def test_frames_and_stats(server, client_page):
     assert {"type": "started", "source": "demo", "fps": 30.0, "recording": False, "drive": "points"} in log["messages"]
     assert log["lastFrame"]["count"] == 68 and log["lastFrame"]["n"] == 3 * 68
 
+    # 30 fps over the last second; a loaded machine can stall the page for a moment, after
+    # which the rate comes back (a broken count would never be in range)
+    page.wait_for_function("client.stats.fps >= 15 && client.stats.fps <= 45", timeout=scaled_ms(10_000))
     stats = page.evaluate("client.stats")
-    assert 15 <= stats["fps"] <= 45, stats  # 30 fps over the last second
     assert stats["frames"] >= 45
     median, p99 = stats["latencyMs"]["median"], stats["latencyMs"]["p99"]
     assert 0 <= median <= p99 < 2000, stats  # same machine: the clocks agree
