@@ -80,15 +80,16 @@ def test_upload_click_rig_and_watch_it_move_then_restart(server, page, face_file
     page.wait_for_function("() => window.app.stream && window.app.stream.stats.frames > 30",
                            timeout=scaled_ms(30_000))
     clip = face_clip(page, targets)
-    shots = []
-    for _ in range(4):
-        shots.append(pixels(page, clip))
+    # the demo rests between expressions and a loaded machine may stall the page, so the
+    # shots go on (up to 12, 400 ms apart) until two pairs show the face moving
+    shots, changes = [pixels(page, clip)], []
+    while len(shots) < 12 and sum(c > 0.5 for c in changes) < 2:
         page.wait_for_timeout(400)
+        shots.append(pixels(page, clip))
+        changes.append(float(np.abs(shots[-1] - shots[-2]).mean()))
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "app_flow_demo_playing.png"))
-    changes = [np.abs(a - b).mean() for a, b in zip(shots, shots[1:])]
-    # the demo rests briefly between expressions, so one pair of shots may fall in a pause
-    assert sorted(changes)[-2] > 0.5, f"face pixels barely change between frames: {changes}"
+    assert sum(c > 0.5 for c in changes) >= 2, f"face pixels barely change between frames: {changes}"
     stats = page.evaluate("() => window.app.stream.stats")
     assert stats["fps"] > 10 and stats["latencyMs"]["median"] < 1000
     assert page.inner_text("#fps").strip() != ""
