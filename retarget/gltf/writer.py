@@ -61,6 +61,7 @@ from retarget.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
 from retarget.gltf.influences import is_joint_based, joint_influences
 from retarget.gltf.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
                                    morph_scale, target_bounds, target_names)
+from retarget.gltf.sparse import add_morph_targets
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
 from retarget.material import Material
@@ -223,7 +224,8 @@ def _built_muscles(mesh, morphs, clips, progress) -> GlbBuilder:
     jaw = SkinWeights(np.zeros((mesh.n_vertices, 1), np.int32), morphs.jaw_weights[:, None], 1, "muscles")
     _add_skin(out, primitive, jaw, pivot[None], JAW_NAME)
     step()
-    _add_targets(out, doc["meshes"][0], itertools.chain(morphs.targets, morphs.correctives), names, step)
+    add_morph_targets(out, doc["meshes"][0], itertools.chain(morphs.targets, morphs.correctives), names,
+                      step=step)
     doc["scene"] = 0
     doc["scenes"] = [{
         "name": mesh.name or "face",
@@ -404,26 +406,6 @@ def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, n
     gltf_mesh["primitives"][0]["targets"] = targets
     gltf_mesh["weights"] = [0.0] * len(targets)
     gltf_mesh["extras"] = {"targetNames": target_names(names), "targetScale": scale}
-
-
-def _add_targets(out: GlbBuilder, gltf_mesh: dict, targets, names: list[str], step) -> None:
-    """Morph targets from (V, 3) offsets in `targets` (an iterable, so that they are never
-    stacked), named `names`; sparse where few vertices move."""
-    accessors = []
-    for offsets in targets:
-        offsets = np.asarray(offsets, dtype=np.float32)                 # (V, 3)
-        v = len(offsets)
-        rows = np.flatnonzero(offsets.any(axis=1))
-        if len(rows) < SPARSE_SHARE * v:
-            index_type = np.uint16 if v <= 65536 else np.uint32
-            accessor = out.sparse_accessor(v, rows.astype(index_type), offsets[rows], bounds=True)
-        else:
-            accessor = out.accessor(offsets, target=ARRAY_BUFFER, bounds=True)
-        accessors.append({"POSITION": accessor})
-        step()
-    gltf_mesh["primitives"][0]["targets"] = accessors
-    gltf_mesh["weights"] = [0.0] * len(accessors)
-    gltf_mesh["extras"] = {"targetNames": list(names)}
 
 
 def _muscle_animation(out: GlbBuilder, clip: ContractionClip, morphs: MuscleMorphs) -> dict:
