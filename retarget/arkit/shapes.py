@@ -79,6 +79,33 @@ class ArkitShapes:
         np.savez_compressed(path, names=np.array(self.names), deltas=self.deltas,
                             at_points=self.at_points)
 
+    @classmethod
+    def load(cls, path) -> "ArkitShapes":
+        """The shapes `save` wrote (``retarget arkit``'s SHAPES.npz), checked: the 52 names
+        in Apple's order, finite ``deltas`` (52, V, 3) and ``at_points`` (52, N, 3). Raises
+        `RetargetError` naming the file and what is wrong."""
+        label = f"ARKit shapes {str(path)!r}"
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                missing = [key for key in ("names", "deltas", "at_points") if key not in z.files]
+                if missing:
+                    raise RetargetError(f"{label} lack {', '.join(missing)}: make them with "
+                                        "'retarget arkit'")
+                names, deltas, at_points = (z[key] for key in ("names", "deltas", "at_points"))
+        except (OSError, ValueError, EOFError) as exc:
+            raise RetargetError(f"could not read {label} as .npz: {exc}") from None
+        if tuple(str(n) for n in names) != ARKIT_NAMES:
+            raise RetargetError(f"{label} do not name ARKit's 52 shapes in Apple's order")
+        k = len(ARKIT_NAMES)
+        for key, array in (("deltas", deltas), ("at_points", at_points)):
+            if array.ndim != 3 or array.shape[0] != k or array.shape[2] != 3 \
+                    or array.dtype.kind not in "fiu":
+                raise RetargetError(f"{label}: {key} must be numbers of shape ({k}, n, 3); got "
+                                    f"{array.shape} {array.dtype}")
+            if not np.isfinite(array).all():
+                raise RetargetError(f"{label}: {key} hold NaN or infinite values")
+        return cls(ARKIT_NAMES, deltas.astype(np.float32), at_points.astype(np.float32))
+
 
 def arkit_shapes(vertices, faces, points: SurfacePoints, layout: Layout | str,
                  rig: SkinWeights | None = None, *, reference: ArkitReference | None = None,
