@@ -6,6 +6,8 @@
 - `shapes`: the 52 shapes generated on any face through the space transform and its rig,
   one dense morph target per name (`arkit_shapes`).
 - `solve`: the 52 weights in [0, 1] that best reproduce a frame's motion (`ArkitSolver`).
+- `drive`: a stream driven by the 52 shapes, frame after frame, with per-shape gains
+  (`ArkitDrive`); `settings`: the user's gains, painted fixes and rig (`ArkitSettings`).
 
 ARKit curves as a source (Live Link Face CSV, tables of named weights) are read in
 `retarget.sources.arkit_curves`, through `retarget.sources.files.read_take`.
@@ -14,6 +16,8 @@ ARKit curves as a source (Live Link Face CSV, tables of named weights) are read 
 from retarget.arkit.reference import ARKIT_NAMES, ArkitReference, arkit_index, arkit_reference
 from retarget.arkit.shapes import ArkitShapes, arkit_shapes
 from retarget.arkit.solve import ArkitSolver
+from retarget.arkit.drive import ArkitDrive
+from retarget.arkit.settings import ArkitSettings
 
-__all__ = ["ARKIT_NAMES", "ArkitReference", "ArkitShapes", "ArkitSolver", "arkit_index",
+__all__ = ["ARKIT_NAMES", "ArkitDrive", "ArkitReference", "ArkitSettings", "ArkitShapes", "ArkitSolver", "arkit_index",
            "arkit_reference", "arkit_shapes"]
