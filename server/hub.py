@@ -4,7 +4,7 @@ A slow viewer never slows the source or grows a queue: publishing overwrites wha
 frame the viewer has not taken yet (counted as dropped), and the viewer's sender always
 sends the newest frame there is. The hub also owns each project's running source (an
 asyncio task), its partial-retargeting regions and its drive (feature points or
-muscles), so every viewer of a project sees the
+muscles or ARKit shapes), so every viewer of a project sees the
 same performance; the source stops when the last viewer leaves. Everything runs on the
 server's event loop; the hub holds no maths.
 """
@@ -126,7 +126,7 @@ class StreamHub:
         self._regions[project_id] = regions
 
     def drive(self, project_id: str) -> str:
-        """What the project's sources are driven by: "points" (default) or "muscles"."""
+        """What the project's sources are driven by: "points" (default), "muscles" or "arkit"."""
         return self._drives.get(project_id, "points")
 
     def set_drive(self, project_id: str, drive: str) -> None:

@@ -102,6 +102,14 @@ class JobRegistry:
         with self._lock:
             self._running.pop(job._slot, None)
 
+    def running(self, project_id: str, kind: str) -> Job | None:
+        """The project's running job of `kind`, or None (a page that reloads finds the
+        job it started)."""
+        with self._lock:
+            job_id = self._running.get(project_id) or self._running.get(f"{project_id}/{kind}")
+            job = self._jobs.get(job_id) if job_id else None
+        return job if job is not None and job.kind == kind else None
+
     def get(self, job_id: str) -> Job | None:
         with self._lock:
             return self._jobs.get(job_id)

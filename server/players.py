@@ -17,7 +17,10 @@ project saved without a layout is played as iBUG 68.
 Every player plays by feature points (RTDF frames of displacements) or, given a
 `retarget.muscles.drive.MuscleDrive` (`set_drive`), by muscles: each frame's feature
 displacements solved into contractions and read as an expression (RTMC frames; the page
-plays the muscles). The drive keeps its own warm start, so it belongs to one player.
+plays the muscles); or, given a `retarget.arkit.drive.ArkitDrive`, by ARKit's 52
+blendshapes: each frame's feature displacements solved into the 52 weights (RTAW frames;
+the page plays the shapes, other tools read the curves). A drive keeps its own warm
+start, so it belongs to one player.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import asyncio
 
 import numpy as np
 
+from retarget.arkit.drive import ArkitDrive
 from retarget.errors import RetargetError
 from retarget.muscles.drive import MuscleDrive
 from retarget.performance import Performance, PerformanceFrame
@@ -33,7 +37,7 @@ from retarget.sample_face import demo_points
 from retarget.sources.conditioning import ConditionSettings
 from retarget.sources.take import Take
 from server.hub import StreamHub
-from server.wire import FLAG_LAST, FLAG_LOST_POINTS, encode_contractions, encode_frame
+from server.wire import FLAG_LAST, FLAG_LOST_POINTS, encode_arkit_weights, encode_contractions, encode_frame
 
 __all__ = ["DemoPlayer", "LivePlayer", "TakePlayer"]
 
@@ -48,11 +52,12 @@ class _Player:
             raise RetargetError(f"fps must be between 1 and 240; got {fps}")
         self.performance = performance
         self.fps = float(fps)
-        self.muscles: MuscleDrive | None = None
+        self.drive: MuscleDrive | ArkitDrive | None = None
 
-    def set_drive(self, muscles: MuscleDrive | None) -> None:
-        """Drive by these muscles from the next frame on (None: by feature points)."""
-        self.muscles = muscles
+    def set_drive(self, drive: MuscleDrive | ArkitDrive | None) -> None:
+        """Drive by these muscles or ARKit shapes from the next frame on (None: by feature
+        points)."""
+        self.drive = drive
 
     def set_regions(self, regions) -> None:
         """Partial retargeting: only the named regions/groups/points move (None: all)."""
@@ -73,15 +78,19 @@ class _Player:
     def encode(self, frame: PerformanceFrame, index: int, *, last: bool = False) -> bytes:
         """The stream frame of `frame`, number `index`; `last` marks the player's final one."""
         flags = (FLAG_LOST_POINTS if frame.lost.any() else 0) | (FLAG_LAST if last else 0)
-        if self.muscles is not None:
-            return encode_contractions(self.muscles.frame(frame.displacements, frame.lost), frame_index=index % 2**32,
+        if isinstance(self.drive, ArkitDrive):
+            return encode_arkit_weights(self.drive.weights(frame.displacements, frame.lost), frame_index=index % 2**32,
+                                        source_time=frame.time, flags=flags, head_rotation=frame.head_rotation)
+        if self.drive is not None:
+            return encode_contractions(self.drive.frame(frame.displacements, frame.lost), frame_index=index % 2**32,
                                        source_time=frame.time, flags=flags, head_rotation=frame.head_rotation)
         return encode_frame(frame.displacements, frame_index=index % 2**32, source_time=frame.time,
                             flags=flags, head_rotation=frame.head_rotation)
 
     def describe(self) -> dict:
         return {"source": self.kind, "fps": self.fps, "recording": self.recording is not None,
-                "drive": "points" if self.muscles is None else "muscles"}
+                "drive": ("points" if self.drive is None else
+                          "arkit" if isinstance(self.drive, ArkitDrive) else "muscles")}
 
 
 class DemoPlayer(_Player):

@@ -11,6 +11,10 @@ Layout on disk::
     <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
     <data_dir>/projects/<id>/muscles-r<R>-<hex>.json  `retarget.muscles.MuscleFace.to_json`:
                                                  the virtual muscles, placed or edited
+    <data_dir>/projects/<id>/arkit-r<R>-<hex>.npz  `retarget.arkit.ArkitShapes.save`: the 52
+                                                 ARKit shapes made for revision R
+    <data_dir>/projects/<id>/arkit-settings-<hex>.json  `retarget.arkit.ArkitSettings.to_json`:
+                                                 the user's gains, painted fixes and rig
 
 A mesh revision made from the current one (the mouth cut open, `put_mesh_revision`) keeps
 the mesh and landmarks it replaced (the row's ``previous_mesh``) until `revert_mesh` goes
@@ -41,6 +45,12 @@ first time they are needed, or saved by the user; placed muscles never replace m
 the user saved for the same revision (edited ones outlive a landmarks change, placed ones
 are placed again).
 
+ARKit shapes (`put_arkit_shapes`) are made by a job from the mesh and landmarks of a
+revision (and, on the project's rig, from its rig version): a landmarks, mesh or (for
+those) rig change makes them stale, and they are made again on request. The user's ARKit
+settings (`put_arkit_settings`) belong to the project and outlive those changes (painted
+fixes are per vertex: the router drops them for a mesh they do not fit).
+
 Project ids come from `secrets.token_urlsafe(16)` and every id is matched against
 `ID_PATTERN` before it is joined to a path; uploaded file names never reach the
 filesystem (only an allow-listed extension does). The store holds no maths: it takes and
@@ -60,6 +70,7 @@ import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
+from retarget.arkit.shapes import ArkitShapes
 from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 from retarget.sources.take import Take
@@ -75,9 +86,11 @@ MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf", "zip")
 """File extensions a stored mesh may have (the formats `retarget.mesh.load_mesh` reads; a
 zip holds a mesh file with its MTL, images or buffers)."""
 
-_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file", "muscles_file")
+_FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file", "muscles_file", "arkit_file",
+                 "arkit_settings_file")
 _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz"
-                           r"|paint-r\d+-[0-9a-f]+\.npz|muscles-r\d+-[0-9a-f]+\.json|\.tmp-.*)")
+                           r"|paint-r\d+-[0-9a-f]+\.npz|muscles-r\d+-[0-9a-f]+\.json|arkit-r\d+-[0-9a-f]+\.npz"
+                           r"|arkit-settings-[0-9a-f]+\.json|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
 
 _RIG_CACHE_BYTES = 512 * 2**20
@@ -112,7 +125,11 @@ CREATE TABLE IF NOT EXISTS projects (
     previous_mesh TEXT,              -- JSON: the mesh and landmarks a mesh revision replaced, NULL = none
     muscles_file  TEXT,              -- the virtual muscles (JSON), NULL = none yet
     muscles_revision INTEGER,        -- the revision they were placed or saved on
-    muscles_edited INTEGER NOT NULL DEFAULT 0  -- 1: saved by the user, not placed
+    muscles_edited INTEGER NOT NULL DEFAULT 0, -- 1: saved by the user, not placed
+    arkit_file    TEXT,              -- the 52 ARKit shapes (npz), NULL = none yet
+    arkit_revision INTEGER,          -- the revision they were made for
+    arkit_rig_version INTEGER,       -- the rig version they were made on, NULL = the default rig
+    arkit_settings_file TEXT         -- the user's ARKit settings (JSON), NULL = defaults
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS takes (
@@ -274,6 +291,9 @@ class ProjectStore:
         if "muscles_revision" not in columns:
             db.execute("ALTER TABLE projects ADD COLUMN muscles_revision INTEGER")
             db.execute("ALTER TABLE projects ADD COLUMN muscles_edited INTEGER NOT NULL DEFAULT 0")
+        if "arkit_revision" not in columns:
+            db.execute("ALTER TABLE projects ADD COLUMN arkit_revision INTEGER")
+            db.execute("ALTER TABLE projects ADD COLUMN arkit_rig_version INTEGER")
         if "upload_key" not in {row["name"] for row in db.execute("PRAGMA table_info(takes)")}:
             db.execute("ALTER TABLE takes ADD COLUMN upload_key TEXT")
 
@@ -716,6 +736,60 @@ class ProjectStore:
                 return None
             data = json.loads((self.folder(project_id) / row["muscles_file"]).read_text())
             return data, row["muscles_revision"], bool(row["muscles_edited"])
+
+    # -- ARKit shapes and settings -------------------------------------------------------
+
+    def put_arkit_shapes(self, project_id: str, shapes: ArkitShapes, *, revision: int,
+                         rig_version: int | None) -> None:
+        """Store the ARKit shapes made from the mesh and landmarks of `revision` (and the
+        rig at `rig_version`, None for the default rig); raises `StaleRig` when the mesh or
+        landmarks (or that rig) changed since."""
+        with self._transaction() as db:
+            row = self._row(project_id)
+            if row["revision"] != revision:
+                raise StaleRig("the mesh or landmarks changed while the ARKit shapes were made; make them again")
+            if rig_version is not None and (row["rig_method"] is None or row["rig_version"] != rig_version):
+                raise StaleRig("the rig changed while the ARKit shapes were made on it; make them again")
+            name = f"arkit-r{revision}-{secrets.token_hex(4)}.npz"
+            write_atomic(self.folder(project_id) / name, writer=shapes.save)
+            db.execute("UPDATE projects SET arkit_file = ?, arkit_revision = ?, arkit_rig_version = ?, "
+                       "updated = ? WHERE id = ?", (name, revision, rig_version, _now(), project_id))
+        self._sweep(project_id)
+
+    def arkit_status(self, project_id: str) -> dict | None:
+        """``{revision, rig_version}`` the stored shapes were made for, or None without any."""
+        with self._lock:
+            row = self._row(project_id)
+        if row["arkit_file"] is None:
+            return None
+        return {"revision": row["arkit_revision"], "rig_version": row["arkit_rig_version"]}
+
+    def arkit_shapes(self, project_id: str) -> ArkitShapes | None:
+        """The stored ARKit shapes (whatever revision they were made for: `arkit_status`),
+        or None."""
+        with self._lock:
+            row = self._row(project_id)
+            if row["arkit_file"] is None:
+                return None
+            return ArkitShapes.load(self.folder(project_id) / row["arkit_file"])
+
+    def put_arkit_settings(self, project_id: str, settings: dict) -> None:
+        """Store the user's (already validated) ARKit settings JSON."""
+        with self._transaction() as db:
+            self._row(project_id)
+            name = f"arkit-settings-{secrets.token_hex(4)}.json"
+            write_atomic(self.folder(project_id) / name, json.dumps(settings).encode())
+            db.execute("UPDATE projects SET arkit_settings_file = ?, updated = ? WHERE id = ?",
+                       (name, _now(), project_id))
+        self._sweep(project_id)
+
+    def arkit_settings(self, project_id: str) -> dict | None:
+        """The user's ARKit settings JSON, or None when never saved."""
+        with self._lock:
+            row = self._row(project_id)
+            if row["arkit_settings_file"] is None:
+                return None
+            return json.loads((self.folder(project_id) / row["arkit_settings_file"]).read_text())
 
     # -- takes --------------------------------------------------------------------------
 

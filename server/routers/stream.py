@@ -26,11 +26,19 @@ are JSON text:
   zero displacements) that puts the face back at rest;
 - ``{"type": "mask", "regions": ["mouth", ...]}``: partial retargeting, only those
   regions, groups or points move (empty or null: all);
-- ``{"type": "drive", "drive": "points" | "muscles"}``: what the project's sources are
-  driven by, the running one from its next frame: feature points (RTDF frames) or the
-  project's muscles (`server.routers.muscles.project_muscles`, placed if need be), each
-  frame solved into contractions and an expression (RTMC frames); answered
+- ``{"type": "drive", "drive": "points" | "muscles" | "arkit"}``: what the project's
+  sources are driven by, the running one from its next frame: feature points (RTDF
+  frames), the project's muscles (`server.routers.muscles.project_muscles`, placed if need
+  be), each frame solved into contractions and an expression (RTMC frames), or ARKit's 52
+  blendshapes (`server.routers.arkit`: the shapes must have been made), each frame solved
+  into the 52 weights, the user's gains applied (RTAW frames); answered
   ``{"type": "drive", "drive"}``;
+- ``{"type": "format", "format": "binary" | "json"}`` (or ``?format=json`` on the URL):
+  how this viewer gets ARKit weight frames: RTAW bytes (default) or JSON text
+  ``{"type": "weights", "frame", "t", "sent", "weights": {"eyeBlinkLeft": 0.1, ...},
+  "head_rotation", "lost", "last"}`` (`server.wire.weights_json`), the same 52 numbers
+  for a tool that reads ARKit curves (a VTuber rig, a game engine, a recorder); answered
+  ``{"type": "format", "format"}``. Frames of the other drives stay binary;
 - ``{"type": "ping", "t": <client time>}``: answered ``{"type": "pong", "t", "server_time"}``.
 
 A malformed control message (or a points message that does not fit) is answered
@@ -54,6 +62,7 @@ from starlette.websockets import WebSocketState
 from uvicorn.protocols.utils import ClientDisconnected
 from websockets.exceptions import ConnectionClosed
 
+from retarget.arkit import ARKIT_NAMES
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
 from retarget.layouts import get_layout
@@ -62,15 +71,17 @@ from server.deps import HubDep, StoreDep
 from server.hub import Mailbox, StreamHub
 from retarget.sources.conditioning import ConditionSettings, NeutralMoved
 from server.players import DemoPlayer, LivePlayer, TakePlayer
+from server.routers.arkit import project_drive
 from server.routers.muscles import project_muscles
-from server.wire import FLAG_NEUTRAL, decode_points, encode_frame
+from server.wire import FLAG_NEUTRAL, decode_points, encode_frame, is_arkit_weights, weights_json
 from server.store import ProjectNotFound, TakeNotFound
 
 router = APIRouter(tags=["stream"])
 log = logging.getLogger(__name__)
 POLICY_VIOLATION = 1008
 DEFAULT_FPS = 60.0
-DRIVES = ("points", "muscles")
+DRIVES = ("points", "muscles", "arkit")
+FORMATS = ("binary", "json")
 
 
 @router.websocket("/api/projects/{project_id}/stream")
@@ -95,15 +106,16 @@ async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -
         await websocket.close(code=POLICY_VIOLATION, reason=str(exc)[:120])
         return
     source = hub.source(project_id)
+    viewer = {"format": "json" if websocket.query_params.get("format") == "json" else "binary"}
     await websocket.send_json({"type": "hello", "project": project_id, "n_points": len(target_points),
                                "layout": layout, "source": source.describe() if source else None})
     box = hub.subscribe(project_id)
     sending = asyncio.Lock()  # the two coroutines share one socket
     try:
         async with asyncio.TaskGroup() as group:
-            sender = group.create_task(_send_frames(websocket, box, sending))
+            sender = group.create_task(_send_frames(websocket, box, sending, viewer))
             group.create_task(_receive_controls(websocket, sending, hub, store, project_id,
-                                                target_points, layout, on_disconnect=sender.cancel))
+                                                target_points, layout, viewer, on_disconnect=sender.cancel))
     except* _GONE:
         pass
     finally:
@@ -120,17 +132,20 @@ def _target_points(store, project: dict):
     return points.positions(mesh.vertices), landmarks.get("layout") or ""
 
 
-async def _send_frames(websocket: WebSocket, box: Mailbox, sending: asyncio.Lock) -> None:
+async def _send_frames(websocket: WebSocket, box: Mailbox, sending: asyncio.Lock, viewer: dict) -> None:
     try:
         while True:
             frame = await box.take()
             async with sending:
-                await websocket.send_bytes(frame)
+                if viewer["format"] == "json" and is_arkit_weights(frame):
+                    await websocket.send_text(json.dumps(weights_json(frame, ARKIT_NAMES)))
+                else:
+                    await websocket.send_bytes(frame)
     except (*_GONE, RuntimeError):
         return  # the receiver sees the disconnect and ends the task group
 
 
-async def _receive_controls(websocket, sending, hub, store, project_id, target_points, layout, *,
+async def _receive_controls(websocket, sending, hub, store, project_id, target_points, layout, viewer, *,
                             on_disconnect) -> None:
     while True:
         message = await websocket.receive()
@@ -141,7 +156,7 @@ async def _receive_controls(websocket, sending, hub, store, project_id, target_p
             if message.get("bytes") is not None:
                 reply = _points(message["bytes"], hub, project_id)
             else:
-                reply = await _control(message.get("text"), hub, store, project_id, target_points, layout)
+                reply = await _control(message.get("text"), hub, store, project_id, target_points, layout, viewer)
         except NeutralMoved as exc:
             reply = {"type": "neutral_refused", "detail": str(exc)}
         except (ValueError, RetargetError, TakeNotFound) as exc:
@@ -187,11 +202,20 @@ def _muscle_drive(store, project_id) -> MuscleDrive:
     return MuscleDrive(model, landmarks_from_json(store.landmarks(project_id), mesh.vertices, mesh.faces))
 
 
+def _drive(store, project_id, drive: str):
+    """A new drive object for `drive` (None for feature points), its own warm start."""
+    if drive == "muscles":
+        return _muscle_drive(store, project_id)
+    if drive == "arkit":
+        return project_drive(store, project_id)
+    return None
+
+
 async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
     """The player `msg` asks for, driven as the project's drive says."""
     player = await _player(msg, store, project_id, target_points, layout)
-    if hub.drive(project_id) == "muscles":
-        player.set_drive(await asyncio.to_thread(_muscle_drive, store, project_id))
+    if hub.drive(project_id) != "points":
+        player.set_drive(await asyncio.to_thread(_drive, store, project_id, hub.drive(project_id)))
     return player
 
 
@@ -216,7 +240,7 @@ async def _player(msg: dict, store, project_id, target_points, layout):
     raise ValueError(f"unknown source {kind!r}; available: 'demo', 'take', 'live'")
 
 
-async def _control(text, hub: StreamHub, store, project_id, target_points, layout) -> dict | None:
+async def _control(text, hub: StreamHub, store, project_id, target_points, layout, viewer) -> dict | None:
     if text is None:
         raise ValueError("control messages are JSON text")
     try:
@@ -269,12 +293,19 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
         drive = msg.get("drive")
         if drive not in DRIVES:
             raise ValueError(f'"drive" must be one of {", ".join(map(repr, DRIVES))}; got {drive!r}')
-        # made first: muscles that cannot be placed refuse the switch and change nothing
-        muscles = await asyncio.to_thread(_muscle_drive, store, project_id) if drive == "muscles" else None
+        # made first: muscles that cannot be placed (or ARKit shapes not made) refuse the
+        # switch and change nothing
+        driving = await asyncio.to_thread(_drive, store, project_id, drive)
         hub.set_drive(project_id, drive)
         if source is not None:
-            source.set_drive(muscles)
+            source.set_drive(driving)
         return {"type": "drive", "drive": drive}
+    if kind == "format":
+        fmt = msg.get("format")
+        if fmt not in FORMATS:
+            raise ValueError(f'"format" must be one of {", ".join(map(repr, FORMATS))}; got {fmt!r}')
+        viewer["format"] = fmt
+        return {"type": "format", "format": fmt}
     if kind == "mask":
         regions = msg.get("regions") or None
         if regions is not None and not (isinstance(regions, list) and all(isinstance(r, str) for r in regions)):

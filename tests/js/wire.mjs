@@ -5,6 +5,8 @@
 //   node wire.mjs decode-weights FILE   length-prefixed RTSW bodies -> one JSON object each
 //   node wire.mjs decode-contractions FILE  length-prefixed RTMC frames -> one JSON object each
 //   node wire.mjs decode-morphs FILE    length-prefixed RTMM bodies -> one JSON object each
+//   node wire.mjs decode-arkit-weights FILE  length-prefixed RTAW frames -> one JSON object each
+//   node wire.mjs decode-arkit-shapes FILE   length-prefixed RTAK bodies -> one JSON object each
 //   node wire.mjs encode-points IN OUT  {points, dims, frameIndex, captureTime} -> RTSP bytes
 //   node wire.mjs encode-edit IN OUT    {version, nJoints, k, vertices, indices, weights} -> RTSE bytes
 //
@@ -13,7 +15,7 @@
 // are exact, and null stands for NaN in encoder input. Encoders exit 3 after printing a
 // refusal's message.
 import { readFileSync, writeFileSync } from 'node:fs';
-import { ContractionDecoder, MeshArraysDecoder, MuscleMorphsDecoder, PointsEncoder, RigWeightsDecoder, StreamDecoder, WeightEditEncoder } from '../../web/static/js/net/wire.js';
+import { ArkitShapesDecoder, ArkitWeightsDecoder, ContractionDecoder, MeshArraysDecoder, MuscleMorphsDecoder, PointsEncoder, RigWeightsDecoder, StreamDecoder, WeightEditEncoder } from '../../web/static/js/net/wire.js';
 
 const bits = ( floats ) => floats ? Array.from( new Uint32Array( floats.buffer, floats.byteOffset, floats.length ) ) : null;
 
@@ -49,6 +51,19 @@ const decoders = {
 
 		const m = new MuscleMorphsDecoder().decode( buffer );
 		return { nVertices: m.nVertices, nTargets: m.nTargets, header: m.header, targetBits: bits( m.targets ), jawBits: bits( m.jawWeights ) };
+
+	},
+	'decode-arkit-weights': ( buffer ) => {
+
+		const f = new ArkitWeightsDecoder().decode( buffer );
+		return { flags: f.flags, frameIndex: f.frameIndex, sourceTime: f.sourceTime, sendTime: f.sendTime,
+			bits: bits( f.weights ), rotationBits: bits( f.headRotation ) };
+
+	},
+	'decode-arkit-shapes': ( buffer ) => {
+
+		const { nVertices, names, shapes } = new ArkitShapesDecoder().decode( buffer );
+		return { nVertices, names, shapes: shapes.map( ( s ) => ( { vertices: Array.from( s.vertices ), values: Array.from( s.values ), scale: s.scale } ) ) };
 
 	},
 };

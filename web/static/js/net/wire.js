@@ -14,6 +14,9 @@
  * - `WeightEditEncoder`: weight edits "RTSE" (PATCH .../rig/weights), painted rows;
  * - `MuscleMorphsDecoder`: played muscles "RTMM" (GET .../muscles/played), morph targets
  *   and the jaw joint.
+ * - `ArkitWeightsDecoder`: ARKit weight frames "RTAW" (server -> page, WebSocket, ARKit
+ *   mode), the 52 blendshape weights;
+ * - `ArkitShapesDecoder`: ARKit shapes "RTAK" (GET .../arkit/shapes), 52 sparse morph targets.
  *
  * All little-endian; every array starts at a multiple of 4 bytes, so a decoder views it in
  * place without copying. Five small codecs in one file, against the one-class-per-file
@@ -377,6 +380,97 @@ export class MuscleMorphsDecoder {
 			targets: new Float32Array( buffer, start, 3 * m * v ),
 			jawWeights: new Float32Array( buffer, start + 12 * m * v, v ),
 		};
+
+	}
+
+}
+
+// -- ARKit weight frames "RTAW" and ARKit shapes "RTAK" (issue 16) -------------------------
+
+/**
+ * Decoder of ARKit weight frames (a stream driven by ARKit's 52 blendshapes): a 32-byte
+ * header (magic "RTAW", uint16 version, uint16 flags as RTDF's, uint32 frame index, uint16
+ * weight count K, uint16 reserved, float64 source and send times), K float32 weights in
+ * [0, 1] (ARKit's order) and, with flag bit 2, the head rotation.
+ */
+export class ArkitWeightsDecoder {
+
+	static MAGIC = magicNumber( 'RTAW' );
+	static VERSION = 1;
+	static HEADER_BYTES = 32;
+
+	/**
+	 * Decode one frame.
+	 * @param {ArrayBuffer} buffer - the WebSocket message's bytes.
+	 * @returns {{version: number, flags: number, frameIndex: number, sourceTime: number,
+	 *   sendTime: number, weights: Float32Array, headRotation: Float32Array|null}} weights
+	 *   (K) view `buffer`.
+	 */
+	decode( buffer ) {
+
+		if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( 'ArkitWeightsDecoder: expected an ArrayBuffer.' );
+		if ( buffer.byteLength < ArkitWeightsDecoder.HEADER_BYTES ) throw new Error( `ArkitWeightsDecoder: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
+		const view = new DataView( buffer );
+		if ( view.getUint32( 0, true ) !== ArkitWeightsDecoder.MAGIC ) throw new Error( 'ArkitWeightsDecoder: not an ARKit weight frame (bad magic).' );
+		const version = view.getUint16( 4, true );
+		if ( version !== ArkitWeightsDecoder.VERSION ) throw new Error( `ArkitWeightsDecoder: unsupported frame version ${ version }.` );
+		const flags = view.getUint16( 6, true ), k = view.getUint16( 12, true );
+		const rotated = ( flags & StreamDecoder.FLAG_HEAD_ROTATION ) !== 0;
+		const body = ArkitWeightsDecoder.HEADER_BYTES + 4 * k;
+		const expected = body + ( rotated ? 16 : 0 );
+		if ( buffer.byteLength !== expected ) throw new Error( `ArkitWeightsDecoder: frame of ${ k } weights must be ${ expected } bytes, got ${ buffer.byteLength }.` );
+		return {
+			version,
+			flags,
+			frameIndex: view.getUint32( 8, true ),
+			sourceTime: view.getFloat64( 16, true ),
+			sendTime: view.getFloat64( 24, true ),
+			weights: new Float32Array( buffer, ArkitWeightsDecoder.HEADER_BYTES, k ),
+			headRotation: rotated ? new Float32Array( buffer, body, 4 ) : null,
+		};
+
+	}
+
+}
+
+/**
+ * Decoder of ARKit shapes "RTAK" (GET .../arkit/shapes): a 20-byte header (magic, uint32
+ * version, V, K, JSON bytes J), the JSON {names, counts, scales}, then per shape its M_k
+ * uint32 vertex indices and M_k x 3 int16 deltas (times the shape's scale: mesh units),
+ * padded to 4 bytes. Sparse: a vertex a shape leaves out does not move in it.
+ */
+export class ArkitShapesDecoder {
+
+	static HEADER_BYTES = 20;
+
+	/**
+	 * @param {ArrayBuffer} buffer
+	 * @returns {{nVertices: number, names: string[], shapes: Array<{vertices: Uint32Array,
+	 *   values: Int16Array, scale: number}>}} per shape: vertices (M) and values (M*3, the
+	 *   deltas over `scale`) view `buffer`.
+	 */
+	decode( buffer ) {
+
+		const view = checkedHeader( 'ArkitShapesDecoder', buffer, 'RTAK', ArkitShapesDecoder.HEADER_BYTES );
+		const v = view.getUint32( 8, true ), k = view.getUint32( 12, true ), j = view.getUint32( 16, true );
+		if ( j % 4 !== 0 || ArkitShapesDecoder.HEADER_BYTES + j > buffer.byteLength ) throw new Error( `ArkitShapesDecoder: a ${ j }-byte JSON header does not fit.` );
+		const header = JSON.parse( new TextDecoder().decode( new Uint8Array( buffer, ArkitShapesDecoder.HEADER_BYTES, j ) ) );
+		const { names, counts, scales } = header;
+		if ( names?.length !== k || counts?.length !== k || scales?.length !== k ) throw new Error( `ArkitShapesDecoder: the header must give ${ k } names, counts and scales.` );
+		let at = ArkitShapesDecoder.HEADER_BYTES + j;
+		const shapes = counts.map( ( m, s ) => {
+
+			const need = at + 4 * m + paddedUint16Bytes( 3 * m );
+			if ( ! ( Number.isInteger( m ) && m >= 0 && m <= v ) || need > buffer.byteLength ) throw new Error( `ArkitShapesDecoder: shape ${ names[ s ] }'s ${ m } vertices do not fit in ${ buffer.byteLength } bytes.` );
+			const vertices = new Uint32Array( buffer, at, m );
+			const values = new Int16Array( buffer, at + 4 * m, 3 * m );
+			at = need;
+			for ( let i = 0; i < m; i ++ ) if ( vertices[ i ] >= v ) throw new Error( `ArkitShapesDecoder: shape ${ names[ s ] } names vertex ${ vertices[ i ] } of ${ v }.` );
+			return { vertices, values, scale: scales[ s ] };
+
+		} );
+		if ( at !== buffer.byteLength ) throw new Error( `ArkitShapesDecoder: ${ buffer.byteLength } bytes, expected ${ at }.` );
+		return { nVertices: v, names, shapes };
 
 	}
 
