@@ -3,8 +3,9 @@
 
 `transfer_files` takes a target mesh and its landmarks, a source's neutral S0 and frames S
 in ``.npy`` files, and writes the deformed target, (F, V, 3) float32 ``.npy``;
-`export_gltf_files` writes the rigged face (or the face with its muscles), and the take
-animated, as one glTF 2.0 binary.
+`export_gltf_files` writes the rigged face (or the face with its muscles, or with ARKit's 52
+blendshapes), and the take animated, as one glTF 2.0 binary. With drive "arkit" both
+solve the take into ARKit weights per frame and can write them as Live Link Face CSV.
 Both read and check their inputs alike (`source_arrays`, `layout_for`, `mask_for`), get
 their skin weights alike (`rig_weights`: read from a rig file or computed) and retarget
 through one `retarget.performance.Performance` (Dutreve et al. 2008 §4).
@@ -29,9 +30,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from retarget.arkit.clip import ArkitClip
+from retarget.arkit.shapes import ArkitShapes, arkit_shapes
+from retarget.arkit.solve import ArkitSolver
 from retarget.clips import ContractionClip, clip_at_rate
 from retarget.errors import RetargetError
-from retarget.gltf import write_gltf, write_muscles_gltf
+from retarget.gltf import write_arkit_gltf, write_gltf, write_muscles_gltf
 from retarget.gltf.influences import is_joint_based
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import Layout, get_layout
@@ -42,12 +46,13 @@ from retarget.muscles.morphs import muscle_morphs
 from retarget.performance import Performance
 from retarget.pipeline import DEFAULT_KERNEL, transfer
 from retarget.skin import SkinWeights
+from retarget.sources.arkit_curves import ArkitCurves, live_link_csv
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
 
-__all__ = ["ExportResult", "TransferResult", "contractions_files", "export_gltf_files", "muscles_for",
-           "transfer_files"]
+__all__ = ["ExportResult", "TransferResult", "arkit_shapes_for", "contractions_files", "export_gltf_files",
+           "muscles_for", "transfer_files"]
 
-DRIVES = ("points", "muscles")
+DRIVES = ("points", "muscles", "arkit")
 
 
 # ---------------------------------------------------------------------------------------
@@ -62,11 +67,12 @@ class TransferResult:
     rest : (V, 3) float64, the target mesh's neutral vertices as read.
     n_points : N, the number of feature points.
     method : the deformer (the rig's method when the weights were read from a file;
-        "muscles" when driven by muscles).
+        "muscles" when driven by muscles, "arkit" by ARKit's shapes).
     weights_seconds, transfer_seconds : wall time of the weight solve (or rig read, or
         muscle placement) and of the per-frame transfer.
     out : the path written.
     contractions : (F, D) float64 solved muscle contractions when driven by muscles.
+    arkit_weights : (F, 52) float64 solved ARKit weights when driven by ARKit's shapes.
     """
 
     vertices: np.ndarray
@@ -77,6 +83,7 @@ class TransferResult:
     transfer_seconds: float
     out: Path
     contractions: np.ndarray | None = None
+    arkit_weights: np.ndarray | None = None
 
     def summary(self) -> str:
         """The one-line report `transfer` prints."""
@@ -106,6 +113,8 @@ def transfer_files(
     drive: str = "points",
     muscles=None,
     contractions_out=None,
+    arkit=None,
+    weights_out=None,
     quiet: bool = False,
 ) -> TransferResult:
     """Retarget source frames in files onto a target mesh in a file; write (F, V, 3).
@@ -129,17 +138,26 @@ def transfer_files(
     muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the mesh
         from its landmarks.
     contractions_out : with drive "muscles", ``.npy`` written with the (F, D) contractions.
+        Drive "arkit": the feature points' motion solved per frame into ARKit's 52 weights
+        (`retarget.arkit.solve.ArkitSolver` on the shapes' feature-point motion) and made by
+        the shapes, ``v0 + sum_k w_k delta_k``.
+    arkit : with drive "arkit", a ``retarget arkit`` SHAPES.npz for this mesh; default: the
+        shapes generated from the landmarks (`retarget.arkit.arkit_shapes`, through `rig`
+        when given, else the shapes' own rig).
+    weights_out : with drive "arkit", the (F, 52) weights written here as Live Link Face
+        CSV (`retarget.sources.arkit_curves.live_link_csv`; times at 30 fps: ``.npy``
+        source frames carry no rate).
 
     Raises `RetargetError` for every refusal, naming the file or option.
     """
-    if drive not in DRIVES:
-        raise RetargetError(f"unknown drive {drive!r}; choose one of {', '.join(DRIVES)}")
     if drive != "muscles" and (muscles is not None or contractions_out is not None):
         raise RetargetError("muscles and contractions_out need drive 'muscles'")
+    _check_drive(drive, muscles, arkit, weights_out, rig)
     out = Path(out)
     require_parent(out)
-    if contractions_out is not None:
-        require_parent(Path(contractions_out))
+    for extra in (contractions_out, weights_out):
+        if extra is not None:
+            require_parent(Path(extra))
     mesh = read_mesh(target_mesh)
     points = read_landmarks(target_landmarks, mesh)
     n = points.n_points
@@ -162,6 +180,19 @@ def transfer_files(
             write_npy(Path(contractions_out), contractions)
         return TransferResult(result.astype(np.float32), mesh.vertices, n, "muscles", placed_seconds,
                               transfer_seconds, out, contractions)
+    if drive == "arkit":
+        shapes = arkit_shapes_for(arkit, mesh, points, the_layout, rig)
+        shapes_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        performance = _performance(mesh, points, the_layout, active, kernel, smoothing, s0)
+        weights = _arkit_weights(shapes, performance, frames, quiet)
+        result = shapes.posed(mesh.vertices, weights)
+        transfer_seconds = time.perf_counter() - start
+        write_npy(out, result)
+        if weights_out is not None:
+            write_live_link(Path(weights_out), weights, TRANSFER_FPS)
+        return TransferResult(result, mesh.vertices, n, "arkit", shapes_seconds, transfer_seconds, out,
+                              arkit_weights=weights)
     weights = rig_weights(rig, deformer, mesh, points, the_layout, quiet=quiet)
     method = (weights.method or "rig") if rig is not None else deformer
     weights_seconds = time.perf_counter() - start
@@ -221,6 +252,70 @@ def _contractions(drive: MuscleDrive, performance: Performance, frames: np.ndarr
     return out
 
 
+TRANSFER_FPS = 30.0
+"""The rate `transfer_files` writes Live Link Face timecodes at (its ``.npy`` frames have none)."""
+
+
+def _check_drive(drive: str, muscles, arkit, weights_out, rig) -> None:
+    """Refuse a drive not in `DRIVES` and options that need another drive."""
+    if drive not in DRIVES:
+        raise RetargetError(f"unknown drive {drive!r}; choose one of {', '.join(DRIVES)}")
+    if drive != "muscles" and muscles is not None:
+        raise RetargetError("--muscles needs --drive muscles")
+    if drive != "arkit" and (arkit is not None or weights_out is not None):
+        raise RetargetError("--arkit and --weights-out need --drive arkit")
+    if drive == "muscles" and rig is not None:
+        raise RetargetError("drive 'muscles' makes the motion with the muscles, not a rig: drop the rig")
+    if arkit is not None and rig is not None:
+        raise RetargetError("--arkit gives shapes already made (by 'retarget arkit', with a rig of "
+                            "its own): drop --rig, or drop --arkit to make the shapes with --rig")
+
+
+def arkit_shapes_for(path, mesh: Mesh, points: SurfacePoints, layout: Layout | None,
+                     rig=None) -> ArkitShapes:
+    """ARKit's 52 shapes for the mesh: read from `path` (``retarget arkit``'s SHAPES.npz,
+    checked against the mesh's V vertices and N points), or (path None) generated from the
+    feature points (`arkit_shapes`, through the `rig` file's weights when given)."""
+    if path is not None:
+        require_file(path, "ARKit shapes")
+        shapes = ArkitShapes.load(path)
+        v, n = shapes.deltas.shape[1], shapes.at_points.shape[1]
+        if v != mesh.n_vertices:
+            raise RetargetError(f"ARKit shapes {str(path)!r} move {v} vertices but the mesh has "
+                                f"{mesh.n_vertices}: make them for this mesh with 'retarget arkit'")
+        if n != points.n_points:
+            raise RetargetError(f"ARKit shapes {str(path)!r} are fitted at {n} feature points but the "
+                                f"landmarks have {points.n_points}")
+        return shapes
+    if layout is None:
+        raise RetargetError("making the ARKit shapes needs the landmarks' layout: give --layout, a "
+                            "landmarks JSON with \"layout\", or shapes with --arkit")
+    weights = None if rig is None else read_rig(rig, mesh, points.n_points)
+    return arkit_shapes(mesh.vertices, mesh.faces, points, layout, weights)
+
+
+def _arkit_weights(shapes: ArkitShapes, performance: Performance, frames: np.ndarray, quiet: bool,
+                   chunk: int = 256) -> np.ndarray:
+    """(F, 52) ARKit weights of (F, N, 2|3) source frames: the retargeted feature
+    displacements solved frame after frame (each warm-starting the next), with a progress bar."""
+    solver = ArkitSolver(shapes.at_points)
+    out = np.empty((len(frames), len(shapes.names)))
+    with progress_bar(len(frames), "ARKit weights", "frame", quiet) as advance:
+        for i in range(0, len(frames), chunk):
+            out[i:i + chunk] = solver.solve_frames(performance.displacements(frames[i:i + chunk]))
+            advance(min(1.0, (i + chunk) / max(len(frames), 1)))
+    return out
+
+
+def write_live_link(path: Path, weights: np.ndarray, fps: float) -> None:
+    """Write (F, 52) ARKit weights at `fps` as Live Link Face CSV."""
+    text = live_link_csv(ArkitCurves(weights, float(fps), None, None, {}))
+    try:
+        path.write_text(text)
+    except OSError as exc:
+        raise RetargetError(f"could not write {str(path)!r}: {exc}") from exc
+
+
 # ---------------------------------------------------------------------------------------
 # export-gltf
 
@@ -232,11 +327,13 @@ class ExportResult:
     n_vertices, n_points : V and N of the exported face.
     n_frames : F frames of the animation (0 without a source).
     fps : the animation's frame rate.
-    deformation : "skin", "morph" or "muscles" (see `retarget.gltf.writer`).
-    method : the rig's method ("muscles" for the muscles).
+    deformation : "skin", "morph", "muscles" or "arkit" (see `retarget.gltf.writer` and
+        `retarget.gltf.arkit`).
+    method : the rig's method ("muscles" for the muscles, "arkit" for ARKit's shapes).
     seconds : wall time, weights and retargeting included.
     n_bytes : size of the file written.
     out : the path written.
+    arkit_weights : (F, 52) float64 the solved ARKit weights, with drive "arkit" and a source.
     """
 
     n_vertices: int
@@ -248,6 +345,7 @@ class ExportResult:
     seconds: float
     n_bytes: int
     out: Path
+    arkit_weights: np.ndarray | None = None
 
     def summary(self) -> str:
         """The one-line report `export-gltf` prints."""
@@ -255,7 +353,8 @@ class ExportResult:
                      else ", no animation")
         kind = {"skin": f"{self.n_points} feature joints of a skin",
                 "morph": f"{self.n_points} feature joints, morph targets",
-                "muscles": "a morph target per muscle and a jaw joint"}[self.deformation]
+                "muscles": "a morph target per muscle and a jaw joint",
+                "arkit": "ARKit's 52 blendshapes as morph targets"}[self.deformation]
         return (f"exported {self.n_vertices} vertices, {kind} "
                 f"({self.method}){animation}: {self.n_bytes / 2**20:.1f} MiB in "
                 f"{self.seconds:.2f} s -> {self.out}")
@@ -277,6 +376,8 @@ def export_gltf_files(
     layout: str | None = None,
     drive: str = "points",
     muscles=None,
+    arkit=None,
+    weights_out=None,
     quiet: bool = False,
 ) -> ExportResult:
     """Write a target mesh, rigged and optionally animated, as a glTF 2.0 binary (.glb).
@@ -295,18 +396,25 @@ def export_gltf_files(
         feature motion solved into contractions (as `transfer_files` does).
     muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the
         mesh from its landmarks.
+        Drive "arkit": the face with ARKit's 52 shapes as named, sparse morph targets
+        (`retarget.gltf.write_arkit_gltf`, no rig), the take's feature motion solved into
+        their weights per frame (as `transfer_files` does).
+    arkit : with drive "arkit", a ``retarget arkit`` SHAPES.npz for this mesh; default:
+        generated from the landmarks (through `rig` when given, `deformer` is not used).
+    weights_out : with drive "arkit" and a source, the (F, 52) weights written here as Live
+        Link Face CSV at `fps`.
 
     Raises `RetargetError` for every refusal, naming the file or option.
     """
     start = time.perf_counter()
-    if drive not in DRIVES:
-        raise RetargetError(f"unknown drive {drive!r}; choose one of {', '.join(DRIVES)}")
-    if drive != "muscles" and muscles is not None:
-        raise RetargetError("--muscles needs --drive muscles")
-    if drive == "muscles" and rig is not None:
-        raise RetargetError("drive 'muscles' exports the muscles, not a rig: drop the rig")
+    _check_drive(drive, muscles, arkit, weights_out, rig)
+    if weights_out is not None and source_frames is None:
+        raise RetargetError("--weights-out writes the take's weights: give --source-neutral and "
+                            "--source-frames too")
     out = Path(out)
     require_parent(out)
+    if weights_out is not None:
+        require_parent(Path(weights_out))
     if (source_neutral is None) != (source_frames is None):
         raise RetargetError("--source-neutral and --source-frames go together: give both "
                             "for an animation, or neither")
@@ -328,8 +436,11 @@ def export_gltf_files(
     if drive == "muscles":
         model = muscles_for(muscles, mesh, points, the_layout)
         morphs = muscle_morphs(model)
+    elif drive == "arkit":
+        shapes = arkit_shapes_for(arkit, mesh, points, the_layout, rig)
     else:
         weights = rig_weights(rig, deformer, mesh, points, the_layout, quiet=quiet)
+    solved = None
     if source_frames is not None:
         performance = _performance(mesh, points, the_layout, active, kernel or DEFAULT_KERNEL,
                                    smoothing, s0)
@@ -337,6 +448,9 @@ def export_gltf_files(
         if drive == "muscles":
             contractions = _contractions(MuscleDrive(model, points), performance, frames, quiet)
             clips.append(ContractionClip(name, contractions, np.arange(len(frames)) / float(fps)))
+        elif drive == "arkit":
+            solved = _arkit_weights(shapes, performance, frames, quiet)
+            clips.append(ArkitClip.at_rate(name, solved, fps))
         else:
             d = np.empty((len(frames), n, 3), np.float32)
             chunk = 256
@@ -348,6 +462,9 @@ def export_gltf_files(
     if drive == "muscles":
         save = partial(write_muscles_gltf, mesh=mesh, morphs=morphs, clips=clips)
         deformation, method = "muscles", "muscles"
+    elif drive == "arkit":
+        save = partial(write_arkit_gltf, mesh=mesh, shapes=shapes, clips=clips)
+        deformation, method = "arkit", "arkit"
     else:
         save = partial(write_gltf, mesh=mesh, points=points, weights=weights, clips=clips)
         deformation = "skin" if is_joint_based(weights) else "morph"
@@ -355,8 +472,10 @@ def export_gltf_files(
     written = []
     with progress_bar(100, "glTF", "%", quiet) as advance:
         write_file(out, lambda f: written.append(save(f, progress=advance)))
+    if weights_out is not None:
+        write_live_link(Path(weights_out), solved, fps)
     return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps, deformation,
-                        method, time.perf_counter() - start, written[0], out)
+                        method, time.perf_counter() - start, written[0], out, solved)
 
 
 # ---------------------------------------------------------------------------------------

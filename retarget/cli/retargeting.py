@@ -61,18 +61,20 @@ def add_transfer(commands, parents) -> None:
     layout_option(p)
     p.add_argument("--drive", choices=list(DRIVES), default="points",
                    help="points: feature points as skinning joints (default); muscles: their motion "
-                   "solved into the 21 muscles' contractions and the jaw (Woodward et al.), no rig")
+                   "solved into the 21 muscles' contractions and the jaw (Woodward et al.), no rig; "
+                   "arkit: solved into ARKit's 52 blendshape weights and made by the shapes")
     p.add_argument("--muscles", metavar="MUSCLES.json",
                    help="with --drive muscles: muscles from 'retarget muscles' (default: placed from "
                    "the landmarks)")
     p.add_argument("--contractions-out", metavar="C.npy",
                    help="with --drive muscles: the (F, 22) contractions, written here (for "
                    "'retarget recognise')")
+    _arkit_options(p, "the (F, 52) weights written here as Live Link Face CSV (timecodes at 30 fps)")
     p.set_defaults(run=_transfer)
 
 
 def _transfer(args) -> int:
-    _refuse_rig_with_muscles(args)
+    _refuse_other_rigs(args)
     result = transfer_files(
         args.target_mesh,
         args.target_landmarks,
@@ -88,6 +90,8 @@ def _transfer(args) -> int:
         drive=args.drive,
         muscles=args.muscles,
         contractions_out=args.contractions_out,
+        arkit=args.arkit,
+        weights_out=args.weights_out,
         quiet=args.quiet,
     )
     print(result.summary())
@@ -144,7 +148,8 @@ def add_export_gltf(commands, parents) -> None:
         "feature point and the rig (a glTF skin; morph targets for rigs with negative "
         "weights) as a glTF 2.0 binary; with a source, the retargeted take as an animation. "
         "With --drive muscles: a morph target per muscle and a jaw joint instead, animated by "
-        "the solved contractions. Units are the mesh's own.")
+        "the solved contractions; with --drive arkit: ARKit's 52 blendshapes as named morph "
+        "targets, animated by the solved weights. Units are the mesh's own.")
     p.add_argument("--mesh", required=True, metavar="MESH",
                    help="target mesh (obj, ply, stl, off, gltf, glb)")
     p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
@@ -172,15 +177,17 @@ def add_export_gltf(commands, parents) -> None:
     p.add_argument("--drive", choices=list(DRIVES), default="points",
                    help="points: feature joints and the rig (default); muscles: a morph target per "
                    "muscle (and correctives for those the jaw crosses) and a jaw joint, animated by "
-                   "the muscle IK's contractions (Woodward et al.), no rig")
+                   "the muscle IK's contractions (Woodward et al.), no rig; arkit: ARKit's 52 "
+                   "blendshapes as named (sparse) morph targets, animated by the solved weights")
     p.add_argument("--muscles", metavar="MUSCLES.json",
                    help="with --drive muscles: muscles from 'retarget muscles' (default: placed from "
                    "the landmarks)")
+    _arkit_options(p, "the take's (F, 52) weights written here as Live Link Face CSV at --fps")
     p.set_defaults(run=_export_gltf)
 
 
 def _export_gltf(args) -> int:
-    _refuse_rig_with_muscles(args)
+    _refuse_other_rigs(args)
     result = export_gltf_files(
         args.mesh,
         args.landmarks,
@@ -196,17 +203,32 @@ def _export_gltf(args) -> int:
         layout=args.layout,
         drive=args.drive,
         muscles=args.muscles,
+        arkit=args.arkit,
+        weights_out=args.weights_out,
         quiet=args.quiet,
     )
     print(result.summary())
     return 0
 
 
-def _refuse_rig_with_muscles(args) -> None:
-    """--deformer and --rig name a rig, which --drive muscles does without."""
+def _arkit_options(p, weights_help: str) -> None:
+    """--arkit and --weights-out, for --drive arkit."""
+    p.add_argument("--arkit", metavar="SHAPES.npz",
+                   help="with --drive arkit: the shapes from 'retarget arkit' (default: made from the "
+                   "landmarks, through --rig when given)")
+    p.add_argument("--weights-out", metavar="W.csv", help=f"with --drive arkit: {weights_help}")
+
+
+def _refuse_other_rigs(args) -> None:
+    """--deformer and --rig name a rig, which --drive muscles does without; --drive arkit
+    makes its shapes with their own rig or the --rig file's, never a --deformer's."""
     if args.drive == "muscles" and (args.deformer or args.rig):
         raise RetargetError("--drive muscles makes the motion with the muscles, not a rig: drop "
                             "--deformer and --rig")
+    if args.drive == "arkit" and args.deformer:
+        raise RetargetError("--drive arkit makes the motion with ARKit's shapes, made with their own "
+                            "rig or --rig's: drop --deformer (or make a rig with 'retarget rig "
+                            "--method NAME' and give it as --rig)")
 
 
 # ---------------------------------------------------------------------------------------

@@ -11,19 +11,22 @@ animations, as one .glb (`writer` documents the layout and the units); `read_glt
 such a file back into the mesh, landmarks, skin weights and clips (`reader`);
 `export_mesh_gltf` writes the mesh alone; `export_muscles_gltf` and `write_muscles_gltf`
 a face driven by its muscles (`retarget.muscles.morphs`: morph targets and a jaw joint)
-with takes of muscle contractions (`retarget.clips.ContractionClip`). `glb` is the
-binary container, `influences` the weights as JOINTS_n / WEIGHTS_n, `morph` the weights
-as morph targets.
+with takes of muscle contractions (`retarget.clips.ContractionClip`);
+`export_arkit_gltf` and `write_arkit_gltf` (`arkit`) a face with ARKit's 52 blendshapes
+as named morph targets animated by their weights (`retarget.arkit.ArkitClip`). `glb` is
+the binary container, `influences` the weights as JOINTS_n / WEIGHTS_n, `morph` the
+weights as morph targets, `sparse` morph targets that keep only the vertices they move.
 """
 
 import importlib
 
-__all__ = ["RiggedFace", "export_gltf", "export_mesh_gltf", "export_muscles_gltf", "joint_names",
-           "read_gltf", "write_gltf", "write_muscles_gltf"]
+__all__ = ["RiggedFace", "export_arkit_gltf", "export_gltf", "export_mesh_gltf", "export_muscles_gltf",
+           "joint_names", "read_gltf", "write_arkit_gltf", "write_gltf", "write_muscles_gltf"]
 
 _HOMES = {"RiggedFace": "reader", "read_gltf": "reader", "export_gltf": "writer",
           "export_mesh_gltf": "writer", "export_muscles_gltf": "writer", "joint_names": "writer",
-          "write_gltf": "writer", "write_muscles_gltf": "writer"}
+          "write_gltf": "writer", "write_muscles_gltf": "writer", "export_arkit_gltf": "arkit",
+          "write_arkit_gltf": "arkit"}
 
 
 def __getattr__(name: str):

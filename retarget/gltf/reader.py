@@ -69,6 +69,9 @@ def read_gltf(source) -> RiggedFace:
     if extras.get("deformation") == "muscles":
         raise RetargetError(f"{label} is a muscle export (a morph target per muscle and a jaw "
                             "joint, animated by contractions): it holds no feature-point rig to read")
+    if extras.get("deformation") == "arkit":
+        raise RetargetError(f"{label} is an ARKit export (ARKit's 52 blendshapes as morph targets, "
+                            "animated by their weights): it holds no feature-point rig to read")
     mesh_node = _mesh_node(nodes, label)
     primitive = _primitive(gltf, nodes[mesh_node])
     root, features = _feature_nodes(gltf, mesh_node)

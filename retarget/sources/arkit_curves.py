@@ -20,6 +20,8 @@ JSON
     ``{"fps": 60, "weights": [{"jawOpen": 0.3, ...}, ...]}``, optionally ``"times"``
     (seconds) and ``"head"`` ([yaw, pitch, roll] per frame, radians).
 
+`live_link_csv` writes weights as Live Link Face CSV, the reader's inverse.
+
 Any subset of the 52 names may be given (the others stay 0); other columns or keys are
 ignored and listed in the take's ``meta["ignored"]``. Policy: a weight must be a finite
 number in [0, 1] (a table on a 0-100 scale is refused with that hint); NaN, empty or
@@ -49,12 +51,26 @@ from retarget.layouts import get_layout
 from retarget.sources.json_text import json_document
 from retarget.sources.take import MAX_TAKE_VALUES, Take
 
-__all__ = ["ArkitCurves", "arkit_curves", "arkit_take", "LIVE_LINK_FPS"]
+__all__ = ["ArkitCurves", "LIVE_LINK_COLUMNS", "LIVE_LINK_FPS", "arkit_curves", "arkit_take",
+           "live_link_csv"]
 
 LIVE_LINK_FPS = 60.0
 """Live Link Face's default recording rate, taken when a CSV's timecodes do not show it."""
 
-HEAD_COLUMNS = ("headyaw", "headpitch", "headroll")
+LIVE_LINK_COLUMNS: tuple[str, ...] = (
+    "Timecode", "BlendShapeCount",
+    *(n[0].upper() + n[1:] for n in ARKIT_NAMES[:15]), "JawRight", "JawLeft",
+    *(n[0].upper() + n[1:] for n in ARKIT_NAMES[17:21]), "MouthRight", "MouthLeft",
+    *(n[0].upper() + n[1:] for n in ARKIT_NAMES[23:]),
+    "HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
+    "RightEyeYaw", "RightEyePitch", "RightEyeRoll",
+)
+"""The columns of a Live Link Face CSV, in the app's order: Apple's 52 names capitalised, but
+for JawRight before JawLeft and MouthRight before MouthLeft (as the app writes them), then
+the head's and the eyes' rotations (radians). The reader goes by name; `live_link_csv` writes
+this order."""
+
+HEAD_COLUMNS = tuple(c.lower() for c in LIVE_LINK_COLUMNS[-9:-6])
 _TIME_COLUMNS = ("time", "time_s", "timestamp", "t")
 _FRAME_COLUMNS = ("frame", "frame#", "frame_index", "index")
 _TIMECODE = re.compile(r"^\s*(\d+):(\d{1,2}):(\d{1,2})[:;.](\d+(?:\.\d*)?)\s*$")
@@ -123,6 +139,47 @@ def head_rotations(angles: np.ndarray) -> np.ndarray:
     rz = np.stack([np.stack([cr, -sr, zero], -1), np.stack([sr, cr, zero], -1),
                    np.stack([zero, zero, one], -1)], -2)
     return ry @ rx @ rz
+
+
+def live_link_csv(curves: ArkitCurves) -> str:
+    """The text of a Live Link Face CSV holding `curves` (`LIVE_LINK_COLUMNS`), the inverse of
+    the reader: ``arkit_curves(text, "csv", label)`` gives back the weights to float32
+    rounding (each cell is the shortest text of the weight's float32 value: read and rounded
+    to float32, the same number), the head rotation likewise (zero when `curves` has none;
+    the eye rotations are zero), and the times to 1/2000 of a frame.
+
+    Timecodes start at 00:00:00:00 and count frames at ``curves.fps`` with a thousandths
+    fraction (``HH:MM:SS:FF.sss``), so the reader finds the rate from a take of a second or
+    more; give it `fps` for a shorter take (else it assumes Live Link Face's 60) or a rate
+    that is not a whole number. BlendShapeCount is 61, as the app writes (52 shapes and 9
+    rotations).
+    """
+    weights = np.asarray(curves.weights, dtype=np.float64)
+    k = len(ARKIT_NAMES)
+    if weights.ndim != 2 or weights.shape[1] != k or len(weights) == 0:
+        raise RetargetError(f"weights must have shape (F, {k}) with F >= 1; got {weights.shape}")
+    _check_weights(weights, "the weights")
+    if not np.isfinite(curves.fps) or curves.fps <= 0:
+        raise RetargetError(f"fps must be a positive number; got {curves.fps!r}")
+    frames = len(weights)
+    times = np.arange(frames) / curves.fps if curves.times is None \
+        else np.asarray(curves.times, dtype=np.float64) - curves.times[0]
+    head = np.zeros((frames, 3)) if curves.head is None else np.asarray(curves.head, dtype=np.float64)
+    if times.shape != (frames,) or head.shape != (frames, 3):
+        raise RetargetError(f"times must have shape ({frames},) and head ({frames}, 3); got "
+                            f"{times.shape} and {head.shape}")
+    # whole thousandths of a frame: the seconds and frames of a timecode then never round up
+    # to a frame number of fps (which would make the reader find the rate one too high)
+    per_second = round(curves.fps * 1000)
+    seconds, thousandths = np.divmod(np.round(times * curves.fps * 1000).astype(np.int64), per_second)
+    order = [arkit_index(c) for c in LIVE_LINK_COLUMNS[2:2 + k]]
+    table = np.hstack([weights[:, order], head, np.zeros((frames, 6))]).astype(np.float32)
+    lines = [",".join(LIVE_LINK_COLUMNS)]
+    for s, ff, row in zip(seconds.tolist(), thousandths.tolist(), table):
+        code = f"{s // 3600:02d}:{s // 60 % 60:02d}:{s % 60:02d}:{ff // 1000:02d}.{ff % 1000:03d}"
+        cells = (np.format_float_positional(x, unique=True, trim="0") for x in row)
+        lines.append(f"{code},{len(LIVE_LINK_COLUMNS) - 2},{','.join(cells)}")
+    return "\n".join(lines) + "\n"
 
 
 # --- CSV ---------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """Blender imports our glTF export: the armature, vertex groups, shape keys, animation and
 material, and the positions Blender evaluates equal our linear blend skinning; the muscle
-export (morph targets per muscle and a jaw joint) plays as glTF defines it.
+export (morph targets per muscle and a jaw joint) plays as glTF defines it, and the ARKit
+export (52 named morph targets in sparse accessors) as `ArkitShapes.posed`.
 
 Blender runs as a Python module (PyPI ``bpy``) in its own interpreter, ``.venv-blender``
 beside ``.venv`` (or the one named by ``RETARGET_BLENDER_PYTHON``), because bpy 5.0 needs
@@ -21,9 +22,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from retarget.arkit.clip import ArkitClip
+from retarget.arkit.reference import ARKIT_NAMES
+from retarget.arkit.shapes import arkit_shapes
 from retarget.clips import ContractionClip, clip_at_rate
 
-from retarget.gltf import export_gltf, export_muscles_gltf, joint_names
+from retarget.gltf import export_arkit_gltf, export_gltf, export_muscles_gltf, joint_names
+from retarget.gltf.arkit import arkit_tolerance
 from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
                                        node_transforms)
 from retarget.gltf.animation import posed_vertices as gltf_vertices
@@ -172,3 +177,34 @@ def test_blender_plays_the_muscle_export_as_gltf_defines_it(face, tmp_path_facto
                              animated_weights(gltf, channels, times), times)
     assert np.abs(result["positions"] - expected).max() < 1e-4 * face["size"]
     assert np.abs(expected - mesh.vertices).max() > 100 * 1e-4 * face["size"]
+
+
+def test_blender_plays_the_arkit_export_from_sparse_targets(face, tmp_path_factory):
+    """52 shape keys named after ARKit, read from sparse accessors (all but the empty
+    tongueOut): Blender's positions at FRAMES (keys and between them) are the shapes posed by
+    the weights interpolated linearly, within the targets' tolerance (1e-4 of the face size
+    per unit of weight)."""
+    mesh, points = face["mesh"], face["points"]
+    rig = compute_weights("ellipsoid", mesh.vertices, mesh.faces, points, get_layout("ibug68"))
+    shapes = arkit_shapes(mesh.vertices, mesh.faces, points, "ibug68", rig)
+    rng = np.random.default_rng(2)
+    weights = rng.uniform(0, 1, (30, 52)) * (rng.random((30, 52)) < 0.15)
+    data = export_arkit_gltf(mesh, shapes, [ArkitClip.at_rate("arkit", weights, FPS)])
+    doc = GltfDocument(data, "face.glb", None).doc
+    targets = [doc.accessors[t["POSITION"]] for t in doc.meshes[0].primitives[0].targets]
+    assert sum(a.sparse is not None and a.bufferView is None for a in targets) == 51
+    d = tmp_path_factory.mktemp("blender_arkit")
+    (d / "face.glb").write_bytes(data)
+    result = _evaluated(d / "face.glb", d)
+    info = result["info"]
+    assert info["armatures"] == [] and info["shape_keys"] == ["Basis", *ARKIT_NAMES]
+    assert info["actions"] and list(info["actions"].values())[0] == [0.0, FPS - 1]
+    v0 = mesh.vertices
+    for frame, got in zip(FRAMES, result["positions"]):
+        w = np.array([np.interp(frame, np.arange(30), weights[:, k]) for k in range(52)])
+        expected = shapes.posed(v0, w)
+        bound = arkit_tolerance(v0) * w.sum() + 1e-5 * face["size"]
+        print(f"ARKit, frame {frame}: |Blender - posed| = {np.abs(got - expected).max() / face['size']:.1e} "
+              f"of the mesh size (bound {bound / face['size']:.1e})")
+        assert np.abs(got - expected).max() < bound, frame
+        assert np.abs(expected - v0).max() > 0.03 * face["size"]       # the pose moves the face
