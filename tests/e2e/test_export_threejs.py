@@ -12,7 +12,9 @@ the clip's feature displacements at that time. three.js reads one JOINTS_0/WEIGH
 (four influences), so the skin must need no second set. The muscle export
 (``drive=muscles``: a morph target per muscle and corrective, a jaw joint) must play in
 three.js as glTF defines it (`retarget.gltf.animation`, which
-tests/unit/test_export_muscles.py ties to the muscles' played form).
+tests/unit/test_export_muscles.py ties to the muscles' played form). The ARKit export (52
+morph targets named after ARKit, in sparse accessors) must play in three.js as
+`ArkitShapes.posed` of the interpolated weights, within the targets' tolerance.
 """
 
 from __future__ import annotations
@@ -25,12 +27,20 @@ import httpx
 import numpy as np
 import pytest
 
-from retarget.gltf import read_gltf
+from retarget.arkit.clip import ArkitClip
+from retarget.arkit.reference import ARKIT_NAMES
+from retarget.arkit.shapes import arkit_shapes
+from retarget.gltf import export_arkit_gltf, read_gltf
+from retarget.gltf.arkit import arkit_tolerance
 from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
                                        node_transforms, posed_vertices)
 from retarget.gltf.document import GltfDocument
+from retarget.landmarks import from_vertex_indices
+from retarget.layouts import get_layout
+from retarget.mesh import mesh_from_arrays
 from retarget.sample_face import demo_weights, sample_face
 from retarget.skin import SkinWeights, skin_displacements
+from retarget.weights import compute_weights
 from tests.e2e.conftest import Server, open_project, sample_copy
 from tests.waits import wait_job
 from tests.waits import scaled_ms
@@ -68,6 +78,7 @@ window.check = {
 			morphs: geometry.morphAttributes.position?.length ?? 0,
 			skinAttributes: Object.keys( geometry.attributes ).filter( ( name ) => name.startsWith( 'skin' ) ).sort(),
 			vertices: geometry.attributes.position.count,
+			morphNames: Object.keys( this.mesh.morphTargetDictionary ?? {} ),
 			animations: this.gltf.animations.map( ( clip ) => [ clip.name, clip.duration ] ),
 		};
 	},
@@ -230,6 +241,37 @@ def test_three_js_plays_the_export_as_our_app_draws_it(server, page, sample):
               f"of the mesh size (moved up to {np.abs(expected - rest).max() / size:.3f})")
         assert np.abs(expected - rest).max() / size > 0.01
         assert np.abs(three - expected).max() / size < TOLERANCE
+
+
+def test_three_js_plays_the_arkit_export(server, page):
+    """The library's ARKit export of the sample face (served as a file): three.js names its 52
+    morph targets after ARKit, reads the sparse accessors, and draws the shapes posed by the
+    weights at a key and between keys."""
+    f = sample_face()
+    points = from_vertex_indices(f.landmarks68, len(f.vertices), "ibug68")
+    rig = compute_weights("ellipsoid", f.vertices, f.faces, points, get_layout("ibug68"))
+    shapes = arkit_shapes(f.vertices, f.faces, points, "ibug68", rig)
+    weights = np.zeros((3, 52))
+    weights[1, [ARKIT_NAMES.index(n) for n in ("jawOpen", "mouthSmileLeft", "eyeBlinkRight")]] = [0.8, 0.6, 1.0]
+    weights[2, ARKIT_NAMES.index("browInnerUp")] = 0.7
+    data = export_arkit_gltf(mesh_from_arrays(f.vertices, f.faces), shapes,
+                             [ArkitClip.at_rate("arkit", weights, FPS)])
+    page.route(server.url + "/three-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
+    page.route(server.url + "/arkit.glb", lambda route: route.fulfill(body=data, content_type="model/gltf-binary"))
+    page.goto(server.url + "/three-check")
+    page.wait_for_function("window.ready === true")
+    loaded = page.evaluate("(url) => check.load(url)", "/arkit.glb")
+    assert not loaded["skinned"] and loaded["morphs"] == 52 and loaded["morphNames"] == list(ARKIT_NAMES)
+    size = float(np.linalg.norm(np.ptp(f.vertices, axis=0)))
+    for frame in (1.0, 1.5):
+        w = np.array([np.interp(frame, np.arange(3), weights[:, k]) for k in range(52)])
+        expected = shapes.posed(f.vertices, w)
+        three = _decoded(page.evaluate("(t) => check.posed(t)", frame / FPS))
+        bound = arkit_tolerance(f.vertices) * w.sum() + 1e-5 * size
+        print(f"ARKit, frame {frame}: |three.js - posed| = {np.abs(three - expected).max() / size:.1e} of the "
+              f"mesh size (bound {bound / size:.1e}, moved up to {np.abs(expected - f.vertices).max() / size:.3f})")
+        assert np.abs(three - expected).max() < bound
+        assert np.abs(expected - f.vertices).max() > 0.03 * size
 
 
 def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
