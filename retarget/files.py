@@ -131,16 +131,16 @@ def transfer_files(
     mask : names (regions, groups, points of the layout) and/or feature indices (as
         strings or ints) of the active points, their union; None for all.
     layout : layout name; default the landmarks JSON's ``"layout"``, if any.
-    rig : ``.npz`` from `SkinWeights.save` to use instead of computing weights.
-    drive : "points" (feature points as skinning joints, Dutreve §3) or "muscles" (the
+    rig : ``.npz`` from `SkinWeights.save` to use instead of computing weights (with drive
+        "arkit": the rig the shapes are made with).
+    drive : "points" (feature points as skinning joints, Dutreve §3), "muscles" (the
         feature points' motion solved into muscle contractions by the muscle IK and made by
-        the muscles, Woodward §4, §7; no rig).
+        the muscles, Woodward §4, §7; no rig) or "arkit" (the feature points' motion solved
+        per frame into ARKit's 52 weights, `retarget.arkit.solve.ArkitSolver` on the shapes'
+        feature-point motion, and made by the shapes, ``v0 + sum_k w_k delta_k``).
     muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the mesh
         from its landmarks.
     contractions_out : with drive "muscles", ``.npy`` written with the (F, D) contractions.
-        Drive "arkit": the feature points' motion solved per frame into ARKit's 52 weights
-        (`retarget.arkit.solve.ArkitSolver` on the shapes' feature-point motion) and made by
-        the shapes, ``v0 + sum_k w_k delta_k``.
     arkit : with drive "arkit", a ``retarget arkit`` SHAPES.npz for this mesh; default: the
         shapes generated from the landmarks (`retarget.arkit.arkit_shapes`, through `rig`
         when given, else the shapes' own rig).
@@ -391,14 +391,14 @@ def export_gltf_files(
         and exported as one animation named after the frames file, frame f at f / fps.
     kernel, smoothing, mask : the retargeting's (`transfer_files`); they need a source.
     layout : layout name; default the landmarks JSON's ``"layout"``, if any.
-    drive : "points" (the rig above) or "muscles": the face with its muscles as morph
+    drive : "points" (the rig above); "muscles": the face with its muscles as morph
         targets and a jaw joint (`retarget.gltf.write_muscles_gltf`, no rig), the take's
-        feature motion solved into contractions (as `transfer_files` does).
-    muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the
-        mesh from its landmarks.
-        Drive "arkit": the face with ARKit's 52 shapes as named, sparse morph targets
+        feature motion solved into contractions (as `transfer_files` does); "arkit": the
+        face with ARKit's 52 shapes as named, sparse morph targets
         (`retarget.gltf.write_arkit_gltf`, no rig), the take's feature motion solved into
         their weights per frame (as `transfer_files` does).
+    muscles : with drive "muscles", a ``retarget muscles`` JSON; default: placed on the
+        mesh from its landmarks.
     arkit : with drive "arkit", a ``retarget arkit`` SHAPES.npz for this mesh; default:
         generated from the landmarks (through `rig` when given, `deformer` is not used).
     weights_out : with drive "arkit" and a source, the (F, 52) weights written here as Live

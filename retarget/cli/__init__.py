@@ -28,7 +28,10 @@ Subcommands (``retarget <command> --help`` for the details):
 ``export-gltf``
     The target mesh rigged (feature points as joints of a glTF skin, or morph targets
     for rigs with negative weights) and, given a source, the retargeted take animated,
-    as one glTF 2.0 binary (`retarget.gltf`).
+    as one glTF 2.0 binary (`retarget.gltf`); ``--drive muscles`` the face with its
+    muscles, ``--drive arkit`` with ARKit's 52 blendshapes as named morph targets animated
+    by the solved weights (``--weights-out``: also as Live Link Face CSV, as ``transfer
+    --drive arkit`` writes them).
 ``arkit``
     ARKit's 52 blendshapes generated on a face from its landmarks (`retarget.arkit`): one
     dense morph target per ARKit name, as an ``.npz``.
