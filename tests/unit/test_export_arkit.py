@@ -62,6 +62,7 @@ def files(tmp_path_factory):
                                            "layout": "ibug68"}))
     points = from_vertex_indices(f.landmarks68, len(f.vertices), "ibug68")
     rig = compute_weights("ellipsoid", f.vertices, f.faces, points, get_layout("ibug68"))
+    rig.save(d / "rig.npz")
     shapes = arkit_shapes(f.vertices, f.faces, points, "ibug68", rig)
     shapes.save(d / "shapes.npz")
     weights = arkit_take_weights()
@@ -71,7 +72,7 @@ def files(tmp_path_factory):
     np.save(d / "s0.npy", arkit_reference("ibug68").neutral)
     np.save(d / "s.npy", take.points)
     return {"dir": d, "face": f, "mesh": mesh, "shapes": shapes, "weights": weights,
-            "obj": d / "target.obj", "t0": d / "t0.json", "arkit": d / "shapes.npz",
+            "obj": d / "target.obj", "t0": d / "t0.json", "arkit": d / "shapes.npz", "rig": d / "rig.npz",
             "s0": d / "s0.npy", "s": d / "s.npy"}
 
 
@@ -211,27 +212,25 @@ def test_an_arkit_take_comes_back_as_its_weights(files, exported):
 
 
 def test_transfer_drive_arkit_makes_the_shapes_and_writes_the_weights(files, tmp_path, capsys):
-    """``transfer --drive arkit`` without --arkit makes the shapes (the shapes' own rig) and
-    writes the face they make with the solved weights, and the weights."""
+    """``transfer --drive arkit --rig RIG.npz`` makes the shapes through the rig (the fixture's:
+    the same shapes), solves the take and writes the face they make and the weights."""
     assert main(["transfer", "--target-mesh", str(files["obj"]), "--target-landmarks", str(files["t0"]),
                  "--source-neutral", str(files["s0"]), "--source-frames", str(files["s"]),
-                 "--out", str(tmp_path / "out.npy"), "--drive", "arkit",
+                 "--out", str(tmp_path / "out.npy"), "--drive", "arkit", "--rig", str(files["rig"]),
                  "--weights-out", str(tmp_path / "w.csv"), "--quiet"]) == 0
     assert "with arkit" in capsys.readouterr().out
-    curves = arkit_curves((tmp_path / "w.csv").read_text(), "csv", "w.csv")
+    curves = arkit_curves((tmp_path / "w.csv").read_text(), "csv", "w.csv", fps=30)
+    assert np.abs(curves.weights - files["weights"]).mean() < 0.005
     v0 = files["mesh"].vertices
     out = np.load(tmp_path / "out.npy")
     assert out.shape == (len(files["weights"]), len(v0), 3) and out.dtype == np.float32
-    # the default shapes have the same feature-point motion as the fixture's: the same weights
-    assert np.abs(curves.weights - files["weights"]).mean() < 0.005
-    jaw = K["jawOpen"]
-    frame = int(np.argmax(curves.weights[:, jaw]))
+    np.testing.assert_allclose(out, files["shapes"].posed(v0, curves.weights), atol=1e-4)
+    frame = int(np.argmax(curves.weights[:, K["jawOpen"]]))
     chin = files["face"].landmarks68[8]
     assert out[frame, chin, 1] - v0[chin, 1] < -1.0                   # the jaw opens by centimetres
 
 
 def test_refusals_name_the_problem(files, tmp_path, capsys):
-    d = files["dir"]
     shapes = files["shapes"]
     ArkitShapes(shapes.names, shapes.deltas[:, :100], shapes.at_points).save(tmp_path / "small.npz")
     np.savez(tmp_path / "names.npz", names=np.array(ARKIT_NAMES[::-1]), deltas=shapes.deltas,
@@ -246,7 +245,7 @@ def test_refusals_name_the_problem(files, tmp_path, capsys):
             (["--drive", "arkit", "--arkit", str(tmp_path / "names.npz")], "Apple's order"),
             (["--drive", "arkit", "--arkit", str(tmp_path / "none.npz")], "does not exist"),
             (["--drive", "arkit", "--deformer", "rbf"], "drop --deformer"),
-            (["--drive", "arkit", "--arkit", str(files["arkit"]), "--rig", str(d / "rig.npz")],
+            (["--drive", "arkit", "--arkit", str(files["arkit"]), "--rig", str(files["rig"])],
              "drop --rig, or drop --arkit"),
             (["--arkit", str(files["arkit"])], "need --drive arkit"),
             (["--weights-out", str(tmp_path / "w.csv"), *source], "need --drive arkit"),
