@@ -10,10 +10,9 @@
 // so the targets are alike here: the muscles', then the correctives.
 //
 // MUSCLE_TARGETS (defined by SkinnedFace.setMuscles) is the target count T; without it a
-// face has no muscles and this chunk is empty. Targets live in an RGBA32F texture, xyz of
-// target t for vertex v at texel v * MUSCLE_TARGETS + t, row-major, SKIN_TEXTURE_WIDTH
-// texels wide (a vertex's targets are adjacent: one fetch stream per vertex). Needs
-// skinning.glsl first.
+// face has no muscles and this chunk is empty. Targets are read as morph_targets.glsl
+// says (a vertex's T targets adjacent in an RGBA32F texture). Needs skinning.glsl and
+// morph_targets.glsl first.
 
 #if defined( MUSCLE_TARGETS )
 
@@ -30,15 +29,7 @@
 	vec3 musclePosition( const in int vertex, const in vec3 rest ) {
 
 		vec3 morphed = rest;
-		int first = vertex * MUSCLE_TARGETS;
-		ivec2 texel = ivec2( first % SKIN_TEXTURE_WIDTH, first / SKIN_TEXTURE_WIDTH );
-		for ( int t = 0; t < MUSCLE_TARGETS; t ++ ) {
-
-			morphed += muscleWeights[ t ] * texelFetch( muscleTargetTexture, texel, 0 ).xyz;
-			texel.x ++;
-			if ( texel.x == SKIN_TEXTURE_WIDTH ) texel = ivec2( 0, texel.y + 1 );
-
-		}
+		MORPH_TARGETS_ADD( morphed, muscleTargetTexture, muscleWeights, MUSCLE_TARGETS, vertex )
 
 		// Rodrigues: R r = r cos + (axis x r) sin + axis (axis . r)(1 - cos)
 		vec3 r = morphed - jawPivot;

@@ -55,7 +55,8 @@ export class App {
 	/**
 	 * The panels, each a view of part of the page.
 	 * @param {{bar: object, upload: object, marks: object, rig: object, mouth: object,
-	 *   paint: object, muscles: object, sources: object, live: object, exports: object}} panels
+	 *   paint: object, muscles: object, blendshapes: object, sources: object, live: object,
+	 *   exports: object}} panels
 	 */
 	setPanels( panels ) {
 
@@ -223,6 +224,7 @@ export class App {
 		this.rig.clear();
 		this.mouth.clear();
 		this.muscles.clear();
+		this.blendshapes.clear();
 		this.live.close();
 		this.sources.stopWebcam();
 		this.exports.setProject( null );
@@ -311,6 +313,7 @@ export class App {
 		this.face?.setHeatmap( null );
 		this.paint.setRig( null, null );
 		this.muscles.clear(); // placed anew from the new landmarks
+		this.blendshapes.clear(); // stale: made anew on request
 		this._showSavedLandmarks( this.project );
 		this.mouth.load( this.project, this.ticket() ).catch( ( error ) => this.errors.show( error ) );
 		this.rig.update();

@@ -17,6 +17,7 @@ import { LandmarkSet } from './model/LandmarkSet.js';
 import { RegionMask } from './model/RegionMask.js';
 import { ProjectSettings } from './net/ProjectSettings.js';
 import { $ } from './panels/dom.js';
+import { BlendshapesPanel } from './panels/BlendshapesPanel.js';
 import { ErrorBanner } from './panels/ErrorBanner.js';
 import { ExportPanel } from './panels/ExportPanel.js';
 import { LandmarksPanel } from './panels/LandmarksPanel.js';
@@ -59,6 +60,7 @@ app.setPanels( {
 	mouth: new MouthPanel( app ),
 	paint: new PaintPanel( app ),
 	muscles: new MusclesPanel( app ),
+	blendshapes: new BlendshapesPanel( app ),
 	sources: new PerformancePanel( app ),
 	live: new LivePanel( app ),
 	exports: new ExportPanel( app ),
@@ -104,6 +106,8 @@ window.addEventListener( 'keydown', async ( event ) => {
 window.addEventListener( 'beforeunload', () => {
 
 	if ( app.projectSettings.pending ) app.projectSettings.flush( { keepalive: true } );
+	if ( app.blendshapes.pending ) app.blendshapes.flush( { keepalive: true } );
+	if ( app.blendshapes.painter.saveState === 'unsaved' ) app.blendshapes.painter.flush( { keepalive: true } );
 
 } );
 
@@ -123,7 +127,7 @@ async function key( event ) {
 	}
 
 	if ( typing ) return;
-	if ( app.paint.key( event ) ) {
+	if ( app.paint.key( event ) || app.blendshapes.painter.key( event ) ) {
 
 		event.preventDefault();
 		return;

@@ -1,4 +1,4 @@
-import { ContractionDecoder, StreamDecoder } from './wire.js';
+import { ArkitWeightsDecoder, ContractionDecoder, StreamDecoder } from './wire.js';
 
 const BACKOFF_MIN_MS = 250;
 const BACKOFF_MAX_MS = 5000;
@@ -13,6 +13,8 @@ const LATENCY_FRAMES = 300;
  * - 'hello'   detail: the server's hello JSON ({type, project, n_points, layout, source});
  * - 'frame'   detail: a decoded frame (StreamDecoder.decode; its displacements view the
  *             message's bytes);
+ * - 'arkit'   detail: a decoded ARKit weight frame of a source driven by ARKit's 52
+ *   blendshapes (ArkitWeightsDecoder.decode; its weights view the message);
  * - 'contractions' detail: a decoded contraction frame of a source driven by muscles
  *             (ContractionDecoder.decode);
  * - 'message' detail: any other JSON the server sends (started, stopped, mask, pong, error);
@@ -40,6 +42,7 @@ export class StreamClient extends EventTarget {
 
 		this._decoder = new StreamDecoder();
 		this._contractions = new ContractionDecoder();
+		this._arkit = new ArkitWeightsDecoder();
 		this._socket = null;
 		this._closed = false;
 		this._attempts = 0; // connections lost since the last hello
@@ -195,13 +198,14 @@ export class StreamClient extends EventTarget {
 
 		if ( event.data instanceof ArrayBuffer ) {
 
-			const muscles = event.data.byteLength >= 4 && new DataView( event.data ).getUint32( 0, true ) === ContractionDecoder.MAGIC;
-			const frame = ( muscles ? this._contractions : this._decoder ).decode( event.data );
+			const magic = event.data.byteLength >= 4 ? new DataView( event.data ).getUint32( 0, true ) : 0;
+			const kind = magic === ContractionDecoder.MAGIC ? 'contractions' : magic === ArkitWeightsDecoder.MAGIC ? 'arkit' : 'frame';
+			const frame = ( kind === 'contractions' ? this._contractions : kind === 'arkit' ? this._arkit : this._decoder ).decode( event.data );
 			this._frames ++;
 			const now = performance.now();
 			this._arrivals.push( now );
 			this._forgetArrivalsBefore( now - FPS_WINDOW_MS );
-			this.dispatchEvent( new CustomEvent( muscles ? 'contractions' : 'frame', { detail: frame } ) );
+			this.dispatchEvent( new CustomEvent( kind, { detail: frame } ) );
 			return;
 
 		}

@@ -1,4 +1,4 @@
-import { MeshArraysDecoder, MuscleMorphsDecoder, RigWeightsDecoder, WeightEditEncoder } from './wire.js';
+import { ArkitShapesDecoder, MeshArraysDecoder, MuscleMorphsDecoder, RigWeightsDecoder, WeightEditEncoder } from './wire.js';
 
 /**
  * The server's REST API (server/routers/*.py), as promise-returning functions; binary
@@ -203,6 +203,29 @@ export const api = {
 
 	/** @returns {Promise<{method: string, n_vertices: number, n_joints: number, n_influences: number}>} */
 	rig: ( id ) => request( 'GET', `/api/projects/${ id }/rig` ),
+
+	/**
+	 * The project's ARKit shapes' state and the user's settings (GET .../arkit):
+	 * {names, state: 'missing'|'stale'|'ready', made_on, settings: {rig, gains, masks},
+	 * max_gain, rigs, job}.
+	 */
+	arkit: ( id ) => request( 'GET', `/api/projects/${ id }/arkit` ),
+
+	/** Save the ARKit settings {rig, gains, masks} (PUT .../arkit); answers as GET does. */
+	putArkit: ( id, settings, { keepalive = false } = {} ) => request( 'PUT', `/api/projects/${ id }/arkit`, { json: settings, keepalive } ),
+
+	/** Make the 52 shapes again on `rig` (POST .../arkit); answers the job. */
+	makeArkit: ( id, rig ) => request( 'POST', `/api/projects/${ id }/arkit`, { json: { rig } } ),
+
+	/**
+	 * The project's ARKit shapes (the "RTAK" format of server/wire.py), decoded sparse.
+	 * @returns {Promise<{nVertices: number, names: string[], shapes: object[]}>}
+	 */
+	async arkitShapes( id ) {
+
+		return new ArkitShapesDecoder().decode( await request( 'GET', `/api/projects/${ id }/arkit/shapes`, { binary: true } ) );
+
+	},
 
 	/**
 	 * The project's muscles as geometry (GET .../muscles: `MuscleFace.to_json` plus names,

@@ -81,6 +81,17 @@ export class LivePanel {
 			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
 
 		} );
+		stream.addEventListener( 'arkit', ( event ) => {
+
+			if ( stream !== this.stream || ! app.face?.arkit ) return; // the shapes are loading
+			const frame = event.detail;
+			app.face.setArkitWeights( frame.weights );
+			app.face.setHeadRotation( frame.headRotation );
+			app.blendshapes.show( frame.weights );
+			stream.markApplied( frame );
+			if ( frame.flags & StreamDecoder.FLAG_LAST ) this._setStreaming( false );
+
+		} );
 		stream.addEventListener( 'message', ( event ) => {
 
 			if ( stream !== this.stream ) return;
@@ -162,7 +173,7 @@ export class LivePanel {
 		if ( ! project ) return 'Create a project first.';
 		if ( ! project.mesh ) return 'Upload a mesh first.';
 		if ( ! project.landmarks ) return `Place and save the ${ landmarks.layout?.n_points ?? '' } landmarks first (${ landmarks.placedCount } placed).`;
-		if ( ! project.rig && this.app.sources.drive !== 'muscles' ) return 'Compute the rig first (or drive by muscles): the stream moves the feature points, the rig carries them to the skin.';
+		if ( ! project.rig && this.app.sources.drive === 'points' ) return 'Compute the rig first (or drive by muscles or ARKit shapes): the stream moves the feature points, the rig carries them to the skin.';
 		return '';
 
 	}
@@ -203,6 +214,7 @@ export class LivePanel {
 		if ( ! this.stream ) this.connect();
 		const drive = this.app.sources.drive;
 		if ( drive === 'muscles' ) await this.app.muscles.load();
+		if ( drive === 'arkit' ) await this.app.blendshapes.load();
 		const start = await this.app.sources.startMessage();
 		this.sendMask();
 		this.stream.send( { type: 'drive', drive } ); // a new stream (new landmarks) knows none yet

@@ -74,12 +74,13 @@ export class PerformancePanel {
 	}
 
 	/**
-	 * What drives the face: 'points' (the feature points, through the rig) or 'muscles'.
-	 * @returns {'points'|'muscles'}
+	 * What drives the face: 'points' (the feature points, through the rig), 'muscles' or
+	 * 'arkit' (ARKit's 52 blendshapes, the Blendshapes panel's).
+	 * @returns {'points'|'muscles'|'arkit'}
 	 */
 	get drive() {
 
-		return $( 'drive-muscles' ).checked ? 'muscles' : 'points';
+		return $( 'drive-muscles' ).checked ? 'muscles' : $( 'drive-arkit' ).checked ? 'arkit' : 'points';
 
 	}
 
@@ -88,17 +89,18 @@ export class PerformancePanel {
 	 * (placed by the server on first need), then the stream (a playing source from its
 	 * next frame) is told, and the choice saved with the project. A failure goes back to
 	 * the feature points and rejects.
-	 * @param {'points'|'muscles'} drive
+	 * @param {'points'|'muscles'|'arkit'} drive
 	 */
 	async setDrive( drive ) {
 
 		const app = this.app;
-		$( drive === 'muscles' ? 'drive-muscles' : 'drive-points' ).checked = true;
+		$( `drive-${ drive }` ).checked = true;
 		this.expressions.setVisible( drive === 'muscles' );
 		app.live.update();
 		try {
 
 			if ( drive === 'muscles' ) await app.muscles.load();
+			if ( drive === 'arkit' ) await app.blendshapes.load();
 
 		} catch ( error ) {
 
@@ -126,7 +128,8 @@ export class PerformancePanel {
 		this.app.conditioning.load( project?.settings?.conditioning ?? null );
 		this.setLayout( this.app.layouts?.find( ( l ) => l.name === project?.landmarks?.layout ) ?? ( project ? this.app.landmarks.layout : null ) );
 		if ( ! project ) return;
-		const drive = project.settings?.drive === 'muscles' && project.landmarks && this.app.face ? 'muscles' : 'points';
+		const saved = project.settings?.drive;
+		const drive = ( saved === 'muscles' || saved === 'arkit' ) && project.landmarks && this.app.face ? saved : 'points';
 		await Promise.all( [ this.list.refresh(), this.setDrive( drive ).catch( ( error ) => this.app.errors.show( error ) ) ] );
 
 	}

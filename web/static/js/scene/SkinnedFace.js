@@ -22,7 +22,7 @@ import { redraw } from './Viewer.js';
 
 const MAX_JOINTS = 4096; // the displacement texture is one row
 const MAX_VERTICES = 2 ** 24; // vertex indices are stored in float32 textures, exact up to 2^24
-const SHADER_FILES = [ 'skinning.glsl', 'muscles.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 'normal_pass.vert', 'texel_pass.frag', 'face.vert', 'face.frag' ];
+const SHADER_FILES = [ 'skinning.glsl', 'morph_targets.glsl', 'muscles.glsl', 'arkit.glsl', 'vertex_texels.glsl', 'skin_pass.vert', 'normal_pass.vert', 'texel_pass.frag', 'face.vert', 'face.frag' ];
 
 /**
  * A face mesh skinned on the GPU by its feature points (Dutreve et al. 2008, §3.1: feature
@@ -43,6 +43,7 @@ const SHADER_FILES = [ 'skinning.glsl', 'muscles.glsl', 'vertex_texels.glsl', 's
  * Driven by muscles instead (`setMuscles`, then `setContractions`), the same skinning
  * pass plays the muscles' morph targets and jaw joint (web/shaders/muscles.glsl): a pose
  * updates only T weights and an angle, and `setDisplacements` goes back to the rig.
+ * Likewise ARKit's 52 blendshapes (`setArkit`, then `setArkitWeights`; arkit.glsl).
  *
  * A mesh with uv may be drawn with its base-colour texture (`setTexture`, `setTextured`);
  * the heat map is drawn over it all the same.
@@ -126,7 +127,13 @@ export class SkinnedFace {
 			jawPivot: { value: new Vector3() },
 			jawAxis: { value: new Vector3( 1, 0, 0 ) },
 			jawAngle: { value: 0 },
+			// arkit.glsl's, used once setArkit defines ARKIT_TARGETS
+			arkitDrive: { value: false },
+			arkitTargetTexture: { value: null },
+			arkitWeights: { value: new Float32Array( 1 ) },
 		};
+		/** @type {import('./ArkitMorphs.js').ArkitMorphs|null} ARKit's shapes (`setArkit`). */
+		this.arkit = null;
 		/** @type {import('../model/PlayedMuscles.js').PlayedMuscles|null} the muscles (`setMuscles`). */
 		this.muscles = null;
 
@@ -289,9 +296,9 @@ export class SkinnedFace {
 	 */
 	setDisplacements( displacements ) {
 
-		if ( this._skinUniforms.muscleDrive.value ) {
+		if ( this._skinUniforms.muscleDrive.value || this._skinUniforms.arkitDrive.value ) {
 
-			this._skinUniforms.muscleDrive.value = false; // the feature points drive again
+			this._skinUniforms.muscleDrive.value = this._skinUniforms.arkitDrive.value = false; // the feature points drive again
 			this._version ++;
 			redraw( this.mesh );
 
@@ -389,6 +396,45 @@ export class SkinnedFace {
 		this.muscles.weights( contractions, uniforms.muscleWeights.value );
 		uniforms.jawAngle.value = this.muscles.jawAngle( contractions );
 		uniforms.muscleDrive.value = true;
+		uniforms.arkitDrive.value = false;
+		this._version ++;
+		redraw( this.mesh );
+
+	}
+
+	/**
+	 * Set (or with null, remove) ARKit's 52 blendshapes, played from then on by
+	 * `setArkitWeights`; the morphs own their texture (the face does not dispose it).
+	 * @param {import('./ArkitMorphs.js').ArkitMorphs|null} morphs - for this mesh.
+	 */
+	setArkit( morphs ) {
+
+		const uniforms = this._skinUniforms;
+		if ( morphs !== null && morphs.nVertices !== this.nVertices ) throw new RangeError( `SkinnedFace.setArkit: the shapes are for ${ morphs.nVertices } vertices, the face has ${ this.nVertices }.` );
+		this.arkit = morphs;
+		uniforms.arkitDrive.value = false;
+		uniforms.arkitTargetTexture.value = morphs?.texture ?? null;
+		uniforms.arkitWeights.value = new Float32Array( morphs?.nTargets ?? 1 );
+		this._setDefine( this._rigDefine );
+		this._version ++;
+		redraw( this.mesh );
+
+	}
+
+	/**
+	 * Pose the face by ARKit's shapes (`setArkit` first): a weight frame's or the
+	 * Blendshapes panel's sliders; `setDisplacements` goes back to the feature points.
+	 * Also call it after painting a fix, so the passes run again.
+	 * @param {ArrayLike<number>} weights - (52) ARKit's order.
+	 */
+	setArkitWeights( weights ) {
+
+		if ( this.arkit === null ) throw new Error( 'SkinnedFace.setArkitWeights: the face has no ARKit shapes (setArkit first).' );
+		const uniforms = this._skinUniforms;
+		if ( weights.length !== this.arkit.nTargets ) throw new RangeError( `SkinnedFace.setArkitWeights: expected ${ this.arkit.nTargets } weights; got ${ weights.length }.` );
+		uniforms.arkitWeights.value.set( weights );
+		uniforms.arkitDrive.value = true;
+		uniforms.muscleDrive.value = false;
 		this._version ++;
 		redraw( this.mesh );
 
@@ -526,7 +572,7 @@ export class SkinnedFace {
 
 	}
 
-	/** The rig's define on both materials, and the muscles' on the skinning pass. */
+	/** The rig's define on both materials, and the muscles' and ARKit's on the skinning pass. */
 	_setDefine( define ) {
 
 		this._rigDefine = define;
@@ -534,7 +580,9 @@ export class SkinnedFace {
 		this.mesh.material.defines = defines;
 		this.mesh.material.needsUpdate = true;
 		const skin = this._passes.skinMaterial;
-		skin.defines = this.muscles === null ? defines : { ...defines, MUSCLE_TARGETS: this.muscles.nTargets };
+		skin.defines = { ...defines };
+		if ( this.muscles !== null ) skin.defines.MUSCLE_TARGETS = this.muscles.nTargets;
+		if ( this.arkit !== null ) skin.defines.ARKIT_TARGETS = this.arkit.nTargets;
 		skin.needsUpdate = true;
 
 	}

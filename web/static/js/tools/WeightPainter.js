@@ -27,6 +27,9 @@ const SPACING = 0.25; // brush radii between dabs along a stroke
  * orbits; Ctrl+click picks the feature point nearest the click. Picking is the landmark
  * picker's (MeshSurface, three-mesh-bvh on the rest pose).
  *
+ * The same brushes paint a one-joint mask instead of the rig (`setTarget`: the Blendshapes
+ * panel's per-shape fixes), with the target's own display and saving.
+ *
  * Dispatches 'change' whenever what a panel shows changes (joint, brush, history, save).
  */
 export class WeightPainter extends BrushSettings {
@@ -50,6 +53,7 @@ export class WeightPainter extends BrushSettings {
 		/** @type {PaintedRig|null} */
 		this.rig = null;
 		this._mirrorOf = null; // joint -> its mirror joint, from the layout
+		this._target = null; // {show, save} of a mask painted instead of the rig (setTarget)
 		this._plane = null; // the face's symmetry plane, mesh frame
 		this._saves = new SaveQueue( ( vertices, options ) => this._send( vertices, options ), () => this._changed() );
 		this._stroke = null; // {pointerId, last, paint: PaintStroke}
@@ -88,6 +92,7 @@ export class WeightPainter extends BrushSettings {
 		this.face = face;
 		this.projectId = projectId;
 		this._neighbours = null;
+		this._target = null;
 		if ( ! face || ! weights ) {
 
 			this.rig = null;
@@ -103,6 +108,28 @@ export class WeightPainter extends BrushSettings {
 		this._mirrorOf = mirror;
 		this._plane = mirror ? this.picker.symmetryPlane( mirror ) : null;
 		if ( this.joint >= weights.nJoints ) this.joint = 0;
+		const radius = face.mesh.geometry.boundingSphere.radius;
+		if ( ! ( this.radius > radius * 1e-3 && this.radius < radius ) ) this.radius = 0.08 * radius;
+		this._changed();
+
+	}
+
+	/**
+	 * Paint a mask instead of a rig: `target.rig` is a PaintedRig of one joint and one
+	 * influence per vertex (the mask's value), painted with the same brushes, cursor and
+	 * undo; each dab calls `target.show( vertices )` and saving `target.save( vertices,
+	 * {keepalive} )`. Null detaches (unsaved dabs are dropped: `flush` first).
+	 * @param {import('../scene/SkinnedFace.js').SkinnedFace|null} face
+	 * @param {{rig: PaintedRig, show: function(ArrayLike<number>): void,
+	 *   save: function(ArrayLike<number>, object): Promise<void>}|null} target
+	 */
+	setTarget( face, target ) {
+
+		this.setRig( target ? face : null, null, null, null, null );
+		if ( ! target ) return;
+		this._target = target;
+		this.rig = target.rig;
+		this.joint = 0;
 		const radius = face.mesh.geometry.boundingSphere.radius;
 		if ( ! ( this.radius > radius * 1e-3 && this.radius < radius ) ) this.radius = 0.08 * radius;
 		this._changed();
@@ -189,7 +216,7 @@ export class WeightPainter extends BrushSettings {
 	async reset( joints ) {
 
 		const rig = this.rig, id = this.projectId;
-		if ( ! rig ) return;
+		if ( ! rig || this._target ) return; // a mask's target resets itself
 		await this.flush();
 		if ( this._saves.pending ) throw new ApiError( 0, `Cannot reset before the painted weights are saved: ${ this.saveError }` );
 		const info = await api.resetRigWeights( id, joints, rig.version );
@@ -348,7 +375,7 @@ export class WeightPainter extends BrushSettings {
 
 		}
 
-		if ( changed.size ) this.face.updateWeights( Int32Array.from( changed ), this.rig.indices, this.rig.weights );
+		if ( changed.size ) this._show( Int32Array.from( changed ) );
 
 	}
 
@@ -369,15 +396,24 @@ export class WeightPainter extends BrushSettings {
 	_changedRows( vertices ) {
 
 		if ( ! vertices ) return false;
-		this.face.updateWeights( vertices, this.rig.indices, this.rig.weights );
+		this._show( vertices );
 		this._saves.add( vertices );
 		return true;
+
+	}
+
+	/** Show the painted rows of `vertices` on the face (or the mask's target). */
+	_show( vertices ) {
+
+		if ( this._target ) this._target.show( vertices );
+		else this.face.updateWeights( vertices, this.rig.indices, this.rig.weights );
 
 	}
 
 	/** Save the rows of `vertices` (the save queue's `send`); the rig takes the new version. */
 	async _send( vertices, { keepalive } ) {
 
+		if ( this._target ) return this._target.save( vertices, { keepalive } );
 		const rig = this.rig;
 		const info = await api.patchRigWeights( this.projectId, rig, vertices, rig.rows( vertices ), { keepalive } );
 		if ( rig === this.rig ) rig.setInfo( info );
