@@ -21,7 +21,7 @@ import numpy as np
 
 from retarget.gltf.glb import ARRAY_BUFFER, GlbBuilder
 
-__all__ = ["add_morph_targets", "kept_rows", "sparse_is_smaller", "target_accessor"]
+__all__ = ["add_morph_targets", "index_type", "kept_rows", "sparse_is_smaller", "target_accessor"]
 
 
 def kept_rows(offsets: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
