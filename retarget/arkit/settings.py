@@ -27,7 +27,6 @@ Every refusal is a `RetargetError` naming the shape, the field and the value.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,8 +84,8 @@ class ArkitSettings:
             raise RetargetError(f"rig must be one of {', '.join(map(repr, RIGS))}; got {rig!r}")
         gains = np.ones(len(ARKIT_NAMES))
         for name, gain in _named(data.get("gains") or {}, "gains").items():
-            if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not math.isfinite(gain) \
-                    or not 0.0 <= gain <= MAX_GAIN:
+            # compared before any conversion: NaN fails, and so does an int too large for a float
+            if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not 0.0 <= gain <= MAX_GAIN:
                 raise RetargetError(f"gain of {name} must be a number in [0, {MAX_GAIN:g}]; got {gain!r}")
             gains[_INDEX[name]] = float(gain)
         fixes = {}
@@ -141,17 +140,18 @@ def _fix(name: str, mask, n_vertices: int | None) -> ShapeFix:
                             "it needs one value per vertex")
     if not all(isinstance(v, int) and not isinstance(v, bool) for v in vertices):
         raise RetargetError(f"mask of {name}: vertices must be integer vertex indices")
-    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in values):
-        raise RetargetError(f"mask of {name}: values must be numbers in [0, 1]")
+    # checked before numpy sees them: NaN fails the comparison, a huge int is out of range
+    bad = next((x for x in values if isinstance(x, bool) or not isinstance(x, (int, float)) or not 0 <= x <= 1),
+               None)
+    if bad is not None:
+        raise RetargetError(f"mask of {name}: values must be numbers in [0, 1]; got {bad!r}")
+    limit = min(n_vertices, 2**31) if n_vertices is not None else 2**31
+    bad = next((v for v in vertices if not 0 <= v < limit), None)
+    if bad is not None:
+        raise RetargetError(f"mask of {name}: vertex {bad} is not one of the mesh's {n_vertices} vertices")
     v = np.asarray(vertices, dtype=np.int64)
     x = np.asarray(values, dtype=np.float64)
-    if len(v) and (v.min() < 0 or (n_vertices is not None and v.max() >= n_vertices)):
-        bad = int(v.min()) if v.min() < 0 else int(v.max())
-        raise RetargetError(f"mask of {name}: vertex {bad} is not one of the mesh's {n_vertices} vertices")
     if len(v) > 1 and not (np.diff(v) > 0).all():
         raise RetargetError(f"mask of {name}: vertices must be ascending and distinct")
-    if not (np.isfinite(x).all() and (x >= 0).all() and (x <= 1).all()):
-        bad = x[~(np.isfinite(x) & (x >= 0) & (x <= 1))][0]
-        raise RetargetError(f"mask of {name}: values must be in [0, 1]; got {bad!r}")
     keep = x < 1  # a vertex at 1 keeps the shape whole: not stored
     return ShapeFix(v[keep], x[keep].astype(np.float32))

@@ -8,7 +8,8 @@ running job or null}``. ``stale``: the mesh or landmarks changed since the shape
 (or the settings ask for another rig than they were made on, or the project's rig
 changed under shapes made on it).
 
-``PUT`` stores the settings (the whole JSON form, checked: a gain out of [0, 2] or not a
+``PUT`` stores the settings (a running source driven by ARKit takes the new gains from
+its next frame; the whole JSON form, checked: a gain out of [0, 2] or not a
 number, an unknown shape name, a mask whose vertices and values differ in length or whose
 vertex is not the mesh's are refused with 422 and the reason) and answers as GET does.
 Painted masks belong to the mesh: a later mesh of another vertex count drops those that
@@ -40,7 +41,7 @@ from retarget.arkit.drive import ArkitDrive
 from retarget.arkit.settings import MAX_GAIN, RIGS
 from retarget.errors import RetargetError
 from retarget.landmarks import landmarks_from_json
-from server.deps import IsolationDep, JobsDep, MeshDep, ProjectDep, StoreDep
+from server.deps import HubDep, IsolationDep, JobsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.jobs import JobBusy
 from server.readers import arkit
@@ -99,7 +100,7 @@ def get_arkit(project: ProjectDep, store: StoreDep, jobs: JobsDep) -> dict:
 
 
 @router.put("")
-def put_arkit(project: ProjectDep, store: StoreDep, jobs: JobsDep,
+def put_arkit(project: ProjectDep, store: StoreDep, jobs: JobsDep, hub: HubDep,
               body: dict[str, Any] = Body(examples=[{"rig": "default", "gains": {"jawOpen": 1.2},
                                                      "masks": {"eyeBlinkLeft": {"vertices": [10, 11],
                                                                                 "values": [0.0, 0.5]}}}])) -> dict:
@@ -107,6 +108,9 @@ def put_arkit(project: ProjectDep, store: StoreDep, jobs: JobsDep,
     mesh = project.get("mesh")
     settings = ArkitSettings.from_json(body, mesh["n_vertices"] if mesh else None)
     store.put_arkit_settings(project["id"], settings.to_json())
+    playing = getattr(hub.source(project["id"]), "drive", None)
+    if isinstance(playing, ArkitDrive):
+        playing.set_gains(settings.gains)
     return _answer(store, store.get(project["id"]), jobs, settings)
 
 

@@ -1,7 +1,7 @@
 """A project as a glTF 2.0 binary, and a project from one.
 
     GET  /api/projects/{id}/export.glb[?takes=<id>,<id>|all][&settings=<JSON>][&regions=<a>,<b>]
-                                       [&drive=points|muscles]
+                                       [&drive=points|muscles|arkit]
     POST /api/projects/import          multipart: file (.glb), name (optional)
 
 The export (`retarget.gltf.export_gltf`) holds the project's mesh, landmarks and the rig
@@ -15,7 +15,11 @@ named after the project. A plain request: the sample face with a 30 s take at 30
 exports in well under a second. With ``drive=muscles`` it holds the project's muscles
 instead of the rig (`retarget.gltf.export_muscles_gltf`: a morph target per muscle and a
 jaw joint; the rig is not needed), each take's feature motion solved into contractions by
-the muscle IK (`retarget.muscles.drive.MuscleDrive`, from the take's first frame).
+the muscle IK (`retarget.muscles.drive.MuscleDrive`, from the take's first frame). With
+``drive=arkit`` it holds the project's ARKit shapes (`server.routers.arkit`: made, with the
+user's painted fixes) as 52 named morph targets (`retarget.gltf.export_arkit_gltf`), each
+take solved into their weights with the user's gains as the stream solves it
+(`retarget.arkit.ArkitDrive`); 409 when the shapes are not made for the current landmarks.
 
 The import reads a .glb this app exported (`retarget.gltf.read_gltf`) into a new
 project: its mesh (stored as a mesh-only .glb, `retarget.gltf.export_mesh_gltf`), its
@@ -35,9 +39,10 @@ from typing import Literal
 
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile, status
 
+from retarget.arkit.clip import ArkitClip
 from retarget.clips import ContractionClip
 from retarget.errors import RetargetError
-from retarget.gltf import export_gltf, export_muscles_gltf
+from retarget.gltf import export_arkit_gltf, export_gltf, export_muscles_gltf
 from retarget.landmarks import landmarks_from_json
 from retarget.muscles.drive import MuscleDrive
 from retarget.muscles.morphs import muscle_morphs
@@ -47,6 +52,7 @@ from server.errors import responses
 from server.limits import body_limit
 from server.readers import imported_project
 from server.routers.meshes import read_capped, upload_extension
+from server.routers.arkit import project_drive, project_settings
 from server.routers.muscles import project_muscles
 
 router = APIRouter(tags=["exports"])
@@ -60,8 +66,8 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                    takes: str = Query(default="", description="take ids, comma-separated, or 'all'"),
                    settings: str = Query(default="", description="ConditionSettings JSON"),
                    regions: str = Query(default="", description="regions that move, comma-separated"),
-                   drive: Literal["points", "muscles"] = Query(
-                       default="points", description="points: the rig; muscles: the muscles"),
+                   drive: Literal["points", "muscles", "arkit"] = Query(
+                       default="points", description="points: the rig; muscles: the muscles; arkit: ARKit's 52 shapes"),
                    ) -> Response:
     """The project rigged and animated as a .glb download (see the module docstring)."""
     landmarks = store.landmarks(project["id"])
@@ -83,7 +89,20 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                                    conditioning, regions=moving))
         except RetargetError as exc:
             raise RetargetError(f"take {info['name']!r}: {exc}") from exc
-    if drive == "muscles":
+    if drive == "arkit":
+        try:
+            arkit = project_drive(store, project["id"])
+        except RetargetError as exc:
+            raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
+        solved = []
+        for clip in clips:
+            arkit.reset()
+            solved.append(ArkitClip(clip.name, arkit.weights_frames(clip.displacements), clip.times))
+        shapes = arkit.shapes
+        fixed = type(shapes)(shapes.names, project_settings(store, project).fixed_deltas(shapes.deltas),
+                             shapes.at_points)
+        data = export_arkit_gltf(mesh, fixed, solved)
+    elif drive == "muscles":
         model, _ = project_muscles(store, project, mesh)
         muscles = MuscleDrive(model, points)
         solved = []

@@ -14,8 +14,7 @@ from retarget.sample_face import demo_points
 from server.players import DemoPlayer
 from server.store import ProjectStore
 from server.wire import (ARKIT_WEIGHTS_MAGIC, FLAG_HEAD_ROTATION, FLAG_LAST, FLAG_LOST_POINTS,
-                         decode_arkit_shapes, decode_arkit_weights, encode_arkit_weights, encode_frame,
-                         weights_json)
+                         decode_arkit_shapes, decode_arkit_weights, encode_arkit_weights, weights_json)
 from tests.api.test_api_muscles import _sample
 from tests.api.test_wire import bits, decode_in_node
 from tests.waits import wait_job
@@ -212,6 +211,28 @@ def test_javascript_decodes_weight_frames_and_shapes(client, sample_id, made, tm
     assert "ArkitShapesDecoder" in decode_in_node(tmp_path, [data[:-4]], "decode-arkit-shapes")[0]["error"]
 
 
+def test_export_and_a_playing_source_follow_the_arkit_settings(client, sample_id, made):
+    url = f"/api/projects/{sample_id}/arkit"
+    answer = client.get(f"/api/projects/{sample_id}/export.glb", params={"drive": "arkit"})
+    assert answer.status_code == 200, answer.text
+    data = answer.content
+    length, kind = np.frombuffer(data, "<u4", 2, 12)
+    document = json.loads(data[20:20 + length])
+    assert kind == 0x4E4F534A and document["meshes"][0]["extras"]["targetNames"] == list(ARKIT_NAMES)
+    settings = client.get(url).json()["settings"]
+    with client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "drive", "drive": "arkit"})
+        ws.send_json({"type": "start", "source": "demo", "fps": 5})
+        assert _next_bytes(ws)[:4] == ARKIT_WEIGHTS_MAGIC
+        gains = {**settings["gains"], "jawOpen": 0.0}
+        assert client.put(url, json={**settings, "gains": gains}).status_code == 200
+        playing = client.app.state.hub.source(sample_id).drive
+        assert playing.gains[ARKIT_NAMES.index("jawOpen")] == 0.0  # from its next frame
+        ws.send_json({"type": "stop"})
+    client.put(url, json=settings)
+
+
 def test_new_landmarks_make_the_shapes_stale(client, sample_id, made):
     """Saves the sample's landmarks again, which drops its rig (no later test needs it)."""
     url = f"/api/projects/{sample_id}/arkit"
@@ -229,4 +250,5 @@ def test_new_landmarks_make_the_shapes_stale(client, sample_id, made):
     bare = client.post("/api/projects", json={"name": "no arkit"}).json()["id"]
     assert client.post(f"/api/projects/{bare}/arkit").status_code == 409
     assert client.get(f"/api/projects/{bare}/arkit").json()["state"] == "missing"
-    assert encode_frame(np.zeros((68, 3)), frame_index=0, source_time=0.0)[:4] == b"RTDF"
+    answer = client.get(f"/api/projects/{sample_id}/export.glb", params={"drive": "arkit"})
+    assert answer.status_code == 409 and "stale" in answer.json()["detail"]
