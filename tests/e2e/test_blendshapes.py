@@ -51,8 +51,10 @@ def test_generate_pose_gain_and_drive_by_arkit(server, page):
     expected = 0.8 * deltas[names.index("jawOpen")]
     assert np.abs(expected).max() > 0.05 * diagonal
     assert np.abs(drawn - expected).max() < TOLERANCE * diagonal
-    page.wait_for_timeout(200)  # a frame drawn
-    assert page.locator(_CANVAS).screenshot() != before
+    deadline = time.monotonic() + scaled_ms(10_000) / 1000  # the next frame drawn (SwiftShader: a few a second)
+    while page.locator(_CANVAS).screenshot() == before:
+        assert time.monotonic() < deadline, "the pixels did not change"
+        page.wait_for_timeout(100)
 
     # a gain is saved with the project and shown again after a reload
     gain = page.locator("#arkit-sliders input[data-gain='jawOpen']")

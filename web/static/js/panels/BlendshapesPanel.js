@@ -104,6 +104,8 @@ export class BlendshapesPanel {
 		if ( ! current() ) return;
 		this.clear( { keepSettings: true } );
 		await this.load();
+		// a source driven by ARKit solves with the shapes it started with: new ones from now
+		if ( app.sources.drive === 'arkit' ) app.stream?.send( { type: 'drive', drive: 'arkit' } );
 
 	}
 
