@@ -39,6 +39,11 @@ __all__ = [
     "assign_markers",
     "MarkerTracker",
     "track_marker_video",
+    "ring_template",
+    "ring_score",
+    "score_peaks",
+    "ring_contrast",
+    "RingTracks",
 ]
 
 _THRESHOLD_BLOCK = 31      # px, adaptive-threshold neighbourhood (a few marker diameters)
@@ -423,6 +428,290 @@ def track_marker_video(
     points[..., 1] = height - points[..., 1]
     meta["lost_share"] = float(np.isnan(points[..., 0]).mean())
     return Take(points, lay.point_names, fps, layout=lay.name, source="markers", meta=meta)
+
+
+# ---------------------------------------------------------------------------------------
+# Markers a few pixels across, no layout: matched filter, detection near predictions,
+# births and a backward pass (issue 17 §1: other people's webcam footage).
+
+_SCORE_RADII = (2.0, 2.6, 3.4, 4.4)   # px, outer ring radii of the matched filter's templates
+_BIRTH_SCORE = 0.55    # correlation that starts a track, with a dot brighter than its ring
+_MIN_DOT_CONTRAST = 8.0  # grey levels by which a new marker's dot outshines its ring all round
+_KEEP_SCORE = 0.25     # correlation of a peak that keeps a track near its prediction
+_SNAP = 3.0            # px, how far from its prediction a tracked marker's peak may lie
+_REACQUIRE = 4.0       # px, the same for a marker lost for a while
+_NEIGHBOURS = 6        # markers whose motion predicts a marker's
+_MIN_SPREAD = 12.0     # grey levels: standard deviation in a template's window below which
+                       # nothing there is taken for a marker (noise on flat background)
+
+
+def ring_template(ring_radius: float, *, dot_share: float = 0.5, skin_reach: float = 1.6,
+                  blur: float = 0.6) -> np.ndarray:
+    """(P, P) float32 picture of a ring marker seen head-on: a white dot of
+    `dot_share` x `ring_radius` inside a black ring of `ring_radius` px on skin out to
+    `skin_reach` x `ring_radius`, supersampled 8x8 per pixel and blurred by `blur` px
+    (the camera's own blur), for `ring_score`."""
+    import cv2
+
+    n = int(np.ceil(ring_radius * skin_reach)) + 1
+    ss = 8
+    ax = (np.arange((2 * n + 1) * ss) + 0.5) / ss - (n + 0.5)
+    r = np.hypot(ax[None, :], ax[:, None])
+    v = np.where(r < dot_share * ring_radius, 1.0, np.where(r < ring_radius, 0.0, 0.6))
+    t = v.reshape(2 * n + 1, ss, 2 * n + 1, ss).mean((1, 3)).astype(np.float32)
+    return cv2.GaussianBlur(t, (0, 0), blur)
+
+
+def ring_score(gray: np.ndarray, radii=_SCORE_RADII, min_spread: float = _MIN_SPREAD) -> np.ndarray:
+    """(h, w) float32 matched-filter response to ring markers in a grey image (h, w) uint8:
+    at each pixel the highest normalised cross-correlation (``TM_CCOEFF_NORMED``, -1..1)
+    with `ring_template` over the ring radii `radii` (px), -1 where a template does not
+    fit or where the window's grey levels spread (standard deviation) less than
+    `min_spread`. Normalised correlation ignores the local gain and offset, so uneven
+    light leaves it be; its peak lies on a marker's centre within about 0.15 px on the
+    hard material (blur, noise, JPEG)."""
+    return _ring_scores(_gray(gray), radii, min_spread)[0]
+
+
+def _ring_scores(g: np.ndarray, radii, min_spread: float):
+    """(score (h, w) float32, radius (h, w) float32: the ring radius of the best template)."""
+    import cv2
+
+    g = g.astype(np.float32)
+    best = np.full(g.shape, -1.0, np.float32)
+    radius = np.zeros(g.shape, np.float32)
+    for r in radii:
+        t = ring_template(r)
+        n = t.shape[0] // 2
+        m = np.nan_to_num(cv2.matchTemplate(g, t, cv2.TM_CCOEFF_NORMED), nan=-1.0)
+        # correlation is scale-free: on flat background, noise alone can look like a ring;
+        # a marker's window holds a white dot and a black ring, so a wide spread of grey
+        mean = cv2.boxFilter(g, -1, t.shape, normalize=True, borderType=cv2.BORDER_REPLICATE)
+        sq = cv2.boxFilter(g * g, -1, t.shape, normalize=True, borderType=cv2.BORDER_REPLICATE)
+        spread = np.sqrt(np.maximum(sq - mean * mean, 0.0))[n:n + m.shape[0], n:n + m.shape[1]]
+        m = np.where(spread >= min_spread, m, -1.0)
+        view = best[n:n + m.shape[0], n:n + m.shape[1]]
+        better = m > view
+        view[better] = m[better]
+        radius[n:n + m.shape[0], n:n + m.shape[1]][better] = r
+    return best, radius
+
+
+def ring_contrast(gray: np.ndarray, centres: np.ndarray, ring_radius: np.ndarray) -> np.ndarray:
+    """(K,) float32 grey levels by which each marker's dot centre outshines the brightest
+    of eight points round its ring (at 0.8 x `ring_radius` (K,) px from centres (K, 2));
+    positive all round only for a bright spot in a dark ring, not for an eye corner or a
+    nostril's edge, which `ring_score` may still like."""
+    import cv2
+
+    g = _gray(gray)
+    c = np.asarray(centres, dtype=np.float32).reshape(-1, 2)
+    if len(c) == 0:
+        return np.zeros(0, np.float32)
+    angle = np.arange(8) * (np.pi / 4)
+    ring = c[:, None] + 0.8 * np.asarray(ring_radius, np.float32).reshape(-1, 1, 1) * np.stack(
+        [np.cos(angle), np.sin(angle)], 1)[None].astype(np.float32)
+    where = np.concatenate([c[:, None], ring], 1)                       # (K, 9, 2)
+    values = cv2.remap(g.astype(np.float32), where[..., 0], where[..., 1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+    return values[:, 0] - values[:, 1:].max(1)
+
+
+def score_peaks(score: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """(centres (K, 2) float64 pixels x right y down, values (K,) float32): the local
+    maxima (3x3) of a `ring_score` map over `threshold`, refined to sub-pixel by a
+    parabola through each peak and its neighbours along x and along y."""
+    import cv2
+
+    peak = (score >= cv2.dilate(score, np.ones((3, 3), np.uint8))) & (score > threshold)
+    ys, xs = np.nonzero(peak)
+    h, w = score.shape
+    inner = (xs > 0) & (ys > 0) & (xs < w - 1) & (ys < h - 1)
+    xs, ys = xs[inner], ys[inner]
+    c = score[ys, xs]
+    left, right, up, down = score[ys, xs - 1], score[ys, xs + 1], score[ys - 1, xs], score[ys + 1, xs]
+    dx = 0.5 * (left - right) / np.minimum(left - 2 * c + right, -1e-6)
+    dy = 0.5 * (up - down) / np.minimum(up - 2 * c + down, -1e-6)
+    centres = np.stack([xs + np.clip(dx, -0.5, 0.5), ys + np.clip(dy, -0.5, 0.5)], 1)
+    return centres.astype(np.float64), c
+
+
+class RingTracks:
+    """Every ring marker in view tracked through a whole clip, without a layout (issue 17
+    §1; Dutreve et al. 2008, §5's markers on other people's footage: a few pixels across,
+    blurred, compressed, unevenly lit, sometimes hidden).
+
+    Per frame, `ring_score`'s peaks over `keep` are the candidates. A track moves by the
+    pyramidal Lucas-Kanade flow of its point, replaced by the median flow of its
+    `neighbours` nearest tracks when the two disagree by over `snap` px (a rigid-plus-
+    expression gate: a marker moves as the skin round it), and snaps to the nearest
+    candidate within `snap` px (one candidate per track, Hungarian). A track without one
+    is lost in that frame (NaN) and coasts with its neighbours' motion until a candidate
+    within `reacquire` px takes it back. A peak over `birth` that no track claims starts a
+    new track, at any frame, and the clip is then walked backward from there so that a
+    marker found late (uncovered, turned into view) is followed back to where it appeared.
+    Tracks matched in fewer than `min_frames` frames or with a median score under
+    `min_score` are dropped (skin features that looked like a marker for a moment).
+
+    `fit(frames)` takes the grey frames; learned: ``points_`` (F, M, 2) float32 pixels
+    (x right, y down; NaN where a marker is not seen), ``scores_`` (F, M) float32, in a
+    stable order: by the frame each marker is first seen, then top to bottom.
+    """
+
+    def __init__(self, *, radii=_SCORE_RADII, birth: float = _BIRTH_SCORE, keep: float = _KEEP_SCORE,
+                 snap: float = _SNAP, reacquire: float = _REACQUIRE, neighbours: int = _NEIGHBOURS,
+                 min_frames: int = 3, min_score: float = 0.4, min_spread: float = _MIN_SPREAD,
+                 min_contrast: float = _MIN_DOT_CONTRAST) -> None:
+        self.radii = tuple(float(r) for r in radii)
+        self.birth, self.keep = float(birth), float(keep)
+        self.snap, self.reacquire = float(snap), float(reacquire)
+        self.neighbours, self.min_frames, self.min_score = int(neighbours), int(min_frames), float(min_score)
+        self.min_spread, self.min_contrast = float(min_spread), float(min_contrast)
+
+    def fit(self, frames) -> RingTracks:
+        """Track the markers through frames, a sequence of (h, w) uint8 grey images."""
+        grays = [_gray(f) for f in frames]
+        if not grays:
+            raise RetargetError("RingTracks.fit needs at least one frame")
+        n = len(grays)
+        peaks, bright = [], []
+        for g in grays:
+            score, radius = _ring_scores(g, self.radii, self.min_spread)
+            cand, val = score_peaks(score, self.keep)
+            peaks.append((cand, val))
+            ix = np.rint(cand).astype(np.int64)
+            bright.append(ring_contrast(g, cand, radius[ix[:, 1], ix[:, 0]]) >= self.min_contrast)
+        pts = np.full((n, 0, 2), np.nan)
+        sc = np.full((n, 0), np.nan)
+        pos = np.zeros((0, 2))                  # where each track is (or is thought to be)
+        rel = np.zeros((0, 2))                  # its motion last frame, less its neighbours'
+        born = []
+        for t in range(n):
+            live = np.isfinite(pts[t - 1, :, 0]) if t > 0 else np.zeros(len(pos), bool)
+            if t > 0 and pos.size:
+                step, rel = self._flow(grays[t - 1], grays[t], pos, live, rel)
+                pos = pos + step
+            cand, val = peaks[t]
+            gate = np.where(live, self.snap, self.reacquire)
+            take = _matched(pos, cand, gate)
+            # a strong peak near a track lost for a while: the marker back, not a new one
+            free = np.ones(len(cand), bool)
+            free[take[take >= 0]] = False
+            lost = np.flatnonzero(take < 0)
+            strong = np.flatnonzero(free & (val >= self.birth) & bright[t])
+            if lost.size and strong.size:
+                again = _matched(pos[lost], cand[strong], np.full(lost.size, 2.5 * self.reacquire))
+                take[lost[again >= 0]] = strong[again[again >= 0]]
+            hit = take >= 0
+            pts[t, hit] = cand[take[hit]]
+            sc[t, hit] = val[take[hit]]
+            rel[hit] += cand[take[hit]] - pos[hit]      # the correction is the track's own
+            rel[~hit] = 0.0
+            pos[hit] = cand[take[hit]]
+            # births: strong peaks away from every track
+            free = np.ones(len(cand), bool)
+            free[take[hit]] = False
+            if len(pos):
+                free &= np.linalg.norm(cand[:, None] - pos[None], axis=2).min(1) > 2.0 * self.snap
+            new = np.flatnonzero(free & (val >= self.birth) & bright[t])
+            if new.size:
+                # two strong peaks of one marker: keep the stronger
+                new = new[np.argsort(-val[new])]
+                keep_new = []
+                for k in new:
+                    if all(np.linalg.norm(cand[k] - cand[j]) > 2.0 * self.snap for j in keep_new):
+                        keep_new.append(k)
+                new = np.array(keep_new)
+                add = np.full((n, len(new), 2), np.nan)
+                add[t] = cand[new]
+                pts = np.concatenate([pts, add], 1)
+                sc = np.concatenate([sc, np.where(np.arange(n)[:, None] == t, val[new][None], np.nan)], 1)
+                pos = np.concatenate([pos, cand[new]])
+                rel = np.concatenate([rel, np.zeros((len(new), 2))])
+                born += [t] * len(new)
+        born = np.array(born, dtype=np.int64)
+        for m in np.flatnonzero(born > 0):
+            self._backward(grays, peaks, pts, sc, m, born[m])
+        seen = np.isfinite(pts[..., 0])
+        with np.errstate(all="ignore"):
+            quality = np.nanmedian(np.where(seen, sc, np.nan), 0) if n else np.zeros(0)
+        good = (seen.sum(0) >= min(self.min_frames, n)) & (np.nan_to_num(quality) >= self.min_score)
+        pts, sc, seen = pts[:, good], sc[:, good], seen[:, good]
+        first = np.where(seen.any(0), seen.argmax(0), n)
+        y0 = pts[np.minimum(first, n - 1), np.arange(pts.shape[1]), 1]
+        order = np.lexsort((pts[np.minimum(first, n - 1), np.arange(pts.shape[1]), 0], y0, first))
+        self.points_ = pts[:, order].astype(np.float32)
+        self.scores_ = sc[:, order].astype(np.float32)
+        return self
+
+    def _flow(self, prev, cur, pos, live, rel):
+        """(step (M, 2), rel (M, 2)): each track's predicted image motion from prev to cur
+        and its part beyond its neighbours'. The prediction is the median LK flow of the
+        `neighbours` nearest seen tracks (the head's motion there) plus the track's own
+        relative motion of the last frame (the expression's, which is smooth); its own LK
+        flow replaces that where the two agree within `snap` px (LK on a marker a few
+        pixels across is often pulled off by the skin round it)."""
+        import cv2
+
+        p = pos.astype(np.float32).reshape(-1, 1, 2)
+        flow, status, _ = cv2.calcOpticalFlowPyrLK(
+            prev, cur, p, None, winSize=(15, 15), maxLevel=2,
+            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03))
+        own = flow.reshape(-1, 2) - pos
+        ok = (status.ravel() == 1) & np.isfinite(own).all(1)
+        trusted = ok & live
+        if trusted.sum() == 0:
+            return np.where(ok[:, None], own, 0.0), rel
+        src = np.flatnonzero(trusted)
+        d = np.linalg.norm(pos[:, None] - pos[src][None], axis=2)
+        near = np.argsort(d, 1)[:, :min(self.neighbours, len(src))]
+        head = np.median(own[src][near], axis=1)
+        guess = head + rel
+        agree = ok & live & (np.linalg.norm(own - guess, axis=1) < self.snap)
+        step = np.where(agree[:, None], own, guess)
+        return step, step - head
+    def _backward(self, grays, peaks, pts, sc, m, t0) -> None:
+        """Follow track m from frame t0 back toward frame 0 (in place): its neighbours'
+        motion from frame t to t - 1 moves it, the nearest free peak within `snap` px takes
+        it; the first frame without one ends the walk."""
+        p = pts[t0, m].copy()
+        for t in range(t0 - 1, -1, -1):
+            both = np.isfinite(pts[t, :, 0]) & np.isfinite(pts[t + 1, :, 0])
+            both[m] = False
+            if both.any():
+                d = np.linalg.norm(pts[t + 1, both] - p, axis=1)
+                near = np.argsort(d)[:self.neighbours]
+                p = p + np.median((pts[t, both] - pts[t + 1, both])[near], axis=0)
+            cand, val = peaks[t]
+            if len(cand) == 0:
+                return
+            d = np.linalg.norm(cand - p, axis=1)
+            others = np.isfinite(pts[t, :, 0])
+            others[m] = False
+            if others.any():
+                taken = np.linalg.norm(cand[:, None] - pts[t, others][None], axis=2).min(1) < 1.5
+                d[taken] = np.inf
+            k = int(d.argmin())
+            if d[k] > self.snap:
+                return
+            pts[t, m] = p = cand[k]
+            sc[t, m] = val[k]
+
+
+def _matched(pos: np.ndarray, cand: np.ndarray, gate: np.ndarray) -> np.ndarray:
+    """(M,) int64 the candidate (K, 2) each position (M, 2) takes, -1 for none: the
+    one-to-one assignment of least total distance among pairs closer than gate (M,)."""
+    from scipy.optimize import linear_sum_assignment
+
+    out = np.full(len(pos), -1, dtype=np.int64)
+    if len(pos) == 0 or len(cand) == 0:
+        return out
+    d = np.linalg.norm(pos[:, None] - cand[None], axis=2)
+    ok = d < gate[:, None]
+    rows, cols = linear_sum_assignment(np.where(ok, d, 1e6))
+    good = ok[rows, cols]
+    out[rows[good]] = cols[good]
+    return out
 
 
 def _auto_assignment(blobs: RingBlobs, lay, path: Path) -> np.ndarray:

@@ -6,6 +6,12 @@ at the vertices of a layout's points, filmed by one or more `Camera`s. Each came
 go to a video file (the codec follows the suffix), and the truth (3D marker positions,
 their projections, visibility, head motion, expression weights) to an ``.npz`` beside it.
 Everything is deterministic for a given seed.
+
+`render_webcam_marker_video` makes the hard material of issue 17: Dutreve et al. 2008 §5's
+own set-up as someone else would film it (a 640x480 webcam at about 60 cm, 3 mm markers
+about 5 px across, larger head turns, a lighting gradient, motion blur, noise, JPEG and
+MPEG-4 compression, a finger over one marker in the first frames, 24 markers that match
+no built-in layout), through `Footage` applied to each rendered frame.
 """
 
 from __future__ import annotations
@@ -30,6 +36,10 @@ __all__ = [
     "head_motion",
     "default_camera",
     "render_marker_video",
+    "Footage",
+    "webcam_camera",
+    "webcam_marker_vertices",
+    "render_webcam_marker_video",
 ]
 
 CODECS = {".avi": "MJPG", ".mp4": "mp4v", ".mkv": "FFV1"}
@@ -51,7 +61,8 @@ class GroundTruth:
     names : (N,) the layout's point names, in its order.
     cameras : (C,) the cameras; camera_names : (C,) their names (file suffixes).
     videos : (C,) paths of the written videos.
-    fps : frame rate; layout : layout name; style : marker style.
+    fps : frame rate; layout : layout name (None for markers placed by vertex); style :
+        marker style.
     head_rotation : (F, 3, 3) float64 and head_translation : (F, 3) float64: the rigid
         motion, world = R @ posed + t (posed = the face in its own frame).
     weights : (F, E) float64 expression weights (`EXPRESSION_NAMES` order).
@@ -67,7 +78,7 @@ class GroundTruth:
     camera_names: tuple[str, ...]
     videos: tuple[str, ...]
     fps: float
-    layout: str
+    layout: str | None
     style: str
     head_rotation: np.ndarray
     head_translation: np.ndarray
@@ -99,6 +110,83 @@ class GroundTruth:
             names=tuple(meta["names"]), cameras=tuple(Camera.from_dict(c) for c in meta["cameras"]),
             camera_names=tuple(meta["camera_names"]), videos=tuple(meta["videos"]),
             fps=float(meta["fps"]), layout=meta["layout"], style=meta["style"], **arrays)
+
+
+@dataclass(frozen=True)
+class Footage:
+    """How a rendered frame is spoilt into other people's footage (`render_marker_video`).
+
+    In the order a camera does it:
+    gradient : uneven light, the log of the gain per 100 px along a seeded direction
+        (0.35: one side of a 140 px face 1.6 times brighter than the other).
+    shutter : exposure time over the frame interval; each frame is blurred along the
+        markers' median image motion since the previous frame times this (a symmetric
+        line kernel, so a marker's blurred centroid stays its mid-exposure position).
+    noise : Gaussian sensor noise, grey levels (`render_marker_video`'s own noise is not
+        added when footage is given).
+    jpeg_quality : each frame goes through JPEG at this quality (8x8 DCT blocks, chroma
+        subsampling: the artefacts of a low bit-rate MPEG-4 stream, whose rate OpenCV's
+        writer does not let one set) before the video codec; None to skip.
+    occluder : (marker index, frames): a skin-coloured finger tip (an ellipse of
+        `occluder_radius` px) covers that marker from the first frame and slides off by
+        the given frame; the truth marks the marker hidden while any of it is covered.
+    """
+
+    gradient: float = 0.35
+    shutter: float = 0.5
+    noise: float = 3.0
+    jpeg_quality: int | None = 30
+    occluder: tuple[int, int] | None = None
+    occluder_radius: float = 9.0
+
+    def apply(self, image: np.ndarray, motion: np.ndarray, rng: np.random.Generator,
+              frame: int, points2d: np.ndarray, radius_px: np.ndarray, direction: np.ndarray):
+        """(image (h, w, 3) uint8, hidden (N,) bool): one rendered frame (h, w, 3) uint8
+        spoilt; motion (2,) px the image moved since the last frame; points2d (N, 2) the
+        markers' projections and radius_px (N,) their outer radii in pixels; direction (2,)
+        unit vector of the light gradient."""
+        import cv2
+
+        h, w = image.shape[:2]
+        img = image.astype(np.float32)
+        if self.gradient:
+            ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+            along = ((xs - w / 2) * direction[0] + (ys - h / 2) * direction[1]) / 100.0
+            img *= np.exp(self.gradient * along)[..., None]
+        hidden = np.zeros(len(points2d), dtype=bool)
+        if self.occluder is not None and frame < self.occluder[1]:
+            k, frames = self.occluder
+            # slides off up-right: centred on the marker at frame 0, clear of it by `frames`
+            step = (self.occluder_radius + radius_px[k] + 2.0) * frame / max(frames - 1, 1)
+            centre = points2d[k] + step * np.array([0.6, -0.8])
+            hidden = np.linalg.norm(points2d - centre, axis=1) < self.occluder_radius + radius_px + 0.5
+            mask = np.zeros((h, w), np.float32)
+            axes = (int(round(self.occluder_radius * 1.25)), int(round(self.occluder_radius)))
+            cv2.ellipse(mask, (int(round(centre[0] * 4)), int(round(centre[1] * 4))),
+                        (axes[0] * 4, axes[1] * 4), 30.0, 0, 360, 1.0, -1, cv2.LINE_AA, 2)
+            finger = np.array([125.0, 155.0, 205.0], np.float32) * 0.9
+            img = img * (1.0 - mask[..., None]) + finger * mask[..., None]
+        length = self.shutter * float(np.hypot(*motion))
+        if length > 0.5:
+            kernel = _line_kernel(length, np.arctan2(motion[1], motion[0]))
+            img = cv2.filter2D(img, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+        if self.noise > 0:
+            img += rng.normal(0.0, self.noise, img.shape).astype(np.float32)
+        out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        if self.jpeg_quality is not None:
+            ok, data = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(self.jpeg_quality)])
+            out = cv2.imdecode(data, cv2.IMREAD_COLOR)
+        return out, hidden
+
+
+def _line_kernel(length: float, angle: float) -> np.ndarray:
+    """A normalised, symmetric, anti-aliased line kernel `length` px long at `angle` rad."""
+    n = int(np.ceil(length / 2)) + 1
+    ys, xs = np.mgrid[-n:n + 1, -n:n + 1].astype(np.float64)
+    c, s = np.cos(angle), np.sin(angle)
+    along, across = xs * c + ys * s, -xs * s + ys * c
+    k = np.clip(length / 2 + 0.5 - np.abs(along), 0, 1) * np.clip(1.0 - np.abs(across), 0, 1)
+    return (k / k.sum()).astype(np.float32)
 
 
 def marker_vertices(face: SampleFace, layout: str = "dutreve21", lid_offset: float = _LID_OFFSET) -> np.ndarray:
@@ -161,6 +249,9 @@ def render_marker_video(
     colors: np.ndarray | None = None,
     noise: float = 2.0,
     resolution: int = 1,
+    vertices: np.ndarray | None = None,
+    pace: float = 1.0,
+    footage: Footage | None = None,
 ) -> GroundTruth:
     """Render the marker performance to video(s) and return (and save) its ground truth.
 
@@ -176,6 +267,11 @@ def render_marker_video(
     scale : world units per cm of the face (10 gives mm); the cameras are in world units.
     marker_radius, dot_radius : cm on the face; colors : (N, 3) BGR for "color".
     noise : Gaussian sensor noise, grey levels; resolution : sample-face resolution.
+    vertices : (N,) int sample-face vertices carrying the markers instead of `layout`'s
+        (the truth's layout is then None and its names m01..mN).
+    pace : demo seconds per second of video (3 plays the demo loop three times as fast:
+        more expressions in a short clip, faster motion).
+    footage : spoil each frame as other people's footage is (`Footage`), after rendering.
     """
     import cv2
 
@@ -186,8 +282,16 @@ def render_marker_video(
         raise RetargetError(f"n_frames must be a positive integer, got {n_frames!r}")
     cams, names = _cameras(cameras, scale)
     face = sample_face(resolution)
-    verts = marker_vertices(face, layout)
-    weights = demo_weights(n_frames + int(round(start * fps)), fps)[-n_frames:]
+    if vertices is None:
+        verts = marker_vertices(face, layout)
+        point_names = get_layout(layout).point_names
+    else:
+        verts = np.asarray(vertices, dtype=np.int64).reshape(-1)
+        layout = None
+        point_names = tuple(f"m{k + 1:02d}" for k in range(len(verts)))
+    if not (np.isfinite(pace) and pace > 0):
+        raise RetargetError(f"pace must be a positive number, got {pace!r}")
+    weights = demo_weights(n_frames + int(round(start * fps)), fps / pace)[-n_frames:]
     R, t = _head_motion(head_motion, n_frames, fps, seed)
     videos = [str(path)] if len(cams) == 1 and names == ["cam0"] else [
         str(path.with_name(f"{path.stem}_{name}{path.suffix}")) for name in names]
@@ -197,6 +301,8 @@ def render_marker_video(
         if not writer.isOpened():
             raise RetargetError(f"cannot write video {v} (codec {CODECS[path.suffix.lower()]})")
     rng = np.random.default_rng(seed)
+    light = np.random.default_rng(seed + 7919).normal(size=2)
+    light /= np.linalg.norm(light)
     n_cam, n_pts = len(cams), len(verts)
     points3d = np.empty((n_frames, n_pts, 3))
     points2d = np.empty((n_frames, n_cam, n_pts, 2))
@@ -209,17 +315,78 @@ def render_marker_video(
             for c, (cam, writer) in enumerate(zip(cams, writers)):
                 frame = render_face(
                     cam, world, face.faces, verts, style=style, marker_radius=marker_radius * scale,
-                    dot_radius=dot_radius * scale, marker_colors=colors, noise=noise, rng=rng)
-                writer.write(frame.image)
+                    dot_radius=dot_radius * scale, marker_colors=colors,
+                    noise=noise if footage is None else 0.0, rng=rng)
                 points2d[i, c], visible[i, c], coverage[i, c] = frame.points2d, frame.visible, frame.coverage
+                image = frame.image
+                if footage is not None:
+                    moved = np.median(points2d[i, c] - points2d[max(i - 1, 0), c], axis=0)
+                    radius_px = cam.K[0, 0] * marker_radius * scale / cam.depth(points3d[i])
+                    image, hidden = footage.apply(image, moved, rng, i, points2d[i, c], radius_px, light)
+                    visible[i, c] &= ~hidden
+                    coverage[i, c][hidden] = 0.0
+                writer.write(image)
     finally:
         for writer in writers:
             writer.release()
     truth = GroundTruth(
-        points3d, points2d, visible, coverage, verts, get_layout(layout).point_names, tuple(cams),
+        points3d, points2d, visible, coverage, verts, point_names, tuple(cams),
         tuple(names), tuple(videos), float(fps), layout, style, R, t * scale, weights)
     truth.save(path.with_suffix(".npz"))
     return truth
+
+
+def webcam_camera(distance: float = 60.0, hfov_deg: float = 60.0, size: tuple[int, int] = (640, 480)) -> Camera:
+    """A webcam `distance` cm in front of the sample face (a 60 degree horizontal field, the
+    usual 640x480 webcam's): 3 mm marker radius is about 2.8 px at 60 cm (Dutreve §5)."""
+    w, h = size
+    vfov = 2.0 * np.degrees(np.arctan(np.tan(np.radians(hfov_deg) / 2) * h / w))
+    target = np.array([0.0, 1.0, 8.0])
+    return look_at(target + [0.0, 0.0, float(distance)], target, (0.0, 1.0, 0.0), vfov, size)
+
+
+def webcam_marker_vertices(face: SampleFace) -> np.ndarray:
+    """(24,) int64 vertices for 24 markers: `marker_vertices` of dutreve21 plus the nose
+    bridge (iBUG 27) and one marker on each cheek (halfway between iBUG 2 and 31, 14 and
+    35), a count no built-in layout has."""
+    base = marker_vertices(face, "dutreve21")
+    lm = face.vertices[face.landmarks68]
+    spots = np.stack([lm[27], 0.5 * (lm[2] + lm[31]), 0.5 * (lm[14] + lm[35])])
+    extra = np.linalg.norm(face.vertices[None] - spots[:, None], axis=2).argmin(1)
+    return np.concatenate([base, extra]).astype(np.int64)
+
+
+def render_webcam_marker_video(
+    path: str | Path,
+    *,
+    n_frames: int = 48,
+    seed: int = 0,
+    distance: float = 60.0,
+    marker_radius: float = 0.3,
+    dot_radius: float = 0.15,
+    amplitude: float = 2.2,
+    pace: float = 2.0,
+    start: float = 1.2,
+    footage: Footage | None = None,
+    occluded: int = 21,
+    occluded_frames: int = 8,
+) -> GroundTruth:
+    """Issue 17's hard mono material: `render_marker_video` with `webcam_camera(distance)`,
+    the 24 `webcam_marker_vertices`, head motion `amplitude` times `head_motion`'s (2.2:
+    yaw up to about 18 degrees, pitch 11, roll 7, so that side markers turn oblique), the
+    demo played at `pace` from `start` s (48 frames at pace 3: talking, a pucker, a blink,
+    surprise, another blink and the start of a smile), and `footage` (default: `Footage()`
+    with marker `occluded` under a finger for the first `occluded_frames` frames).
+    Suffix .mp4 (MPEG-4 Part 2) for the compressed stream. Returns the ground truth."""
+    fps = 30.0
+    face = sample_face(1)
+    if footage is None:
+        footage = Footage(occluder=(occluded, occluded_frames) if occluded_frames else None)
+    motion = head_motion(n_frames, fps / pace, seed, amplitude)
+    return render_marker_video(
+        path, n_frames=n_frames, fps=fps, cameras=webcam_camera(distance), head_motion=motion,
+        seed=seed, start=start, marker_radius=marker_radius, dot_radius=dot_radius,
+        vertices=webcam_marker_vertices(face), pace=pace, footage=footage)
 
 
 def _cameras(cameras, scale: float) -> tuple[list[Camera], list[str]]:
