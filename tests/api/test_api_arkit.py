@@ -1,6 +1,7 @@
 """The project's ARKit 52 blendshapes over the API (issue 16): made by a job, the RTAK
-binary, the user's settings (gains, painted fixes, rig) with their refusals, and the
-stream driven by ARKit (RTAW frames, or named weights as JSON). The shapes are made once
+binary, the user's settings (gains, painted fixes, rig) with their refusals, the stream
+driven by ARKit (RTAW frames, or named weights as JSON) and the export. The formats'
+JavaScript twins are cross-tested in test_wire.py. The shapes are made once
 per module (about 9 s on the sample face)."""
 
 import json
@@ -13,10 +14,8 @@ from retarget.arkit import ARKIT_NAMES, ArkitDrive, ArkitShapes
 from retarget.sample_face import demo_points
 from server.players import DemoPlayer
 from server.store import ProjectStore
-from server.wire import (ARKIT_WEIGHTS_MAGIC, FLAG_HEAD_ROTATION, FLAG_LAST, FLAG_LOST_POINTS,
-                         decode_arkit_shapes, decode_arkit_weights, encode_arkit_weights, weights_json)
+from server.wire import ARKIT_WEIGHTS_MAGIC, decode_arkit_shapes, decode_arkit_weights
 from tests.api.test_api_muscles import _sample
-from tests.api.test_wire import bits, decode_in_node
 from tests.waits import wait_job
 
 
@@ -179,36 +178,6 @@ def _next_bytes(ws) -> bytes:
         message = ws.receive()
         if message.get("bytes") is not None:
             return message["bytes"]
-
-
-def test_javascript_decodes_weight_frames_and_shapes(client, sample_id, made, tmp_path):
-    rng = np.random.default_rng(16)
-    w = rng.random(52).astype(np.float32)
-    q = np.array([0.1, -0.2, 0.05, 0.97], np.float32)
-    frames = [encode_arkit_weights(w, frame_index=2**32 - 1, source_time=-3.25, send_time=1.7e9,
-                                   flags=FLAG_LOST_POINTS),
-              encode_arkit_weights(w, frame_index=7, source_time=0.5, flags=FLAG_LAST, send_time=1.7e9,
-                                   head_rotation=q)]
-    plain, rotated = decode_in_node(tmp_path, frames, "decode-arkit-weights")
-    for js in (plain, rotated):
-        assert js["bits"] == bits(w) and js["sendTime"] == 1.7e9
-    assert plain["frameIndex"] == 2**32 - 1 and plain["sourceTime"] == -3.25 and plain["rotationBits"] is None
-    assert plain["flags"] == FLAG_LOST_POINTS
-    assert rotated["flags"] == FLAG_LAST | FLAG_HEAD_ROTATION and rotated["rotationBits"] == bits(q)
-    assert "ArkitWeightsDecoder" in decode_in_node(tmp_path, [frames[0][:-4]], "decode-arkit-weights")[0]["error"]
-    named = weights_json(frames[1], ARKIT_NAMES)
-    assert named["last"] and not named["lost"] and named["head_rotation"] == pytest.approx(q.tolist())
-
-    data = client.get(f"/api/projects/{sample_id}/arkit/shapes").content
-    js, = decode_in_node(tmp_path, [data], "decode-arkit-shapes")
-    names, deltas = decode_arkit_shapes(data)
-    assert js["names"] == names and js["nVertices"] == deltas.shape[1]
-    for k, shape in enumerate(js["shapes"]):
-        vertices = np.array(shape["vertices"], dtype=np.int64)
-        values = np.array(shape["values"], dtype=np.float32).reshape(-1, 3) * np.float32(shape["scale"])
-        np.testing.assert_array_equal(values, deltas[k, vertices])
-        assert not np.delete(deltas[k], vertices, axis=0).any()
-    assert "ArkitShapesDecoder" in decode_in_node(tmp_path, [data[:-4]], "decode-arkit-shapes")[0]["error"]
 
 
 def test_export_and_a_playing_source_follow_the_arkit_settings(client, sample_id, made):

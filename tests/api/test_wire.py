@@ -301,3 +301,57 @@ def test_python_refuses_broken_weight_edits_with_the_reason():
                          (good[:54] + good[56:], "got 90")):  # the padding left out
         with pytest.raises(RetargetError, match=message):
             edit_arrays(bad)
+
+
+# -- ARKit weight frames (RTAW) and shapes (RTAK) ------------------------------------------
+
+def test_javascript_decodes_exactly_the_arkit_weight_frames_python_encodes(tmp_path):
+    from server.wire import (FLAG_LAST, decode_arkit_weights, encode_arkit_weights, is_arkit_weights,
+                             weights_json)
+
+    w = np.random.default_rng(16).random(52).astype(np.float32)
+    q = np.array([0.1, -0.2, 0.05, 0.97], np.float32)
+    frames = [encode_arkit_weights(w, frame_index=2**32 - 1, source_time=-3.25, send_time=1.7e9,
+                                   flags=FLAG_LOST_POINTS),
+              encode_arkit_weights(w, frame_index=7, source_time=0.5, flags=FLAG_LAST, send_time=1.7e9,
+                                   head_rotation=q)]
+    assert len(frames[0]) == 32 + 4 * 52 and is_arkit_weights(frames[1])
+    plain, rotated = decode_in_node(tmp_path, frames, "decode-arkit-weights")
+    for js, data in ((plain, frames[0]), (rotated, frames[1])):
+        ours = decode_arkit_weights(data)
+        assert js["bits"] == bits(w) == bits(ours.weights) and js["sendTime"] == 1.7e9
+        assert (js["frameIndex"], js["flags"], js["sourceTime"]) == (ours.frame_index, ours.flags, ours.source_time)
+    assert plain["frameIndex"] == 2**32 - 1 and plain["rotationBits"] is None
+    assert rotated["flags"] == FLAG_LAST | FLAG_HEAD_ROTATION and rotated["rotationBits"] == bits(q)
+    assert "ArkitWeightsDecoder" in decode_in_node(tmp_path, [frames[0][:-4]], "decode-arkit-weights")[0]["error"]
+    with pytest.raises(ValueError, match="wrong length"):
+        decode_arkit_weights(frames[0][:-4])
+    named = weights_json(frames[1], [f"s{k}" for k in range(52)])
+    assert named["last"] and not named["lost"] and named["frame"] == 7 and len(named["weights"]) == 52
+
+
+@pytest.mark.parametrize("n_vertices", [1, 7, 300])
+def test_javascript_decodes_exactly_the_arkit_shapes_python_encodes(tmp_path, n_vertices):
+    from server.wire import arkit_shapes_binary, decode_arkit_shapes
+
+    rng = np.random.default_rng(n_vertices)
+    deltas = rng.normal(size=(52, n_vertices, 3)).astype(np.float32)
+    deltas[:, rng.random(n_vertices) < 0.5] = 0  # sparse: half the vertices still
+    deltas[3] = 0  # a shape that moves nothing (tongueOut on ICT)
+    deltas[4, :, 0] = 1e-6 * deltas[4, :, 1]  # below the floor of the shape's peak: dropped
+    names = [f"s{k}" for k in range(52)]
+    data = arkit_shapes_binary(names, deltas)
+    ours_names, ours = decode_arkit_shapes(data)
+    peaks = np.abs(deltas).max(axis=(1, 2))
+    assert ours_names == names and (np.abs(ours - deltas).max(axis=(1, 2)) <= 1.01e-3 * peaks + 1e-12).all()
+    js, = decode_in_node(tmp_path, [data], "decode-arkit-shapes")
+    assert js["names"] == names and js["nVertices"] == n_vertices
+    for k, shape in enumerate(js["shapes"]):
+        vertices = np.array(shape["vertices"], dtype=np.int64)
+        values = np.array(shape["values"], dtype=np.float32).reshape(-1, 3) * np.float32(shape["scale"])
+        np.testing.assert_array_equal(values, ours[k, vertices])
+        assert not np.delete(ours[k], vertices, axis=0).any()
+    assert not js["shapes"][3]["vertices"]
+    assert "ArkitShapesDecoder" in decode_in_node(tmp_path, [data[:-4]], "decode-arkit-shapes")[0]["error"]
+    with pytest.raises(ValueError):
+        decode_arkit_shapes(data[:-4])
