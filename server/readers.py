@@ -270,16 +270,16 @@ def stereo_take(videos: list[Path], cal: StereoCalibration, layout: str,
 def arkit(mesh: Mesh, points: SurfacePoints, layout: str, rig_weights: SkinWeights | None, progress):
     """ARKit's 52 shapes on a stored mesh (`retarget.arkit.arkit_shapes`), on `rig_weights`
     or the default dense rig. The library reports no progress, so `progress` gets an
-    estimate from the elapsed time and the vertex count (about 9 s for the 8,430-vertex
-    sample face and 53 s for the 133k-vertex one on this project's loaded 2-core
-    machine), approaching 0.95 and never claiming the end."""
+    estimate from the elapsed time and the vertex count (2-9 s for the 8,430-vertex
+    sample face and 32-53 s for the 132,907-vertex one on this project's 2-core machine,
+    by its load), approaching 0.95 and never claiming the end."""
     import math
     import threading
     import time
 
     from retarget.arkit import arkit_shapes
 
-    expected = 3.0 + 4e-4 * len(mesh.vertices)
+    expected = 3.0 + 2.5e-4 * len(mesh.vertices)
     stop = threading.Event()
 
     def tick():
