@@ -588,25 +588,37 @@ class RingTracks:
         born = []
         for t in range(n):
             live = np.isfinite(pts[t - 1, :, 0]) if t > 0 else np.zeros(len(pos), bool)
-            if t > 0 and pos.size:
-                step, rel = self._flow(grays[t - 1], grays[t], pos, live, rel)
-                pos = pos + step
             cand, val = peaks[t]
-            gate = np.where(live, self.snap, self.reacquire)
-            take = _matched(pos, cand, gate)
+            if t > 0 and pos.size:
+                own, guess, rel = self._flow(grays[t - 1], grays[t], pos, live, rel)
+                # two guesses, the marker's own flow and its neighbours' plus its own last
+                # relative motion: the candidate near either will do
+                d = np.minimum(np.linalg.norm(pos[:, None] + own[:, None] - cand[None], axis=2),
+                               np.linalg.norm(pos[:, None] + guess[:, None] - cand[None], axis=2))
+                pos = pos + guess
+            else:
+                d = np.linalg.norm(pos[:, None] - cand[None], axis=2)
+            # a faint peak (no dot brighter than its ring all round) takes a marker only
+            # near where it should be, and only if nothing brighter is as near
+            d = d + np.where(bright[t], 0.0, 0.5)[None]
+            gate = np.where(live, self.snap, self.reacquire)[:, None]
+            gate = np.where(bright[t][None] | live[:, None], gate, self.snap)
+            take = _matched(d, gate, first=np.isfinite(pts[:t, :, 0]).sum(0) >= self.min_frames)
             # a strong peak near a track lost for a while: the marker back, not a new one
             free = np.ones(len(cand), bool)
             free[take[take >= 0]] = False
             lost = np.flatnonzero(take < 0)
             strong = np.flatnonzero(free & (val >= self.birth) & bright[t])
             if lost.size and strong.size:
-                again = _matched(pos[lost], cand[strong], np.full(lost.size, 2.5 * self.reacquire))
+                again = _matched(np.linalg.norm(pos[lost][:, None] - cand[strong][None], axis=2),
+                                 np.full((lost.size, 1), 2.5 * self.reacquire))
                 take[lost[again >= 0]] = strong[again[again >= 0]]
             hit = take >= 0
             pts[t, hit] = cand[take[hit]]
             sc[t, hit] = val[take[hit]]
             rel[hit] += cand[take[hit]] - pos[hit]      # the correction is the track's own
             rel[~hit] = 0.0
+            rel = np.clip(rel, -self.snap, self.snap)
             pos[hit] = cand[take[hit]]
             # births: strong peaks away from every track
             free = np.ones(len(cand), bool)
@@ -645,12 +657,12 @@ class RingTracks:
         return self
 
     def _flow(self, prev, cur, pos, live, rel):
-        """(step (M, 2), rel (M, 2)): each track's predicted image motion from prev to cur
-        and its part beyond its neighbours'. The prediction is the median LK flow of the
+        """(own (M, 2), guess (M, 2), rel (M, 2)): two predictions of each track's image
+        motion from prev to cur, and the guess's part beyond its neighbours'. `own` is
+        its pyramidal LK flow (often pulled off by the skin round a marker a few pixels
+        across; the guess where LK fails); `guess` is the median LK flow of the
         `neighbours` nearest seen tracks (the head's motion there) plus the track's own
-        relative motion of the last frame (the expression's, which is smooth); its own LK
-        flow replaces that where the two agree within `snap` px (LK on a marker a few
-        pixels across is often pulled off by the skin round it)."""
+        relative motion of the last frame (the expression's, which is smooth)."""
         import cv2
 
         p = pos.astype(np.float32).reshape(-1, 1, 2)
@@ -661,15 +673,16 @@ class RingTracks:
         ok = (status.ravel() == 1) & np.isfinite(own).all(1)
         trusted = ok & live
         if trusted.sum() == 0:
-            return np.where(ok[:, None], own, 0.0), rel
+            own = np.where(ok[:, None], own, 0.0)
+            return own, own, rel
         src = np.flatnonzero(trusted)
         d = np.linalg.norm(pos[:, None] - pos[src][None], axis=2)
         near = np.argsort(d, 1)[:, :min(self.neighbours, len(src))]
         head = np.median(own[src][near], axis=1)
         guess = head + rel
-        agree = ok & live & (np.linalg.norm(own - guess, axis=1) < self.snap)
-        step = np.where(agree[:, None], own, guess)
-        return step, step - head
+        # LK pulled off by the skin disagrees with the neighbours: the guess stands alone
+        agree = ok & (np.linalg.norm(own - guess, axis=1) < 0.5 * self.snap)
+        return np.where(agree[:, None], own, guess), guess, rel
     def _backward(self, grays, peaks, pts, sc, m, t0) -> None:
         """Follow track m from frame t0 back toward frame 0 (in place): its neighbours'
         motion from frame t to t - 1 moves it, the nearest free peak within `snap` px takes
@@ -698,19 +711,34 @@ class RingTracks:
             sc[t, m] = val[k]
 
 
-def _matched(pos: np.ndarray, cand: np.ndarray, gate: np.ndarray) -> np.ndarray:
-    """(M,) int64 the candidate (K, 2) each position (M, 2) takes, -1 for none: the
-    one-to-one assignment of least total distance among pairs closer than gate (M,)."""
+def _matched(d: np.ndarray, gate: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:
+    """(M,) int64 the candidate each track takes, -1 for none, from distances d (M, K):
+    the one-to-one assignment of least total cost where a pair costs its distance, if
+    under gate (broadcast to (M, K)), and leaving a track without one costs its gate (so
+    that no pair is broken up to make two worse ones). Tracks in `first` (M,) bool
+    choose before the others."""
     from scipy.optimize import linear_sum_assignment
 
-    out = np.full(len(pos), -1, dtype=np.int64)
-    if len(pos) == 0 or len(cand) == 0:
+    out = np.full(d.shape[0], -1, dtype=np.int64)
+    if d.size == 0:
         return out
-    d = np.linalg.norm(pos[:, None] - cand[None], axis=2)
-    ok = d < gate[:, None]
-    rows, cols = linear_sum_assignment(np.where(ok, d, 1e6))
-    good = ok[rows, cols]
-    out[rows[good]] = cols[good]
+    gate = np.broadcast_to(gate, d.shape)
+    order = [np.arange(d.shape[0])] if first is None else [np.flatnonzero(first), np.flatnonzero(~first)]
+    free = np.ones(d.shape[1], bool)
+    for rows_in in order:
+        if rows_in.size == 0 or not free.any():
+            continue
+        cols_in = np.flatnonzero(free)
+        dd, gg = d[np.ix_(rows_in, cols_in)], gate[np.ix_(rows_in, cols_in)]
+        ok = dd < gg
+        none = np.full((len(rows_in), len(rows_in)), 1e6)
+        np.fill_diagonal(none, gg.max(1))
+        rows, cols = linear_sum_assignment(np.concatenate([np.where(ok, dd, 1e6), none], 1))
+        pick = cols < len(cols_in)
+        rows, cols = rows[pick], cols[pick]
+        good = ok[rows, cols]
+        out[rows_in[rows[good]]] = cols_in[cols[good]]
+        free[cols_in[cols[good]]] = False
     return out
 
 

@@ -27,7 +27,7 @@ from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sample_face import SampleFace, demo_weights, posed_vertices, sample_face
 from retarget.testing.camera import Camera, look_at
-from retarget.testing.render import render_face
+from retarget.testing.render import render_face, vertex_normals
 
 __all__ = [
     "CODECS",
@@ -66,6 +66,9 @@ class GroundTruth:
     head_rotation : (F, 3, 3) float64 and head_translation : (F, 3) float64: the rigid
         motion, world = R @ posed + t (posed = the face in its own frame).
     weights : (F, E) float64 expression weights (`EXPRESSION_NAMES` order).
+    facing : (F, C, N) float64 cosine of the angle between each marker's normal and its
+        line of sight to the camera (1 head-on; `visible` needs > 0.3, 73 degrees), or
+        None in truth files written before it was recorded.
     """
 
     points3d: np.ndarray
@@ -83,6 +86,7 @@ class GroundTruth:
     head_rotation: np.ndarray
     head_translation: np.ndarray
     weights: np.ndarray
+    facing: np.ndarray | None = None
 
     def save(self, path: str | Path) -> None:
         """Write the truth to an ``.npz`` (arrays, plus JSON for names and cameras)."""
@@ -95,7 +99,8 @@ class GroundTruth:
             path, points3d=self.points3d, points2d=self.points2d, visible=self.visible,
             coverage=self.coverage, marker_vertices=self.marker_vertices,
             head_rotation=self.head_rotation, head_translation=self.head_translation,
-            weights=self.weights, meta=np.array(json.dumps(meta)))
+            weights=self.weights, meta=np.array(json.dumps(meta)),
+            **({} if self.facing is None else {"facing": self.facing}))
 
     @classmethod
     def load(cls, path: str | Path) -> GroundTruth:
@@ -308,16 +313,20 @@ def render_marker_video(
     points2d = np.empty((n_frames, n_cam, n_pts, 2))
     visible = np.empty((n_frames, n_cam, n_pts), dtype=bool)
     coverage = np.empty((n_frames, n_cam, n_pts))
+    facing = np.empty((n_frames, n_cam, n_pts))
     try:
         for i in range(n_frames):
             world = (posed_vertices(face, weights[i]) @ R[i].T + t[i]) * scale
             points3d[i] = world[verts]
+            normals = vertex_normals(world, face.faces)[verts]
             for c, (cam, writer) in enumerate(zip(cams, writers)):
                 frame = render_face(
                     cam, world, face.faces, verts, style=style, marker_radius=marker_radius * scale,
                     dot_radius=dot_radius * scale, marker_colors=colors,
                     noise=noise if footage is None else 0.0, rng=rng)
                 points2d[i, c], visible[i, c], coverage[i, c] = frame.points2d, frame.visible, frame.coverage
+                sight = cam.center - points3d[i]
+                facing[i, c] = np.einsum("nk,nk->n", normals, sight) / np.linalg.norm(sight, axis=1)
                 image = frame.image
                 if footage is not None:
                     moved = np.median(points2d[i, c] - points2d[max(i - 1, 0), c], axis=0)
@@ -331,7 +340,7 @@ def render_marker_video(
             writer.release()
     truth = GroundTruth(
         points3d, points2d, visible, coverage, verts, point_names, tuple(cams),
-        tuple(names), tuple(videos), float(fps), layout, style, R, t * scale, weights)
+        tuple(names), tuple(videos), float(fps), layout, style, R, t * scale, weights, facing)
     truth.save(path.with_suffix(".npz"))
     return truth
 
