@@ -12,9 +12,10 @@ import pytest
 
 from retarget.arkit import ARKIT_NAMES, ArkitDrive, ArkitShapes
 from retarget.sample_face import demo_points
+from retarget.sources.arkit_curves import ArkitCurves, live_link_csv
 from server.players import DemoPlayer
 from server.store import ProjectStore
-from server.wire import ARKIT_WEIGHTS_MAGIC, decode_arkit_shapes, decode_arkit_weights
+from server.wire import ARKIT_WEIGHTS_MAGIC, FLAG_LAST, decode_arkit_shapes, decode_arkit_weights
 from tests.api.test_api_muscles import _sample
 from tests.waits import wait_job
 
@@ -200,6 +201,52 @@ def test_export_and_a_playing_source_follow_the_arkit_settings(client, sample_id
         assert playing.gains[ARKIT_NAMES.index("jawOpen")] == 0.0  # from its next frame
         ws.send_json({"type": "stop"})
     client.put(url, json=settings)
+
+
+def test_a_live_link_take_plays_back_as_its_own_weights(client, sample_id, made):
+    """A Live Link Face CSV is a take like any other (listed, trimmed, played); played driven
+    by ARKit on the project's own shapes, it gives back the weights it was recorded with."""
+    url = f"/api/projects/{sample_id}/arkit"
+    kept = client.get(url).json()["settings"]
+    assert client.put(url, json={"rig": kept["rig"]}).status_code == 200  # every gain 1
+    t = np.arange(60) / 30.0
+    weights = np.zeros((60, 52))
+    ramp = np.clip(np.sin(np.pi * t / t[-1]), 0, None)  # from rest to rest: frame 0 is the neutral
+    for name, peak in (("jawOpen", 0.6), ("eyeBlinkLeft", 0.8), ("eyeBlinkRight", 0.8),
+                       ("mouthSmileLeft", 0.5), ("mouthSmileRight", 0.5), ("browInnerUp", 0.4)):
+        weights[:, ARKIT_NAMES.index(name)] = peak * ramp
+    text = live_link_csv(ArkitCurves(weights, 30.0, None, None, {}))
+    answer = client.post(f"/api/projects/{sample_id}/takes", data={"layout": "ibug68"},
+                         files={"file": ("MySlate_3_iPhone.csv", text.encode())})
+    assert answer.status_code == 201, answer.text
+    take = answer.json()
+    assert (take["n_frames"], take["n_points"], take["dims"]) == (60, 68, 3)
+    assert take["duration"] == pytest.approx(59 / 30)
+    trimmed = client.patch(f"/api/projects/{sample_id}/takes/{take['id']}", json={"trim": [0.5, 1.5]})
+    assert trimmed.status_code == 200 and trimmed.json()["trim"] == [0.5, 1.5]
+    client.patch(f"/api/projects/{sample_id}/takes/{take['id']}", json={"trim": [0, None]})
+    settings = {"neutral": {"mode": "frame", "frame": 0}, "head_pose": "keep", "filter": "none"}
+    got = {}
+    with client.websocket_connect(f"/api/projects/{sample_id}/stream") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "drive", "drive": "arkit"})
+        ws.send_json({"type": "start", "source": "take", "take": take["id"], "loop": False,
+                      "settings": settings})
+        while len(got) < 60:
+            frame = decode_arkit_weights(_next_bytes(ws))
+            got[frame.frame_index] = frame.weights
+            if frame.flags & FLAG_LAST:
+                break
+        ws.send_json({"type": "stop"})
+    frames = sorted(got)
+    assert len(frames) >= 50, f"only {len(frames)} of 60 frames arrived"
+    error = np.abs(np.array([got[i] for i in frames]) - weights[frames])
+    on = weights[frames] > 0.05
+    # the take's points are the reference face making the weights; carried onto the sample
+    # face and solved on its shapes, they come back (the library's round trip, through the server)
+    assert error.mean() < 0.01 and error[on].mean() < 0.06, (error.mean(), error[on].mean())
+    assert client.put(url, json=kept).status_code == 200
+    assert client.delete(f"/api/projects/{sample_id}/takes/{take['id']}").status_code == 204
 
 
 def test_new_landmarks_make_the_shapes_stale(client, sample_id, made):
