@@ -52,7 +52,7 @@ def biharmonic_weights(vertices, faces, points, layout=None, *, k: int | None = 
     ell = float(np.sqrt(((t0 - t0.mean(0)) ** 2).sum(1).mean()))
     q = q + (membrane / ell**2) * (-lap) + (damping / ell**4) * mass
     supports = lip_supports(v, faces, points, layout) if separate_lips and layout is not None else ()
-    w = constrained_weights(q, points, constraint_weight, progress, supports)
+    w = constrained_weights(q, points, constraint_weight, progress, supports, vertices=v)
     return SkinWeights.from_dense(w, k, "biharmonic")
 
 

@@ -22,5 +22,6 @@ def laplacian_weights(vertices, faces, points, layout=None, *, k: int | None = N
     constraints are w = 1.
     """
     lap = uniform_laplacian(faces, len(vertices))
-    w = constrained_weights((lap.T @ lap), points, constraint_weight, progress)
+    w = constrained_weights((lap.T @ lap), points, constraint_weight, progress,
+                            vertices=vertices)
     return SkinWeights.from_dense(w, k, "laplacian")

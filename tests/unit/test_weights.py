@@ -156,3 +156,80 @@ def test_every_method_rigs_the_dense_layout(method, dense_face):
     assert (np.abs(weights).max(0) > 0.02).all()
     new = np.isin(layout.regions, ("cheeks", "forehead"))
     assert (np.abs(weights[:, new]).max(0) > 0.1).all()
+
+
+# -- the sparse Cholesky of the quadratic rigs (retarget/weights/cholesky.py) --------------
+
+def _system(f, pts):
+    """The biharmonic rig's system matrix and right-hand sides on the built-in face."""
+    import scipy.sparse as sp
+
+    from retarget.operators import cotmatrix, massmatrix
+    from retarget.weights.quadratic import constraint_matrix
+
+    lap, mass = cotmatrix(f.vertices, f.faces), massmatrix(f.vertices, f.faces)
+    q = lap.T @ sp.diags(1.0 / mass.diagonal()) @ lap - 0.1 * lap + 0.01 * mass
+    c = constraint_matrix(pts, len(f.vertices))
+    w2 = 1e4 * float(np.median(q.diagonal()))
+    a = (q + w2 * (c.T @ c)).tocsc()
+    return a, (w2 * c.T).toarray()
+
+
+def test_cholesky_solves_as_scipy_does_with_and_without_its_tail(face):
+    """The multifrontal factor against SciPy's spsolve (an independent oracle), for the
+    whole system and for the system without its tail unknowns."""
+    from scipy.sparse.linalg import spsolve
+
+    from retarget.weights.cholesky import cholesky
+
+    f, _, pts = face
+    a, b = _system(f, pts)
+    b = b[:, :6]
+    tail = f.vertices[:, 1] > np.quantile(f.vertices[:, 1], 0.9)
+    factor = cholesky(a, f.vertices, tail, leaf_size=32)
+    expected = spsolve(a, b)
+    np.testing.assert_allclose(factor.solve(b), expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+    keep = ~tail
+    restricted = np.zeros_like(expected)
+    restricted[keep] = spsolve(a[keep][:, keep].tocsc(), b[keep])
+    np.testing.assert_allclose(factor.solve(b, restricted=True), restricted, rtol=0,
+                               atol=1e-9 * np.abs(restricted).max())
+    np.testing.assert_allclose(factor.solve(b[:, 0]), expected[:, 0], rtol=0,
+                               atol=1e-9 * np.abs(expected).max())
+
+
+def test_cholesky_refuses_a_matrix_that_is_not_positive_definite(face):
+    import scipy.sparse as sp
+
+    from retarget.weights.cholesky import cholesky
+
+    f = face[0]
+    a = -sp.identity(len(f.vertices), format="csc")
+    with pytest.raises(RetargetError, match="not positive definite"):
+        cholesky(a, f.vertices)
+
+
+@pytest.mark.parametrize("method", ["biharmonic", "laplacian"])
+def test_quadratic_rigs_equal_superlu_s(method):
+    """The rigs solved by the Cholesky factor equal the SuperLU path's within 1e-6 (lip
+    supports included: ibug68 has lower-lip, jaw and upper-lip features)."""
+    import retarget.weights.biharmonic as biharmonic
+    import retarget.weights.laplacian as laplacian
+    from retarget.weights.quadratic import constrained_weights
+
+    f = sample_face()
+    layout = get_layout("ibug68")
+    pts = from_vertex_indices(f.landmarks68, len(f.vertices), layout.name)
+    module = biharmonic if method == "biharmonic" else laplacian
+    new = compute_weights(method, f.vertices, f.faces, pts, layout).dense()
+
+    def superlu(*args, vertices=None, **kwargs):
+        return constrained_weights(*args, **kwargs)
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(module, "constrained_weights", superlu)
+    try:
+        old = compute_weights(method, f.vertices, f.faces, pts, layout).dense()
+    finally:
+        mp.undo()
+    assert np.abs(new - old).max() < 1e-6
