@@ -437,6 +437,8 @@ def track_marker_video(
 _SCORE_RADII = (2.0, 2.6, 3.4, 4.4)   # px, outer ring radii of the matched filter's templates
 _BIRTH_SCORE = 0.55    # correlation that starts a track, with a dot brighter than its ring
 _MIN_DOT_CONTRAST = 8.0  # grey levels by which a new marker's dot outshines its ring all round
+_CLEAR_DOT = 40.0      # grey levels of a dot over its ring that start a track whatever the
+                       # correlation (skin features never passed 35 on the hard material)
 _KEEP_SCORE = 0.25     # correlation of a peak that keeps a track near its prediction
 _SNAP = 3.0            # px, how far from its prediction a tracked marker's peak may lie
 _REACQUIRE = 4.0       # px, the same for a marker lost for a while
@@ -574,27 +576,33 @@ class RingTracks:
         if not grays:
             raise RetargetError("RingTracks.fit needs at least one frame")
         n = len(grays)
-        peaks, bright = [], []
+        peaks, bright, strong = [], [], []
         for g in grays:
             score, radius = _ring_scores(g, self.radii, self.min_spread)
             cand, val = score_peaks(score, self.keep)
-            peaks.append((cand, val))
             ix = np.rint(cand).astype(np.int64)
-            bright.append(ring_contrast(g, cand, radius[ix[:, 1], ix[:, 0]]) >= self.min_contrast)
+            contrast = ring_contrast(g, cand, radius[ix[:, 1], ix[:, 0]])
+            peaks.append((cand, val, contrast))
+            bright.append(contrast >= self.min_contrast)
+            # births: a clear match with a dot, or a clear dot in a ring the round
+            # templates fit less well (a marker seen obliquely)
+            strong.append(bright[-1] & ((val >= self.birth) | (contrast >= _CLEAR_DOT)))
         pts = np.full((n, 0, 2), np.nan)
         sc = np.full((n, 0), np.nan)
+        ct = np.full((n, 0), np.nan)           # the matched peaks' dot contrast
         pos = np.zeros((0, 2))                  # where each track is (or is thought to be)
         rel = np.zeros((0, 2))                  # its motion last frame, less its neighbours'
         born = []
         for t in range(n):
             live = np.isfinite(pts[t - 1, :, 0]) if t > 0 else np.zeros(len(pos), bool)
-            cand, val = peaks[t]
+            cand, val, contrast = peaks[t]
             if t > 0 and pos.size:
                 own, guess, rel = self._flow(grays[t - 1], grays[t], pos, live, rel)
-                # two guesses, the marker's own flow and its neighbours' plus its own last
-                # relative motion: the candidate near either will do
-                d = np.minimum(np.linalg.norm(pos[:, None] + own[:, None] - cand[None], axis=2),
-                               np.linalg.norm(pos[:, None] + guess[:, None] - cand[None], axis=2))
+                # three guesses: the marker's own flow, its neighbours' (the head's), and
+                # theirs plus its own last relative motion (an expression going on, which
+                # may also stop or turn): the candidate near any will do
+                d = np.min([np.linalg.norm(pos[:, None] + step[:, None] - cand[None], axis=2)
+                            for step in (own, guess, guess - rel)], axis=0)
                 pos = pos + guess
             else:
                 d = np.linalg.norm(pos[:, None] - cand[None], axis=2)
@@ -608,14 +616,15 @@ class RingTracks:
             free = np.ones(len(cand), bool)
             free[take[take >= 0]] = False
             lost = np.flatnonzero(take < 0)
-            strong = np.flatnonzero(free & (val >= self.birth) & bright[t])
-            if lost.size and strong.size:
-                again = _matched(np.linalg.norm(pos[lost][:, None] - cand[strong][None], axis=2),
+            back = np.flatnonzero(free & strong[t])
+            if lost.size and back.size:
+                again = _matched(np.linalg.norm(pos[lost][:, None] - cand[back][None], axis=2),
                                  np.full((lost.size, 1), 2.5 * self.reacquire))
-                take[lost[again >= 0]] = strong[again[again >= 0]]
+                take[lost[again >= 0]] = back[again[again >= 0]]
             hit = take >= 0
             pts[t, hit] = cand[take[hit]]
             sc[t, hit] = val[take[hit]]
+            ct[t, hit] = contrast[take[hit]]
             rel[hit] += cand[take[hit]] - pos[hit]      # the correction is the track's own
             rel[~hit] = 0.0
             rel = np.clip(rel, -self.snap, self.snap)
@@ -625,7 +634,7 @@ class RingTracks:
             free[take[hit]] = False
             if len(pos):
                 free &= np.linalg.norm(cand[:, None] - pos[None], axis=2).min(1) > 2.0 * self.snap
-            new = np.flatnonzero(free & (val >= self.birth) & bright[t])
+            new = np.flatnonzero(free & strong[t])
             if new.size:
                 # two strong peaks of one marker: keep the stronger
                 new = new[np.argsort(-val[new])]
@@ -637,17 +646,21 @@ class RingTracks:
                 add = np.full((n, len(new), 2), np.nan)
                 add[t] = cand[new]
                 pts = np.concatenate([pts, add], 1)
-                sc = np.concatenate([sc, np.where(np.arange(n)[:, None] == t, val[new][None], np.nan)], 1)
+                now = np.arange(n)[:, None] == t
+                sc = np.concatenate([sc, np.where(now, val[new][None], np.nan)], 1)
+                ct = np.concatenate([ct, np.where(now, contrast[new][None], np.nan)], 1)
                 pos = np.concatenate([pos, cand[new]])
                 rel = np.concatenate([rel, np.zeros((len(new), 2))])
                 born += [t] * len(new)
         born = np.array(born, dtype=np.int64)
         for m in np.flatnonzero(born > 0):
-            self._backward(grays, peaks, pts, sc, m, born[m])
+            self._backward(peaks, pts, sc, ct, m, born[m])
         seen = np.isfinite(pts[..., 0])
         with np.errstate(all="ignore"):
-            quality = np.nanmedian(np.where(seen, sc, np.nan), 0) if n else np.zeros(0)
-        good = (seen.sum(0) >= min(self.min_frames, n)) & (np.nan_to_num(quality) >= self.min_score)
+            quality = np.nanmedian(np.where(seen, sc, np.nan), 0)
+            clear = np.nanmedian(np.where(seen, ct, np.nan), 0)
+        good = (seen.sum(0) >= min(self.min_frames, n)) & (
+            (np.nan_to_num(quality) >= self.min_score) | (np.nan_to_num(clear) >= _CLEAR_DOT))
         pts, sc, seen = pts[:, good], sc[:, good], seen[:, good]
         first = np.where(seen.any(0), seen.argmax(0), n)
         y0 = pts[np.minimum(first, n - 1), np.arange(pts.shape[1]), 1]
@@ -683,7 +696,7 @@ class RingTracks:
         # LK pulled off by the skin disagrees with the neighbours: the guess stands alone
         agree = ok & (np.linalg.norm(own - guess, axis=1) < 0.5 * self.snap)
         return np.where(agree[:, None], own, guess), guess, rel
-    def _backward(self, grays, peaks, pts, sc, m, t0) -> None:
+    def _backward(self, peaks, pts, sc, ct, m, t0) -> None:
         """Follow track m from frame t0 back toward frame 0 (in place): its neighbours'
         motion from frame t to t - 1 moves it, the nearest free peak within `snap` px takes
         it; the first frame without one ends the walk."""
@@ -695,7 +708,7 @@ class RingTracks:
                 d = np.linalg.norm(pts[t + 1, both] - p, axis=1)
                 near = np.argsort(d)[:self.neighbours]
                 p = p + np.median((pts[t, both] - pts[t + 1, both])[near], axis=0)
-            cand, val = peaks[t]
+            cand, val, contrast = peaks[t]
             if len(cand) == 0:
                 return
             d = np.linalg.norm(cand - p, axis=1)
@@ -709,6 +722,7 @@ class RingTracks:
                 return
             pts[t, m] = p = cand[k]
             sc[t, m] = val[k]
+            ct[t, m] = contrast[k]
 
 
 def _matched(d: np.ndarray, gate: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:

@@ -123,7 +123,7 @@ class Footage:
 
     In the order a camera does it:
     gradient : uneven light, the log of the gain per 100 px along a seeded direction
-        (0.35: one side of a 140 px face 1.6 times brighter than the other).
+        (0.25: one side of a 140 px face 1.4 times brighter than the other).
     shutter : exposure time over the frame interval; each frame is blurred along the
         markers' median image motion since the previous frame times this (a symmetric
         line kernel, so a marker's blurred centroid stays its mid-exposure position).
@@ -137,7 +137,7 @@ class Footage:
         the given frame; the truth marks the marker hidden while any of it is covered.
     """
 
-    gradient: float = 0.35
+    gradient: float = 0.25
     shutter: float = 0.5
     noise: float = 3.0
     jpeg_quality: int | None = 30
