@@ -31,13 +31,16 @@ def add_track(commands, parents) -> None:
         "track", parents=parents, help="track a performance video into source points",
         description="Track a video into (F, N, 3) float32 source points in a layout's order "
         "(NaN rows where a point or the face is lost; z = 0 for one-camera markers) and print "
-        "the frames per second.")
+        "the frames per second. One-camera markers without --layout: every marker in view, "
+        "in a stable order (m01..mM, in the --take file's names).")
     p.add_argument("video", metavar="VIDEO", help="the video (the left one for stereo)")
     p.add_argument("--method", choices=["markerless", "markers", "stereo"], required=True,
                    help="markerless: MediaPipe's face mesh (run natively, no browser); markers: white dots with a black ring, one camera; stereo: "
                    "coloured markers seen by a calibrated pair")
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="points to produce (default: dutreve21 for markers and stereo, ibug68 for markerless)")
+                   help="points to produce (default: ibug68 for markerless, dutreve21 for stereo; for "
+                   "markers, dutreve21 when the first frame shows its 21 markers, else every marker "
+                   "in view, named m01..mM by when it is first seen, then top to bottom)")
     p.add_argument("--right", metavar="VIDEO", help="stereo: the right camera's video")
     p.add_argument("--calibration", metavar="CALIB.npz", help="stereo: from 'retarget calibrate'")
     p.add_argument("--max-frames", type=positive_int, metavar="F",
@@ -55,7 +58,7 @@ def _track(args) -> int:
     take_out = Path(args.take) if args.take else None
     if take_out is not None:
         require_parent(take_out)
-    layout = args.layout or ("ibug68" if args.method == "markerless" else "dutreve21")
+    layout = args.layout or {"markerless": "ibug68", "markers": "auto", "stereo": "dutreve21"}[args.method]
     if args.method == "stereo":
         if not (args.right and args.calibration):
             raise RetargetError("--method stereo needs --right RIGHT_VIDEO and --calibration CALIB.npz")

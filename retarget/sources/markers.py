@@ -369,65 +369,133 @@ class MarkerTracker:
 def track_marker_video(
     path: str | Path,
     *,
-    layout: str = "dutreve21",
+    layout: str | None = "dutreve21",
     assignment: np.ndarray | None = None,
     progress: Callable[[int, int], None] | None = None,
     tracker: MarkerTracker | None = None,
+    tracks: RingTracks | None = None,
 ) -> Take:
     """Track a ring-marker video into a 2D `Take` (Dutreve et al. 2008, §5).
 
-    path : the video; layout : the layout whose points the markers stand for.
+    path : the video.
+    layout : the layout whose points the markers stand for: its markers are found and
+        named in the first frame and followed by `MarkerTracker`; where the first frame
+        shows fewer ring markers than the layout has (markers a few pixels across, some
+        hidden), `RingTracks` follows every marker through the whole clip and
+        `assign_markers` names them on the frame where most are seen.
+        None: no layout, every marker in view, `RingTracks`' columns named m01..mM.
+        "auto": dutreve21 when the first frame shows exactly its 21 markers in its
+        arrangement, None otherwise.
     assignment : None to find and name the markers in the first frame automatically
         (`assign_markers` against `reference_points`), or (N, 2) first-frame pixel
         positions (x right, y down, as in the image) in the layout's point order; each
         snaps to the nearest marker.
     progress : called as progress(frames_done, frames_claimed) after each frame
         (frames_claimed is the header's count, 0 when unknown).
-    tracker : a configured `MarkerTracker` (default settings otherwise).
+    tracker : a configured `MarkerTracker`; tracks : a configured `RingTracks`
+        (default settings otherwise).
 
     Returns a Take with points (F, N, 2) float32 in pixels, x right and **y up**
     (``y_up = height - y``), NaN where a marker is lost; source "markers"; meta with the
-    video size, the header's frame count and whether the video was truncated.
+    video size, the header's frame count, whether the video was truncated and which
+    tracker ran ("tracker": "MarkerTracker" or "RingTracks").
     """
     import cv2
 
-    lay = get_layout(layout)
-    tracker = MarkerTracker() if tracker is None else tracker
     path = Path(path)
+    if layout == "auto" and assignment is not None:
+        raise RetargetError('layout "auto" cannot take an assignment: name the layout')
+    lay = None if layout in (None, "auto") else get_layout(layout)
+    if lay is None and assignment is not None:
+        raise RetargetError("an assignment needs a layout")
     with VideoReader(path) as reader:
         frames = iter(reader)
         _, first = next(frames)
         g = cv2.cvtColor(first, cv2.COLOR_BGR2GRAY)
         blobs = ring_blobs(g)
-        if assignment is None:
-            start = _auto_assignment(blobs, lay, path)
+        if layout == "auto":
+            auto = get_layout("dutreve21")
+            if len(blobs.centres) == auto.n_points and (
+                    assign_markers(blobs.centres, reference_points(auto.name)) >= 0).all():
+                lay = auto
+        follow = lay is not None and (assignment is not None or len(blobs.centres) >= lay.n_points)
+        if follow:
+            track = _followed(reader, frames, g, blobs, lay, assignment, path, progress, tracker)
         else:
-            start = _points(assignment, "assignment")
-            if start.shape != (lay.n_points, 2):
-                raise RetargetError(
-                    f"assignment must be ({lay.n_points}, 2) pixel positions for layout "
-                    f"{lay.name!r}, got {start.shape}")
-        try:
-            track = [tracker.start(g, start, blobs)]
-        except RetargetError as exc:
-            raise RetargetError(f"{path}: {exc}") from None
-        if progress is not None:
-            progress(1, reader.n_frames)
-        for i, frame in frames:
-            track.append(tracker.update(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)))
+            grays = [g]
             if progress is not None:
-                progress(i + 1, reader.n_frames)
+                progress(1, reader.n_frames)
+            for i, frame in frames:
+                grays.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+                if progress is not None:
+                    progress(i + 1, reader.n_frames)
         width, height = reader.size
         meta = {
             "video": path.name, "size": [width, height], "units": "px", "y_axis": "up",
             "frames_claimed": reader.n_frames, "truncated": reader.truncated,
-            "fps_known": reader.fps_known,
+            "fps_known": reader.fps_known, "tracker": "MarkerTracker" if follow else "RingTracks",
         }
         fps = reader.fps
-    points = np.stack(track)
+    if follow:
+        points, names = np.stack(track), lay.point_names
+    else:
+        tracks = RingTracks() if tracks is None else tracks
+        points = tracks.fit(grays).points_
+        if lay is None:
+            names = tuple(f"m{k + 1:0{max(2, len(str(points.shape[1])))}d}" for k in range(points.shape[1]))
+        else:
+            points = points[:, _named_tracks(points, lay, len(blobs.centres), path)]
+            names = lay.point_names
+    points = points.copy()
     points[..., 1] = height - points[..., 1]
-    meta["lost_share"] = float(np.isnan(points[..., 0]).mean())
-    return Take(points, lay.point_names, fps, layout=lay.name, source="markers", meta=meta)
+    meta["lost_share"] = float(np.isnan(points[..., 0]).mean()) if points.size else 1.0
+    return Take(points, names, fps, layout=None if lay is None else lay.name, source="markers", meta=meta)
+
+
+def _followed(reader, frames, g, blobs, lay, assignment, path, progress, tracker) -> list:
+    """[(N, 2)] per frame: `MarkerTracker` from the first frame (grey g) on."""
+    import cv2
+
+    tracker = MarkerTracker() if tracker is None else tracker
+    if assignment is None:
+        start = _auto_assignment(blobs, lay, path)
+    else:
+        start = _points(assignment, "assignment")
+        if start.shape != (lay.n_points, 2):
+            raise RetargetError(
+                f"assignment must be ({lay.n_points}, 2) pixel positions for layout "
+                f"{lay.name!r}, got {start.shape}")
+    try:
+        track = [tracker.start(g, start, blobs)]
+    except RetargetError as exc:
+        raise RetargetError(f"{path}: {exc}") from None
+    if progress is not None:
+        progress(1, reader.n_frames)
+    for i, frame in frames:
+        track.append(tracker.update(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)))
+        if progress is not None:
+            progress(i + 1, reader.n_frames)
+    return track
+
+
+def _named_tracks(points: np.ndarray, lay, first_found: int, path: Path) -> np.ndarray:
+    """(N,) int64 the `RingTracks` column (of points (F, M, 2)) of each of the layout's
+    points, named by `assign_markers` on the frame where most markers are seen."""
+    seen = np.isfinite(points[..., 0])
+    best = int(seen.sum(1).argmax()) if len(points) else 0
+    cols = np.flatnonzero(seen[best]) if len(points) else np.zeros(0, np.int64)
+    if len(cols) < lay.n_points:
+        raise RetargetError(
+            f"{path}: found {first_found} ring markers in the first frame, layout {lay.name!r} needs "
+            f"{lay.n_points} (white dots with a black ring; at most {len(cols)} seen at once in the clip)")
+    match = assign_markers(points[best, cols].astype(np.float64), reference_points(lay.name))
+    if (match < 0).any():
+        missing = [lay.point_names[i] for i in np.flatnonzero(match < 0)]
+        raise RetargetError(
+            f"{path}: no marker matches point(s) {', '.join(missing)} of layout {lay.name!r} "
+            f"in frame {best}, where most markers are seen (are they placed as the layout's "
+            f"reference face shows?)")
+    return cols[match]
 
 
 # ---------------------------------------------------------------------------------------
