@@ -4,7 +4,7 @@ error against the rendered truth, and their refusals."""
 import numpy as np
 
 from retarget.cli import main
-from retarget.testing.marker_video import render_marker_video
+from retarget.testing.marker_video import render_marker_video, render_webcam_marker_video
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
 
 
@@ -25,6 +25,38 @@ def test_track_markers_writes_frames_close_to_the_truth(tmp_path, capsys):
     assert seen.mean() > 0.9
     error = np.linalg.norm(frames[..., :2] - expected, axis=-1)[seen]
     assert np.median(error) < 0.5
+
+
+def test_track_markers_without_a_layout_writes_every_marker_in_a_stable_order(tmp_path, capsys):
+    """Webcam footage of 24 small markers (no built-in layout has 24): no --layout, so
+    every marker in view, columns m01..mM by when each is first seen."""
+    from retarget.sources.take import Take
+
+    truth = render_webcam_marker_video(tmp_path / "webcam.mp4", n_frames=16, seed=2, occluded_frames=0)
+    out, take_path = tmp_path / "frames.npy", tmp_path / "take.npz"
+    assert main(["track", str(truth.videos[0]), "--method", "markers", "--out", str(out),
+                 "--take", str(take_path), "-q"]) == 0
+    frames = np.load(out)
+    n = frames.shape[1]
+    assert f"tracked 16 frames of {n} points (own labels)" in capsys.readouterr().out
+    assert frames.shape == (16, n, 3) and frames.dtype == np.float32 and 20 <= n <= 24
+    take = Take.load(take_path)
+    assert take.names == tuple(f"m{k:02d}" for k in range(1, n + 1)) and take.layout is None
+    # each column is one marker throughout, within a pixel
+    image = frames[..., :2].astype(np.float64)
+    image[..., 1] = truth.cameras[0].size[1] - image[..., 1]
+    d = np.linalg.norm(image[:, :, None] - truth.points2d[:, 0][:, None], axis=3)
+    nearest = np.nan_to_num(d, nan=np.inf).argmin(2)
+    seen = np.isfinite(image[..., 0])
+    assert seen.mean() > 0.9
+    for m in range(n):
+        assert len(set(nearest[seen[:, m], m])) == 1
+    assert np.median(d.min(2)[seen]) < 0.5
+    # the order: by first frame seen, then top to bottom
+    first = seen.argmax(0)
+    assert (np.diff(first) >= 0).all()
+    top = image[0, first == 0, 1]
+    assert (np.diff(top) >= 0).all()
 
 
 def test_calibrate_then_track_stereo(tmp_path, capsys):
