@@ -257,6 +257,7 @@ def render_marker_video(
     vertices: np.ndarray | None = None,
     pace: float = 1.0,
     footage: Footage | None = None,
+    face: SampleFace | None = None,
 ) -> GroundTruth:
     """Render the marker performance to video(s) and return (and save) its ground truth.
 
@@ -277,6 +278,8 @@ def render_marker_video(
     pace : demo seconds per second of video (3 plays the demo loop three times as fast:
         more expressions in a short clip, faster motion).
     footage : spoil each frame as other people's footage is (`Footage`), after rendering.
+    face : the performer (any `SampleFace`: vertices in cm, +y up, +z out, with shapes
+        named as `EXPRESSION_NAMES`), default `sample_face(resolution)`.
     """
     import cv2
 
@@ -286,7 +289,7 @@ def render_marker_video(
     if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
         raise RetargetError(f"n_frames must be a positive integer, got {n_frames!r}")
     cams, names = _cameras(cameras, scale)
-    face = sample_face(resolution)
+    face = sample_face(resolution) if face is None else face
     if vertices is None:
         verts = marker_vertices(face, layout)
         point_names = get_layout(layout).point_names
@@ -379,23 +382,25 @@ def render_webcam_marker_video(
     footage: Footage | None = None,
     occluded: int = 21,
     occluded_frames: int = 8,
+    face: SampleFace | None = None,
 ) -> GroundTruth:
     """Issue 17's hard mono material: `render_marker_video` with `webcam_camera(distance)`,
     the 24 `webcam_marker_vertices`, head motion `amplitude` times `head_motion`'s (2.2:
     yaw up to about 18 degrees, pitch 11, roll 7, so that side markers turn oblique), the
     demo played at `pace` from `start` s (48 frames at pace 3: talking, a pucker, a blink,
     surprise, another blink and the start of a smile), and `footage` (default: `Footage()`
-    with marker `occluded` under a finger for the first `occluded_frames` frames).
-    Suffix .mp4 (MPEG-4 Part 2) for the compressed stream. Returns the ground truth."""
+    with marker `occluded` under a finger for the first `occluded_frames` frames); `face`
+    as `render_marker_video`'s. Suffix .mp4 (MPEG-4 Part 2) for the compressed stream.
+    Returns the ground truth."""
     fps = 30.0
-    face = sample_face(1)
+    face = sample_face(1) if face is None else face
     if footage is None:
         footage = Footage(occluder=(occluded, occluded_frames) if occluded_frames else None)
     motion = head_motion(n_frames, fps / pace, seed, amplitude)
     return render_marker_video(
         path, n_frames=n_frames, fps=fps, cameras=webcam_camera(distance), head_motion=motion,
         seed=seed, start=start, marker_radius=marker_radius, dot_radius=dot_radius,
-        vertices=webcam_marker_vertices(face), pace=pace, footage=footage)
+        vertices=webcam_marker_vertices(face), pace=pace, footage=footage, face=face)
 
 
 def _cameras(cameras, scale: float) -> tuple[list[Camera], list[str]]:
