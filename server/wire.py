@@ -106,7 +106,7 @@ block is a tail, so readers of vertices and faces alone need not know it.
 
 Rig weights (RTSW)
 ------------------
-::
+Version 1 (GET .../rig/weights), float32::
 
     offset      size    field
     0           4       magic b"RTSW"
@@ -117,6 +117,30 @@ Rig weights (RTSW)
     20          2 V K   uint16 joint indices, (V, K) row-major, each in [0, N)
     20+2VK      0 or 2  zero padding, so the weights start at a multiple of 4
     ...         4 V K   float32 weights, (V, K) row-major
+
+Version 2 (GET .../rig/weights?version=2, what the page reads; gzip-encoded for a client
+that accepts it), quantised: 2.4 MiB against version 1's 51.7 MiB for the dense
+biharmonic rig of the 132,907-vertex built-in face (`bench/rig.py`)::
+
+    offset      size    field
+    0           4       magic b"RTSW"
+    4           4       uint32 format version (2)
+    8           4       uint32 V, vertex count
+    12          4       uint32 K, influences per vertex
+    16          4       uint32 N, joint (feature point) count
+    20          4       uint32 flags: bit 0 = dense, every vertex lists joints 0..K-1 in
+                        that order (K = N): the joint indices are not sent
+    24          4       float32 step, a power of two: a weight is step x q
+    28          2 V K   uint16 joint indices, (V, K) row-major (absent when dense)
+    ...         0 or 2  zero padding, so the weights start at a multiple of 4
+    ...         V K     the low bytes of the int16 q, slot-major: q[0, 0], q[1, 0], ...,
+                        q[V-1, 0], q[0, 1], ... (a slot's weights over the mesh are a
+                        smooth field: its bytes deflate well)
+    ...         V K     the high bytes of q, in the same order
+
+step is the smallest power of two with every |weight| <= 32767 step (2^-14 for that
+rig): each weight is rounded to within step / 2 (3.1e-5 there), and step x q is exact in
+float32, so both sides dequantise to the same bits.
 
 Weights are `retarget.skin.SkinWeights`: unused slots have weight 0; the rest of a row's
 1 belongs to the static root joint.
@@ -398,22 +422,73 @@ def morphs_binary(morphs: MuscleMorphs, dofs, limits, expressions) -> bytes:
 
 WEIGHTS_MAGIC = b"RTSW"
 WEIGHTS_VERSION = 1
+WEIGHTS_VERSIONS = (1, 2)
 WEIGHTS_HEADER = struct.Struct("<4sIIII")
+WEIGHTS_HEADER_V2 = struct.Struct("<4sIIIIIf")
+WEIGHTS_DENSE = 1
 EDIT_MAGIC = b"RTSE"
 EDIT_VERSION = 1
 EDIT_HEADER = struct.Struct("<4sIIIII")
 
 
-def weights_binary(rig: SkinWeights) -> bytes:
-    """The RTSW bytes of a rig (module docstring)."""
+def weights_binary(rig: SkinWeights, version: int = WEIGHTS_VERSION) -> bytes:
+    """The RTSW bytes of a rig in format `version` (1 or 2, module docstring)."""
+    if version not in WEIGHTS_VERSIONS:
+        raise RetargetError(f"rig weights format version must be one of {WEIGHTS_VERSIONS}; got {version}")
     if rig.n_joints > 0xFFFF:
         raise RetargetError(f"rig has {rig.n_joints} joints; the binary form holds 65535")
     v, k = rig.indices.shape
-    indices = np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
+    if version == 1:
+        indices = np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
+        padding = b"\0" * (-len(indices) % 4)
+        weights = np.ascontiguousarray(rig.weights, dtype="<f4").tobytes()
+        header = WEIGHTS_HEADER.pack(WEIGHTS_MAGIC, 1, v, k, rig.n_joints)
+        return header + indices + padding + weights
+    dense = k == rig.n_joints and bool((rig.indices == np.arange(k)).all())
+    top = float(np.abs(rig.weights).max(initial=0.0))
+    step = 2.0 ** int(np.ceil(np.log2(top / 32767))) if top > 0 else 1.0
+    q = np.ascontiguousarray(np.round(rig.weights.T / step), dtype="<i2")  # (K, V), slot-major
+    planes = q.view(np.uint8).reshape(-1, 2).T.tobytes()  # low bytes, then high bytes
+    indices = b"" if dense else np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
     padding = b"\0" * (-len(indices) % 4)
-    weights = np.ascontiguousarray(rig.weights, dtype="<f4").tobytes()
-    header = WEIGHTS_HEADER.pack(WEIGHTS_MAGIC, WEIGHTS_VERSION, v, k, rig.n_joints)
-    return header + indices + padding + weights
+    header = WEIGHTS_HEADER_V2.pack(WEIGHTS_MAGIC, 2, v, k, rig.n_joints,
+                                    WEIGHTS_DENSE if dense else 0, step)
+    return header + indices + padding + planes
+
+
+def weights_from_binary(data: bytes) -> SkinWeights:
+    """The rig of RTSW bytes of either version (its weights dequantised for version 2);
+    RetargetError when malformed."""
+    if len(data) < WEIGHTS_HEADER.size:
+        raise RetargetError(f"rig weights: {len(data)} bytes is shorter than the header")
+    magic, version, v, k, n = WEIGHTS_HEADER.unpack_from(data)
+    if magic != WEIGHTS_MAGIC or version not in WEIGHTS_VERSIONS:
+        raise RetargetError(f"rig weights: expected magic {WEIGHTS_MAGIC!r} version 1 or 2, "
+                            f"got {magic!r} version {version}")
+    flags, step, start = 0, None, WEIGHTS_HEADER.size
+    if version == 2:
+        if len(data) < WEIGHTS_HEADER_V2.size:
+            raise RetargetError(f"rig weights: {len(data)} bytes is shorter than the header")
+        *_, flags, step = WEIGHTS_HEADER_V2.unpack_from(data)
+        start = WEIGHTS_HEADER_V2.size
+    dense = bool(flags & WEIGHTS_DENSE)
+    index_bytes = 0 if dense else 2 * v * k
+    offset = start + index_bytes + (-index_bytes % 4)
+    size = offset + (2 if version == 2 else 4) * v * k
+    if len(data) != size or (dense and k != n):
+        raise RetargetError(f"rig weights: {v} rows of {k} influences of {n} joints need "
+                            f"{size} bytes; got {len(data)}")
+    if dense:
+        indices = np.broadcast_to(np.arange(k, dtype=np.int32), (v, k)).copy()
+    else:
+        indices = np.frombuffer(data, "<u2", v * k, start).reshape(v, k).astype(np.int32)
+    if version == 1:
+        weights = np.frombuffer(data, "<f4", v * k, offset).reshape(v, k).astype(np.float32)
+    else:
+        planes = np.frombuffer(data, np.uint8, 2 * v * k, offset).reshape(2, v * k)
+        q = np.ascontiguousarray(planes.T).view("<i2").reshape(k, v).T
+        weights = q.astype(np.float32) * np.float32(step)
+    return SkinWeights(indices, np.ascontiguousarray(weights), n)
 
 
 def edit_arrays(body: bytes) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:

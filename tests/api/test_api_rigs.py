@@ -20,6 +20,7 @@ from retarget.sample_face import sample_face
 from retarget.weights import compute_weights
 from server.app import create_app
 from server.jobs import JobBusy, JobRegistry
+from server.wire import weights_from_binary
 from tests.waits import wait_job
 
 
@@ -141,6 +142,19 @@ def test_rig_job_runs_to_done_and_matches_the_library(client, face_project):
                                get_layout("ibug68"))
     np.testing.assert_array_equal(idx, expected.indices)
     np.testing.assert_array_equal(w, expected.weights)
+    # version 2, what the page reads: quantised, dense (no indices), gzip-encoded on request
+    raw = client.get(f"/api/projects/{pid}/rig/weights", params={"version": 2},
+                     headers={"Accept-Encoding": "identity"})
+    assert "content-encoding" not in raw.headers
+    r = client.get(f"/api/projects/{pid}/rig/weights", params={"version": 2},
+                   headers={"Accept-Encoding": "gzip"})
+    assert r.headers["content-encoding"] == "gzip" and r.content == raw.content
+    assert len(raw.content) == 28 + w.nbytes // 2  # no indices, int16 weights
+    assert int(r.headers["content-length"]) < len(raw.content) / 3
+    v2 = weights_from_binary(r.content)
+    np.testing.assert_array_equal(v2.indices, expected.indices)
+    assert np.abs(v2.weights - expected.weights).max() <= 2.0 ** -15
+    assert client.get(f"/api/projects/{pid}/rig/weights", params={"version": 3}).status_code == 422
 
 
 def test_rig_job_with_k_and_a_method_without_progress(client, face_project):

@@ -248,13 +248,14 @@ export const api = {
 	},
 
 	/**
-	 * The rig's skin weights (the "RTSW" format of server/wire.py).
+	 * The rig's skin weights (the "RTSW" format of server/wire.py, version 2: quantised to
+	 * within 2^-15 of the largest weight, gzip-encoded on the way).
 	 * @returns {Promise<{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array}>}
 	 *   indices and weights are (V, k) row-major.
 	 */
 	async rigWeights( id ) {
 
-		return new RigWeightsDecoder().decode( await request( 'GET', `/api/projects/${ id }/rig/weights`, { binary: true } ) );
+		return new RigWeightsDecoder().decode( await request( 'GET', `/api/projects/${ id }/rig/weights?version=2`, { binary: true } ) );
 
 	},
 

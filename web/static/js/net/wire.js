@@ -34,14 +34,15 @@ function magicNumber( text ) {
 
 /**
  * A DataView on a REST format's bytes after checking its 4-byte magic and uint32 version
- * (1) and that it holds at least its header.
+ * (one of `versions`) and that it holds at least its header.
  * @param {string} who - the codec, for the message.
  * @param {ArrayBuffer} buffer
  * @param {string} magic
  * @param {number} headerBytes
+ * @param {number[]} [versions] - the versions the codec reads.
  * @returns {DataView}
  */
-function checkedHeader( who, buffer, magic, headerBytes ) {
+function checkedHeader( who, buffer, magic, headerBytes, versions = [ 1 ] ) {
 
 	if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( `${ who }: expected an ArrayBuffer.` );
 	const found = String.fromCharCode( ...new Uint8Array( buffer, 0, Math.min( 4, buffer.byteLength ) ) );
@@ -49,7 +50,7 @@ function checkedHeader( who, buffer, magic, headerBytes ) {
 	if ( buffer.byteLength < headerBytes ) throw new Error( `${ who }: ${ buffer.byteLength } bytes is shorter than its ${ headerBytes }-byte header.` );
 	const view = new DataView( buffer );
 	const version = view.getUint32( 4, true );
-	if ( version !== 1 ) throw new Error( `${ who }: unsupported format version ${ version }.` );
+	if ( ! versions.includes( version ) ) throw new Error( `${ who }: unsupported format version ${ version }.` );
 	return view;
 
 }
@@ -267,37 +268,86 @@ export class MeshArraysDecoder {
 }
 
 /**
- * Decoder of a rig's skin weights: a 20-byte header (magic "RTSW", uint32 version, uint32
- * V, uint32 K, uint32 N) followed by V x K uint16 joint indices, 0 or 2 bytes of padding
- * and V x K float32 weights.
+ * Decoder of a rig's skin weights (server/wire.py's docstring has both layouts): version 1,
+ * a 20-byte header (magic "RTSW", uint32 version, uint32 V, uint32 K, uint32 N) followed by
+ * V x K uint16 joint indices, 0 or 2 bytes of padding and V x K float32 weights; version 2
+ * (GET .../rig/weights?version=2), a 28-byte header (the same, then uint32 flags and a
+ * float32 step) followed by the indices unless flag bit 0 (dense: joints 0..K-1 in order),
+ * padding, and the int16 weights over step as a plane of low bytes then one of high bytes,
+ * slot-major.
  */
 export class RigWeightsDecoder {
 
 	static HEADER_BYTES = 20;
+	static HEADER_BYTES_V2 = 28;
+	static DENSE = 1;
 
 	/**
 	 * @param {ArrayBuffer} buffer
 	 * @returns {{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array}}
-	 *   indices and weights are (V, k) row-major views on `buffer`; unused slots have weight 0.
+	 *   indices and weights are (V, k) row-major (views on `buffer` for version 1; version 2's
+	 *   dequantised weights, and a dense rig's indices, are new arrays); unused slots have
+	 *   weight 0.
 	 */
 	decode( buffer ) {
 
-		const view = checkedHeader( 'RigWeightsDecoder', buffer, 'RTSW', RigWeightsDecoder.HEADER_BYTES );
+		const view = checkedHeader( 'RigWeightsDecoder', buffer, 'RTSW', RigWeightsDecoder.HEADER_BYTES, [ 1, 2 ] );
+		const version = view.getUint32( 4, true );
 		const v = view.getUint32( 8, true ), k = view.getUint32( 12, true ), n = view.getUint32( 16, true );
-		const start = RigWeightsDecoder.HEADER_BYTES + paddedUint16Bytes( v * k );
-		const size = start + 4 * v * k;
-		if ( buffer.byteLength !== size ) {
+		if ( version === 1 ) {
 
-			throw new Error( `RigWeightsDecoder: ${ v } rows of ${ k } influences need ${ size } bytes, got ${ buffer.byteLength }.` );
+			const start = RigWeightsDecoder.HEADER_BYTES + paddedUint16Bytes( v * k );
+			const size = start + 4 * v * k;
+			if ( buffer.byteLength !== size ) {
+
+				throw new Error( `RigWeightsDecoder: ${ v } rows of ${ k } influences need ${ size } bytes, got ${ buffer.byteLength }.` );
+
+			}
+
+			return {
+				nJoints: n,
+				nInfluences: k,
+				indices: new Uint16Array( buffer, RigWeightsDecoder.HEADER_BYTES, v * k ),
+				weights: new Float32Array( buffer, start, v * k ),
+			};
 
 		}
 
-		return {
-			nJoints: n,
-			nInfluences: k,
-			indices: new Uint16Array( buffer, RigWeightsDecoder.HEADER_BYTES, v * k ),
-			weights: new Float32Array( buffer, start, v * k ),
-		};
+		const header = RigWeightsDecoder.HEADER_BYTES_V2;
+		if ( buffer.byteLength < header ) throw new Error( `RigWeightsDecoder: ${ buffer.byteLength } bytes is shorter than its ${ header }-byte header.` );
+		const dense = ( view.getUint32( 20, true ) & RigWeightsDecoder.DENSE ) !== 0;
+		const step = view.getFloat32( 24, true );
+		const vk = v * k;
+		const start = header + ( dense ? 0 : paddedUint16Bytes( vk ) );
+		const size = start + 2 * vk;
+		if ( buffer.byteLength !== size || ( dense && k !== n ) ) {
+
+			throw new Error( `RigWeightsDecoder: ${ v } rows of ${ k } influences of ${ n } joints need ${ size } bytes, got ${ buffer.byteLength }.` );
+
+		}
+
+		let indices;
+		if ( dense ) {
+
+			indices = new Uint16Array( vk );
+			for ( let i = 0; i < vk; i += k ) for ( let s = 0; s < k; s ++ ) indices[ i + s ] = s;
+
+		} else {
+
+			indices = new Uint16Array( buffer, header, vk );
+
+		}
+
+		// q = low | high << 8 as int16; step is a power of two, so q * step is exact in float32
+		const low = new Uint8Array( buffer, start, vk ), high = new Uint8Array( buffer, start + vk, vk );
+		const weights = new Float32Array( vk );
+		for ( let s = 0, t = 0; s < k; s ++ ) {
+
+			for ( let i = s; i < vk; i += k, t ++ ) weights[ i ] = ( ( low[ t ] | high[ t ] << 8 ) << 16 >> 16 ) * step;
+
+		}
+
+		return { nJoints: n, nInfluences: k, indices, weights };
 
 	}
 
