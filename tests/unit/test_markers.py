@@ -17,10 +17,13 @@ from retarget.sources.markers import (
 )
 from retarget.sources.video import VideoReader
 from retarget.testing.marker_video import (
+    Footage,
     default_camera,
+    head_motion,
     marker_vertices,
     render_marker_video,
     render_webcam_marker_video,
+    webcam_camera,
 )
 from retarget.testing.render import render_face
 
@@ -328,3 +331,22 @@ def test_a_marker_hidden_in_the_first_frame_is_picked_up_when_it_appears(webcam)
     # it came last: the columns run in the order the markers are first seen
     first = np.isfinite(p[..., 0]).argmax(0)
     assert (np.diff(first) >= 0).all() and first[col] > 0
+
+
+def test_the_dutreve_layout_on_webcam_footage_is_named_from_the_tracks(tmp_path):
+    """Issue 17's failing command: dutreve21's markers on a webcam at 60 cm, where the first
+    frame shows only a few of them as rings; they are tracked as unnamed markers and named
+    on the frame that sees most."""
+    n = 24
+    truth = render_marker_video(
+        tmp_path / "dutreve.mp4", n_frames=n, cameras=webcam_camera(), seed=1, start=1.2, pace=2.0,
+        head_motion=head_motion(n, 15.0, 1, 2.2), footage=Footage())
+    first = cv2.VideoCapture(str(tmp_path / "dutreve.mp4")).read()[1]
+    assert len(detect_ring_markers(cv2.cvtColor(first, cv2.COLOR_BGR2GRAY))) < 21
+    take = track_marker_video(tmp_path / "dutreve.mp4", layout="dutreve21")
+    assert take.meta["tracker"] == "RingTracks" and take.layout == "dutreve21"
+    assert take.names == get_layout("dutreve21").point_names
+    err = np.linalg.norm(_image_points(take) - truth.points2d[:, 0], axis=2)
+    clear = truth.visible[:, 0] & (truth.facing[:, 0] > 0.5)
+    assert np.median(err[clear]) < 0.5 and (np.nan_to_num(err[clear], nan=np.inf) < 3).mean() > 0.95
+    assert np.nanmax(err) < 3                              # every point is its own marker
