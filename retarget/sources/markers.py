@@ -16,6 +16,22 @@ pyramidal Lucas-Kanade feature tracker [Bouguet 2002] following their 2D positio
    the frame is lost (NaN) until a detection near its predicted place brings it back.
 4. `track_marker_video` runs the three over a video and returns a 2D `Take` in pixels with
    y up (x right, ``y_up = height - y``).
+
+That suits markers ten pixels and more across. On the paper's own set-up as others film
+it (a 640x480 webcam at 60 cm: 3 mm markers about 5 px across, blurred, noisy, compressed,
+unevenly lit, some oblique or hidden; issue 17) the dot is a pixel or two and the ring
+rarely closes, so:
+
+5. `ring_score` is a matched filter, the normalised correlation with `ring_template`s of
+   2-4.4 px ring radius; its peaks (`score_peaks`, sub-pixel) lie on the dots within about
+   0.15 px, and `ring_contrast` (dot over the brightest of its ring) tells a marker from
+   an eye corner when a track starts.
+6. `RingTracks` follows every marker in view through a whole clip without a layout:
+   each track moves with its neighbours' motion (plus its own expression's), snaps to the
+   nearest peak, established tracks first; strong peaks no track claims start new tracks
+   at any frame, followed back to where the marker appeared. `track_marker_video` uses it
+   without a layout (columns m01..mM) or when the first frame shows fewer rings than the
+   layout has (named by `assign_markers` on the frame that sees most).
 """
 
 from __future__ import annotations
