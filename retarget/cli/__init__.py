@@ -49,12 +49,17 @@ Subcommands (``retarget <command> --help`` for the details):
     The expression of each frame (neutral or one of six) from muscle contractions, with
     the distances and a confidence, as CSV (Woodward §10).
 
+``batch``
+    Every take of a manifest (YAML/JSON) retargeted onto every character, the outputs
+    (glTF, ARKit CSV, vertices) in a folder per character and take, on a Dask cluster or
+    in this process, resumable (`retarget.batch`).
+
 ``serve`` (the web app) is the server's: `server.cli` owns the installed ``retarget``
 command and adds it to this parser, so the library never imports the web stack; ``python -m
 retarget.cli`` runs the library's commands alone.
 
 One module per command family: `retargeting` (transfer, rig, export-gltf, demo), `sources`
-(track, condition, calibrate), `arkit`, `mouth` (open-mouth), `landmarks`, `muscles`
+(track, condition, calibrate), `arkit`, `batch`, `mouth` (open-mouth), `landmarks`, `muscles`
 (muscles, recognise), `layouts`; `parser` holds what their parsers share. The
 work is the library's (`retarget.files` reads, checks and writes the files).
 
@@ -71,7 +76,7 @@ import os
 import sys
 
 from retarget import __version__
-from retarget.cli import arkit, landmarks, layouts, mouth, muscles, retargeting, sources
+from retarget.cli import arkit, batch, landmarks, layouts, mouth, muscles, retargeting, sources
 from retarget.cli.parser import PROG, Parser, UsageError, quiet_option
 from retarget.errors import RetargetError
 
@@ -104,6 +109,7 @@ def build_parser() -> Parser:
     muscles.add_muscles(commands)
     muscles.add_recognise(commands, quiet)
     layouts.add_layouts(commands)
+    batch.add_batch(commands, quiet)
     return parser
 
 
