@@ -564,22 +564,24 @@ def _ring_scores(g: np.ndarray, radii, min_spread: float):
     import cv2
 
     g = g.astype(np.float32)
+    g2 = g * g
     best = np.full(g.shape, -1.0, np.float32)
     radius = np.zeros(g.shape, np.float32)
     for r in radii:
         t = ring_template(r)
         n = t.shape[0] // 2
-        m = np.nan_to_num(cv2.matchTemplate(g, t, cv2.TM_CCOEFF_NORMED), nan=-1.0)
+        m = cv2.matchTemplate(g, t, cv2.TM_CCOEFF_NORMED)
+        np.nan_to_num(m, copy=False, nan=-1.0)
         # correlation is scale-free: on flat background, noise alone can look like a ring;
         # a marker's window holds a white dot and a black ring, so a wide spread of grey
-        mean = cv2.boxFilter(g, -1, t.shape, normalize=True, borderType=cv2.BORDER_REPLICATE)
-        sq = cv2.boxFilter(g * g, -1, t.shape, normalize=True, borderType=cv2.BORDER_REPLICATE)
-        spread = np.sqrt(np.maximum(sq - mean * mean, 0.0))[n:n + m.shape[0], n:n + m.shape[1]]
-        m = np.where(spread >= min_spread, m, -1.0)
-        view = best[n:n + m.shape[0], n:n + m.shape[1]]
-        better = m > view
-        view[better] = m[better]
-        radius[n:n + m.shape[0], n:n + m.shape[1]][better] = r
+        inner = (slice(n, n + m.shape[0]), slice(n, n + m.shape[1]))
+        mean = cv2.boxFilter(g, -1, t.shape, borderType=cv2.BORDER_REPLICATE)[inner]
+        var = cv2.boxFilter(g2, -1, t.shape, borderType=cv2.BORDER_REPLICATE)[inner]
+        var -= mean * mean
+        m[var < min_spread * min_spread] = -1.0
+        better = m > best[inner]
+        np.copyto(best[inner], m, where=better)
+        radius[inner][better] = r
     return best, radius
 
 
