@@ -1,0 +1,168 @@
+"""`retarget batch` (retarget/batch/): the manifest's checks, and a generated batch of 3
+characters (two as mesh + landmarks, one as an exported project) x 4 takes (CSV, NPY,
+JSON and a broken CSV) run in one process and on a 2-worker Dask LocalCluster: the same
+bytes, the broken take's pairs failed with the reason, a rerun doing nothing, a changed
+take setting redoing only its pairs, a worker killed mid-run survived."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pytest
+import yaml
+
+from retarget.batch import INDEX_NAME, plan_batch, read_manifest, run_batch
+from retarget.batch.manifest import manifest_from_dict
+from retarget.cli import main
+from retarget.errors import RetargetError
+from retarget.testing.batch_manifest import write_batch_fixture
+
+GOOD = {f"{c}/take{k}" for c in ("wide", "narrow", "lips") for k in range(3)}
+BROKEN = {f"{c}/broken" for c in ("wide", "narrow", "lips")}
+
+
+@pytest.fixture(scope="module")
+def manifest_path(tmp_path_factory) -> Path:
+    return write_batch_fixture(tmp_path_factory.mktemp("batch-in"), n_frames=20)
+
+
+@pytest.fixture(scope="module")
+def reference(manifest_path, tmp_path_factory) -> Path:
+    """The single-process run's output root."""
+    out = tmp_path_factory.mktemp("batch-here")
+    report = run_batch(plan_batch(read_manifest(manifest_path), out), workers=0)
+    assert set(report.succeeded) == GOOD and set(report.failed) == BROKEN
+    return out
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+# ---------------------------------------------------------------------------------------
+# the manifest
+
+
+def _minimal(**changes) -> dict:
+    data = {"characters": [{"name": "a", "mesh": "a.obj", "landmarks": "a.json"}],
+            "takes": [{"name": "t", "file": "t.csv"}]}
+    for key, value in changes.items():
+        if key in ("character", "take"):
+            data[key + "s"] = [{**data[key + "s"][0], **value}]
+        else:
+            data[key] = value
+    return data
+
+
+@pytest.mark.parametrize("data, message", [
+    ([1, 2], "must be a mapping"),
+    (_minimal(extra=1), "unknown key(s) 'extra'"),
+    (_minimal(outputs=["gif"]), "outputs must be a list of gltf"),
+    (_minimal(characters=[]), "'characters' must be a non-empty list"),
+    (_minimal(character={"name": "../up"}), "characters[0] ('../up'): 'name' must be"),
+    (_minimal(character={"project": "p.glb"}), "characters[0] ('a'): give a 'project'"),
+    (_minimal(character={"rig": {"deformer": "magic"}}), "characters[0] ('a'): unknown deformer 'magic'"),
+    (_minimal(character={"rig": {"k": 0}}), "rig k must be a positive integer"),
+    (_minimal(character={"layout": "ibug99"}), "unknown layout 'ibug99'"),
+    (_minimal(take={"settings": {"filter": "wobbly"}}), "takes[0] ('t'): settings: settings filter"),
+    (_minimal(take={"fps": -3}), "takes[0] ('t'): fps must be a positive number"),
+    (_minimal(takes=[{"name": "t", "file": "a.csv"}, {"name": "t", "file": "b.csv"}]), "'t' is used twice"),
+    (_minimal(pairs=[{"character": "a", "take": "nope"}]), "pairs[0]: no take named 'nope'"),
+])
+def test_manifest_errors_name_the_entry(data, message, tmp_path):
+    with pytest.raises(RetargetError) as error:
+        manifest_from_dict(data, tmp_path)
+    assert message in str(error.value)
+
+
+def test_manifest_paths_are_relative_to_it(manifest_path):
+    manifest = read_manifest(manifest_path)
+    assert [c.name for c in manifest.characters] == ["wide", "narrow", "lips"]
+    assert manifest.characters[2].project == manifest_path.parent / "lips.glb"
+    assert manifest.take("take1").file == manifest_path.parent / "take1.npy"
+    assert len(manifest.pairs) == 12 and manifest.outputs == ("gltf", "arkit_csv", "npy")
+
+
+def test_cli_refuses_a_bad_manifest(tmp_path, capsys):
+    bad = tmp_path / "m.json"
+    bad.write_text('{"characters": 3}')
+    assert main(["batch", str(bad), "--out", str(tmp_path / "out"), "--workers", "0"]) == 2
+    assert "'characters' must be a non-empty list" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------
+# running
+
+
+def test_single_process_tree(reference):
+    files = _files(reference)
+    expected = {f"{pair}/{name}" for pair in GOOD for name in ("animation.glb", "arkit.csv", "vertices.npy")}
+    assert set(files) == expected | {INDEX_NAME}
+    assert not any(name.endswith(".tmp") for name in files)
+
+
+def test_cluster_gives_the_same_bytes(manifest_path, reference, client, tmp_path):
+    report = run_batch(plan_batch(read_manifest(manifest_path), tmp_path), client=client)
+    assert set(report.succeeded) == GOOD
+    assert set(report.failed) == BROKEN
+    assert all("broken.csv" in reason for reason in report.failed.values())
+    assert _files(tmp_path) == _files(reference)  # the index too
+
+
+def test_rerun_does_nothing(manifest_path, reference):
+    plan = plan_batch(read_manifest(manifest_path), reference)
+    assert plan.jobs == [] and set(plan.skipped) == GOOD and set(plan.failed_before) == BROKEN
+    report = run_batch(plan, workers=0)
+    assert report.succeeded == [] and set(report.failed_before) == BROKEN
+    assert plan_batch(read_manifest(manifest_path), reference, retry_failed=True).jobs != []
+
+
+def test_changed_take_setting_redoes_only_its_pairs(manifest_path, reference, tmp_path):
+    data = yaml.safe_load(manifest_path.read_text())
+    data["takes"][1]["settings"] = {"filter": "mean3"}
+    changed = manifest_path.parent / "changed.yaml"
+    changed.write_text(yaml.safe_dump(data))
+    plan = plan_batch(read_manifest(changed), reference)
+    assert {job.key for job in plan.jobs} == {f"{c}/take1" for c in ("wide", "narrow", "lips")}
+
+
+def test_cli_runs_a_batch(manifest_path, tmp_path, capsys):
+    assert main(["batch", str(manifest_path), "--out", str(tmp_path), "--no-dask", "-q"]) == 1
+    out = capsys.readouterr().out
+    assert "9 succeeded, 3 failed" in out and "failed wide/broken" in out
+    assert main(["batch", str(manifest_path), "--out", str(tmp_path), "--no-dask", "-q"]) == 1
+    assert "0 succeeded, 0 failed and 3 as before, 9 skipped" in capsys.readouterr().out
+
+
+def test_killed_worker_is_survived(manifest_path, reference, client, tmp_path):
+    pids = client.run(os.getpid)  # worker address -> its process, which this test's cluster started
+    killed = []
+
+    def kill_one_busy(result) -> None:
+        if killed:
+            return
+        busy = [address for address, keys in client.processing().items() if keys and address in pids]
+        if busy:
+            os.kill(pids[busy[0]], signal.SIGKILL)  # mid-task: the nanny starts a new worker
+            killed.append(busy[0])
+
+    report = run_batch(plan_batch(read_manifest(manifest_path), tmp_path), client=client,
+                       on_result=kill_one_busy)
+    assert killed, "no worker was busy to kill"
+    assert set(report.succeeded) == GOOD and set(report.failed) == BROKEN
+    assert _files(tmp_path) == _files(reference)
