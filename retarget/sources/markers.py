@@ -753,6 +753,7 @@ class RingTracks:
         order = np.lexsort((pts[np.minimum(first, n - 1), np.arange(pts.shape[1]), 0], y0, first))
         self.points_ = pts[:, order].astype(np.float32)
         self.scores_ = sc[:, order].astype(np.float32)
+        self.contrasts_ = ct[:, order].astype(np.float32)
         return self
 
     def _flow(self, prev, cur, pos, live, rel):
