@@ -25,7 +25,7 @@ from server.isolation import Isolation, IsolationLimits
 from server.jobs import JobRegistry
 from server.hub import StreamHub
 from server.limits import BodyLimit, Limits
-from server.routers import (arkit, exports, info, landmarks, layouts, meshes, mouth, muscles, projects,
+from server.routers import (arkit, batch, exports, info, landmarks, layouts, meshes, mouth, muscles, projects,
                             rigs, stream, takes)
 from server.sample import ensure_sample_project
 from server.store import ProjectStore
@@ -87,7 +87,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
     if sample:
         ensure_sample_project(app.state.store)
     errors.install(app)
-    for module in (projects, meshes, mouth, landmarks, rigs, muscles, arkit, takes, exports, stream,
+    for module in (projects, meshes, mouth, landmarks, rigs, muscles, arkit, takes, exports, batch, stream,
                    layouts, info):
         app.include_router(module.router)
     mount_web(app)
