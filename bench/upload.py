@@ -12,7 +12,8 @@ stage timed by the client, wall clock:
     landmarks  PUT  /api/projects/{id}/landmarks   (the face's 68 vertex indices, ibug68)
     rig        POST /api/projects/{id}/rig {"method"}, then GET /api/jobs/{job} every 50 ms
                until done (the rig job's own progress feeds the progress bar)
-    download   GET  mesh/arrays and rig/weights    (what the browser fetches to draw it)
+    download   GET  mesh/arrays and rig/weights?version=2, accepting gzip (what the
+               browser fetches to draw it; sizes as sent)
     stream     WS   /api/projects/{id}/stream: hello, {"type": "start", "source": "demo"},
                until the first binary frame arrives
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import gzip
 import json
 import sys
 import tempfile
@@ -51,9 +53,14 @@ def multipart(field: str, filename: str, data: bytes) -> tuple[bytes, str]:
     return head + data + f"\r\n--{boundary}--\r\n".encode(), f"multipart/form-data; boundary={boundary}"
 
 
-def get_bytes(url: str) -> bytes:
-    with urllib.request.urlopen(url, timeout=300) as reply:
-        return reply.read()
+def get_bytes(url: str) -> tuple[bytes, int]:
+    """The body of GET `url` as the page gets it, and its bytes on the wire: the page
+    accepts gzip, as every browser does, and inflates what the server encoded."""
+    request = urllib.request.Request(url, headers={"Accept-Encoding": "gzip"})
+    with urllib.request.urlopen(request, timeout=300) as reply:
+        data = reply.read()
+        encoded = reply.headers.get("Content-Encoding") == "gzip"
+    return (gzip.decompress(data) if encoded else data), len(data)
 
 
 async def first_frame(ws_url: str, fps: float) -> None:
@@ -102,15 +109,15 @@ def one_run(server: ServerProcess, obj: bytes, landmarks: list[int], method: str
     t["rig"] = clock() - t0
 
     t0 = clock()
-    arrays = get_bytes(base + "/mesh/arrays")
-    weights = get_bytes(base + "/rig/weights")
+    _, arrays = get_bytes(base + "/mesh/arrays")
+    _, weights = get_bytes(base + "/rig/weights?version=2")  # what the page reads
     t["download"] = clock() - t0
 
     t0 = clock()
     asyncio.run(first_frame(f"{server.ws_url}/api/projects/{pid}/stream", fps))
     t["stream"] = clock() - t0
     t["total"] = sum(t[s] for s in STAGES)
-    t["bytes"] = (len(obj), len(arrays), len(weights))
+    t["bytes"] = (len(obj), arrays, weights)
     t["detail"] = job["detail"]
     return t
 

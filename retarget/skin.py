@@ -14,6 +14,7 @@ between features.
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,10 +81,20 @@ class SkinWeights:
         return self.weights.astype(np.float64).sum(1)
 
     def save(self, path) -> None:
-        """Write an .npz with ``joint_indices`` (V, K) int32, ``weights`` (V, K) float32,
-        ``n_joints`` and ``method``."""
-        np.savez_compressed(path, joint_indices=self.indices, weights=self.weights,
-                            n_joints=np.int32(self.n_joints), method=np.str_(self.method))
+        """Write an .npz (a path or a binary file) with ``joint_indices`` (V, K) int32,
+        ``weights`` (V, K) float32, ``n_joints`` and ``method``. The indices are deflated
+        (fast level 1: they are regular), the weights stored as they are: deflate gains 15 %
+        on float32 weights for 1.6 s of a 133k-vertex dense rig (np.savez_compressed)."""
+        arrays = {"joint_indices": (self.indices, zipfile.ZIP_DEFLATED),
+                  "weights": (self.weights, zipfile.ZIP_STORED),
+                  "n_joints": (np.int32(self.n_joints), zipfile.ZIP_DEFLATED),
+                  "method": (np.str_(self.method), zipfile.ZIP_DEFLATED)}
+        with zipfile.ZipFile(path, "w", compresslevel=1) as z:
+            for name, (array, compression) in arrays.items():
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.compress_type = compression
+                with z.open(info, "w", force_zip64=True) as f:
+                    np.lib.format.write_array(f, np.asanyarray(array), allow_pickle=False)
 
     @classmethod
     def load(cls, path) -> "SkinWeights":
@@ -95,7 +106,7 @@ class SkinWeights:
             raise RetargetError(f"could not read rig {str(path)!r}: {exc}") from exc
         if idx.shape != w.shape or idx.ndim != 2 or (idx.size and (idx.min() < 0 or idx.max() >= n)):
             raise RetargetError(f"rig {str(path)!r} is inconsistent: joint_indices {idx.shape}, weights {w.shape}, n_joints {n}")
-        return cls(idx.astype(np.int32), w.astype(np.float32), n, method)
+        return cls(idx.astype(np.int32, copy=False), w.astype(np.float32, copy=False), n, method)
 
 
 def skin_displacements(weights, displacements: np.ndarray) -> np.ndarray:
