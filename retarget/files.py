@@ -46,6 +46,8 @@ from retarget.muscles.morphs import muscle_morphs
 from retarget.performance import Performance
 from retarget.pipeline import DEFAULT_KERNEL, transfer
 from retarget.skin import SkinWeights
+from retarget.units import export_scale, unit_scale
+from retarget.units import mesh_units as unit_of
 from retarget.sources.arkit_curves import ArkitCurves, live_link_csv
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights
 
@@ -334,6 +336,9 @@ class ExportResult:
     n_bytes : size of the file written.
     out : the path written.
     arkit_weights : (F, 52) float64 the solved ARKit weights, with drive "arkit" and a source.
+    source_units : the mesh's unit, as given or guessed ("m", "cm", "mm", "in").
+    scale : what every length was multiplied by (0.01 for a centimetre mesh in metres, 1.0
+        with units "keep").
     """
 
     n_vertices: int
@@ -346,6 +351,8 @@ class ExportResult:
     n_bytes: int
     out: Path
     arkit_weights: np.ndarray | None = None
+    source_units: str = "m"
+    scale: float = 1.0
 
     def summary(self) -> str:
         """The one-line report `export-gltf` prints."""
@@ -355,8 +362,10 @@ class ExportResult:
                 "morph": f"{self.n_points} feature joints, morph targets",
                 "muscles": "a morph target per muscle and a jaw joint",
                 "arkit": "ARKit's 52 blendshapes as morph targets"}[self.deformation]
+        units = (f"in metres (the mesh in {self.source_units}, x{self.scale:g})" if self.scale != 1.0
+                 or self.source_units == "m" else f"in the mesh's {self.source_units}")
         return (f"exported {self.n_vertices} vertices, {kind} "
-                f"({self.method}){animation}: {self.n_bytes / 2**20:.1f} MiB in "
+                f"({self.method}){animation}, {units}: {self.n_bytes / 2**20:.1f} MiB in "
                 f"{self.seconds:.2f} s -> {self.out}")
 
 
@@ -378,13 +387,15 @@ def export_gltf_files(
     muscles=None,
     arkit=None,
     weights_out=None,
+    units: str = "m",
+    mesh_units: str = "guess",
     quiet: bool = False,
 ) -> ExportResult:
     """Write a target mesh, rigged and optionally animated, as a glTF 2.0 binary (.glb).
 
     mesh_path, landmarks : the target mesh file and its landmarks JSON (N points); the
         joints are named after the layout's points (`retarget.gltf.joint_names`).
-    out : the .glb written (`retarget.gltf.export_gltf`; mesh units kept).
+    out : the .glb written (`retarget.gltf.export_gltf`).
     rig : ``.npz`` from `SkinWeights.save`; else weights of `deformer` are computed.
     source_neutral, source_frames : ``.npy`` S0 (N, 2|3) and S (F, N, 2|3), as for
         `transfer_files`; both or neither. Given, the take is retargeted (Dutreve §4)
@@ -403,10 +414,17 @@ def export_gltf_files(
         generated from the landmarks (through `rig` when given, `deformer` is not used).
     weights_out : with drive "arkit" and a source, the (F, 52) weights written here as Live
         Link Face CSV at `fps`.
+    units : "m" (lengths in metres, glTF's unit; the default) or "keep" (the mesh's own
+        numbers); the scale is recorded in the file (`retarget.gltf.units`).
+    mesh_units : the mesh's unit, "m", "cm", "mm", "in", or "guess" from its size
+        (`retarget.units.guess_units`).
 
     Raises `RetargetError` for every refusal, naming the file or option.
     """
     start = time.perf_counter()
+    export_scale(units, "m")  # a bad choice is refused before any work
+    if mesh_units != "guess":
+        unit_scale(mesh_units)
     _check_drive(drive, muscles, arkit, weights_out, rig)
     if weights_out is not None and source_frames is None:
         raise RetargetError("--weights-out writes the take's weights: give --source-neutral and "
@@ -424,6 +442,8 @@ def export_gltf_files(
     if not np.isfinite(fps) or fps <= 0:
         raise RetargetError(f"fps must be a positive number; got {fps!r}")
     mesh = read_mesh(mesh_path)
+    source_units = unit_of(mesh_units, mesh.vertices)
+    scaling = {"units": units, "mesh_units": source_units}
     points = read_landmarks(landmarks, mesh)
     the_layout = layout_for(layout, points)
     if the_layout is not None:
@@ -460,13 +480,13 @@ def export_gltf_files(
                     advance((i + chunk) / len(frames))
             clips.append(clip_at_rate(name, d, fps))
     if drive == "muscles":
-        save = partial(write_muscles_gltf, mesh=mesh, morphs=morphs, clips=clips)
+        save = partial(write_muscles_gltf, mesh=mesh, morphs=morphs, clips=clips, **scaling)
         deformation, method = "muscles", "muscles"
     elif drive == "arkit":
-        save = partial(write_arkit_gltf, mesh=mesh, shapes=shapes, clips=clips)
+        save = partial(write_arkit_gltf, mesh=mesh, shapes=shapes, clips=clips, **scaling)
         deformation, method = "arkit", "arkit"
     else:
-        save = partial(write_gltf, mesh=mesh, points=points, weights=weights, clips=clips)
+        save = partial(write_gltf, mesh=mesh, points=points, weights=weights, clips=clips, **scaling)
         deformation = "skin" if is_joint_based(weights) else "morph"
         method = weights.method or ("rig" if rig is not None else deformer)
     written = []
@@ -475,7 +495,8 @@ def export_gltf_files(
     if weights_out is not None:
         write_live_link(Path(weights_out), solved, fps)
     return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps, deformation,
-                        method, time.perf_counter() - start, written[0], out, solved)
+                        method, time.perf_counter() - start, written[0], out, solved,
+                        source_units, export_scale(units, source_units))
 
 
 # ---------------------------------------------------------------------------------------

@@ -12,6 +12,7 @@ from retarget.errors import RetargetError
 from retarget.files import (DRIVES, computed_weights, export_gltf_files, layout_for, read_landmarks,
                             read_mesh, require_parent, transfer_files, write_file, write_json,
                             write_npy)
+from retarget.units import EXPORT_UNITS, UNITS
 from retarget.cli.parser import PROG, layout_option, non_negative_float, positive_float, positive_int
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING
@@ -149,7 +150,9 @@ def add_export_gltf(commands, parents) -> None:
         "weights) as a glTF 2.0 binary; with a source, the retargeted take as an animation. "
         "With --drive muscles: a morph target per muscle and a jaw joint instead, animated by "
         "the solved contractions; with --drive arkit: ARKit's 52 blendshapes as named morph "
-        "targets, animated by the solved weights. Units are the mesh's own.")
+        "targets, animated by the solved weights. Lengths are written in metres (glTF's "
+        "unit) from the mesh's unit, given or guessed from its size; --units keep writes the "
+        "mesh's own numbers. The scale is recorded in the file.")
     p.add_argument("--mesh", required=True, metavar="MESH",
                    help="target mesh (obj, ply, stl, off, gltf, glb)")
     p.add_argument("--landmarks", required=True, metavar="T0.json", help="its landmarks JSON")
@@ -183,6 +186,11 @@ def add_export_gltf(commands, parents) -> None:
                    help="with --drive muscles: muscles from 'retarget muscles' (default: placed from "
                    "the landmarks)")
     _arkit_options(p, "the take's (F, 52) weights written here as Live Link Face CSV at --fps")
+    p.add_argument("--units", choices=list(EXPORT_UNITS), default="m",
+                   help="m: every length in metres, glTF's unit (default); keep: the mesh's own numbers")
+    p.add_argument("--mesh-units", choices=[*UNITS, "guess"], default="guess",
+                   help="the unit the mesh is in (default: guess from its size: a face is about "
+                   "0.2 m across, so ~0.2 is m, ~20 cm, ~200 mm; inches are never guessed)")
     p.set_defaults(run=_export_gltf)
 
 
@@ -205,6 +213,8 @@ def _export_gltf(args) -> int:
         muscles=args.muscles,
         arkit=args.arkit,
         weights_out=args.weights_out,
+        units=args.units,
+        mesh_units=args.mesh_units,
         quiet=args.quiet,
     )
     print(result.summary())

@@ -21,7 +21,9 @@ is 2.5 MiB against 5.5 MiB dense on the 8,430-vertex sample face, 42 MiB against
 132,907 vertices, every posed vertex within 2.2e-4 of the face size of the exact shapes
 (``python bench/arkit.py --export-only``).
 
-Units: the mesh's own, as `retarget.gltf.writer` says. The scene's ``extras.retarget``
+Units: metres by default, or the mesh's own with ``units="keep"``, recorded, as
+`retarget.gltf.writer` says (`retarget.gltf.units`); clips with ``head_rotations`` animate a
+``head`` node over the mesh (`retarget.gltf.head`). The scene's ``extras.retarget``
 records ``deformation: "arkit"``; `retarget.gltf.read_gltf` refuses such a file by name.
 """
 
@@ -34,7 +36,7 @@ from retarget.arkit.shapes import ArkitShapes
 from retarget.errors import RetargetError
 from retarget.gltf.glb import GlbBuilder
 from retarget.gltf.sparse import add_morph_targets
-from retarget.gltf.writer import FORMAT, MESH_NODE, _face_document, _stepper
+from retarget.gltf.writer import FORMAT, MESH_NODE, _face_document, _head, _scaled, _stepper
 from retarget.mesh import Mesh
 
 __all__ = ["TOLERANCE", "arkit_tolerance", "export_arkit_gltf", "write_arkit_gltf"]
@@ -51,10 +53,10 @@ def arkit_tolerance(vertices) -> float:
 
 
 def export_arkit_gltf(mesh: Mesh, shapes: ArkitShapes, clips=(), *, tolerance: float | None = None,
-                      progress=None) -> bytes:
+                      units: str = "m", mesh_units: str = "guess", progress=None) -> bytes:
     """The .glb bytes of `mesh` with its ARKit `shapes`, with `clips` animated (arguments as
     for `write_arkit_gltf`)."""
-    built = _built(mesh, shapes, clips, tolerance, progress)
+    built = _built(mesh, shapes, clips, tolerance, progress, units, mesh_units)
     data = built.glb_bytes()
     if progress is not None:
         progress(1.0)
@@ -62,45 +64,50 @@ def export_arkit_gltf(mesh: Mesh, shapes: ArkitShapes, clips=(), *, tolerance: f
 
 
 def write_arkit_gltf(file, mesh: Mesh, shapes: ArkitShapes, clips=(), *,
-                     tolerance: float | None = None, progress=None) -> int:
+                     tolerance: float | None = None, units: str = "m", mesh_units: str = "guess",
+                     progress=None) -> int:
     """Write the .glb of `mesh` with its ARKit `shapes` as named morph targets and `clips`
     as animations of their weights to a binary file object (module docstring); returns the
     number of bytes written.
 
-    mesh : the face, V vertices (units kept).
+    mesh : the face, V vertices, in `mesh_units`.
     shapes : its 52 ARKit shapes, ``deltas`` (52, V, 3) mesh units.
     clips : `ArkitClip` objects, one animation each, in order.
     tolerance : mesh units; a vertex a shape moves no further is left out of its sparse
         target (default `arkit_tolerance` of the mesh; 0 keeps every vertex that moves).
+    units, mesh_units : as for `retarget.gltf.write_gltf` ("m" by default: metres).
     progress : optional callable taking the fraction done in [0, 1].
 
     Raises `RetargetError` when the sizes disagree (naming both).
     """
-    built = _built(mesh, shapes, clips, tolerance, progress)
+    built = _built(mesh, shapes, clips, tolerance, progress, units, mesh_units)
     n_bytes = built.write(file)
     if progress is not None:
         progress(1.0)
     return n_bytes
 
 
-def _built(mesh: Mesh, shapes: ArkitShapes, clips, tolerance, progress) -> GlbBuilder:
+def _built(mesh: Mesh, shapes: ArkitShapes, clips, tolerance, progress, units, mesh_units) -> GlbBuilder:
     """The document and buffer of the export; progress reaches 0.95 (writing is left)."""
     clips = tuple(clips)
     _check(mesh, shapes, clips)
     tolerance = arkit_tolerance(mesh.vertices) if tolerance is None else float(tolerance)
     if not np.isfinite(tolerance) or tolerance < 0:
         raise RetargetError(f"tolerance must be a finite number >= 0; got {tolerance!r}")
+    mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
+    scale = scaling["scale"]
+    tolerance *= scale
     step = _stepper(progress, len(shapes.names) + len(clips))
     out, doc, _ = _face_document(mesh)
-    add_morph_targets(out, doc["meshes"][0], shapes.deltas, shapes.names, tolerance=tolerance,
-                      step=step)
+    deltas = (delta * np.float32(scale) for delta in shapes.deltas) if scale != 1.0 else shapes.deltas
+    add_morph_targets(out, doc["meshes"][0], deltas, shapes.names, tolerance=tolerance, step=step)
     doc["nodes"] = [{"name": mesh.name or "face", "mesh": 0}]
     doc["scene"] = 0
     doc["scenes"] = [{
         "name": mesh.name or "face",
         "nodes": [MESH_NODE],
         "extras": {"retarget": {"format": FORMAT, "deformation": "arkit", "method": "arkit",
-                                "tolerance": tolerance}},
+                                "tolerance": tolerance, **scaling}},
     }]
     if clips:
         doc["animations"] = []
@@ -113,6 +120,7 @@ def _built(mesh: Mesh, shapes: ArkitShapes, clips, tolerance, progress) -> GlbBu
                 "channels": [{"sampler": 0, "target": {"node": MESH_NODE, "path": "weights"}}],
             })
             step()
+    _head(out, clips, mesh, [MESH_NODE])
     return out
 
 

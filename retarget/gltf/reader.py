@@ -10,7 +10,12 @@ The round trip of the export. What comes back, against what went in:
   implicit remainder again), from the morph targets otherwise; per vertex the same
   non-zero weights (float32), K being the busiest vertex's count;
 - one `Clip` per animation: the feature joints' translations minus their neutral
-  positions, at the animation's key times.
+  positions, at the animation's key times, and the ``head`` node's rotations as its
+  ``head_rotations`` when the export turned the head (`retarget.gltf.head`; a head
+  translation beyond the turn about the pivot is not read back);
+- the units: the scale the export applied (``extras.retarget.scale``,
+  `retarget.gltf.units`) is divided out, so a face exported in metres comes back in its
+  own units, named in ``units``.
 
 The file is parsed and its accessors read by `retarget.gltf.document.GltfDocument`
 (bounds-checked), its animation channels by `retarget.gltf.animation`. Files of another
@@ -33,6 +38,7 @@ from retarget.gltf.influences import weights_from_influences
 from retarget.gltf.morph import weights_from_targets
 from retarget.gltf.animation import animation_channels
 from retarget.gltf.document import GltfDocument
+from retarget.gltf.units import file_scale
 from retarget.landmarks import SurfacePoints, from_positions, landmarks_from_json
 from retarget.material import Material
 from retarget.mesh import Mesh, mesh_from_arrays
@@ -49,6 +55,8 @@ class RiggedFace:
     clips : one `Clip` per animation, in file order.
     joint_names : the N feature joints' names.
     deformation : "skin" (a glTF skin) or "morph" (morph targets).
+    units : the mesh's unit as the export recorded it ("m", "cm", "mm", "in"), or None
+        for a file that records none (its numbers are taken as they are).
     """
 
     mesh: Mesh
@@ -57,6 +65,7 @@ class RiggedFace:
     clips: tuple[Clip, ...]
     joint_names: tuple[str, ...]
     deformation: str
+    units: str | None = None
 
 
 
@@ -72,12 +81,14 @@ def read_gltf(source) -> RiggedFace:
     if extras.get("deformation") == "arkit":
         raise RetargetError(f"{label} is an ARKit export (ARKit's 52 blendshapes as morph targets, "
                             "animated by their weights): it holds no feature-point rig to read")
+    units, scale = file_scale(extras)
+    head = _head_node(extras, nodes)
     mesh_node = _mesh_node(nodes, label)
     primitive = _primitive(gltf, nodes[mesh_node])
-    root, features = _feature_nodes(gltf, mesh_node)
+    root, features = _feature_nodes(gltf, mesh_node, head)
     neutral = np.array([_translation(nodes[i]) for i in features]) + _translation(nodes[root])
     names = tuple(str(nodes[i].name or f"feature_{k}") for k, i in enumerate(features))
-    mesh = _mesh(gltf, nodes[mesh_node], primitive)
+    mesh = _mesh(gltf, nodes[mesh_node], primitive, scale)
     method = str(extras.get("method", ""))
     if nodes[mesh_node].skin is not None:
         weights = _skin_weights(gltf, primitive, len(features), method)
@@ -86,8 +97,8 @@ def read_gltf(source) -> RiggedFace:
         # target by target: a dense rig's 3N (V, 3) offsets are never stacked
         targets = [gltf.accessor(_index(t.get("POSITION"), label, "a morph target's POSITION"))
                    for t in primitive.targets]
-        scale = gltf.doc.meshes[nodes[mesh_node].mesh].extras.get("targetScale", 1.0)
-        weights = weights_from_targets(targets, len(features), float(scale), method)
+        target_scale = gltf.doc.meshes[nodes[mesh_node].mesh].extras.get("targetScale", 1.0)
+        weights = weights_from_targets(targets, len(features), float(target_scale), method)
         deformation = "morph"
     else:
         raise RetargetError(f"{label}: its mesh has neither a skin nor morph targets")
@@ -102,8 +113,9 @@ def read_gltf(source) -> RiggedFace:
     else:
         points = from_positions(neutral, mesh.vertices, mesh.faces)
     joint_position = {node: p for node, p in zip(features, neutral.astype(np.float32))}
-    clips = tuple(_clip(gltf, k, joint_position) for k in range(len(gltf.doc.animations or [])))
-    return RiggedFace(mesh, points, weights, clips, names, deformation)
+    clips = tuple(_clip(gltf, k, joint_position, head, scale)
+                  for k in range(len(gltf.doc.animations or [])))
+    return RiggedFace(mesh, points, weights, clips, names, deformation, units)
 
 
 def _source_bytes(source) -> tuple[bytes, str]:
@@ -144,6 +156,15 @@ def _retarget_extras(gltf: GltfDocument) -> dict:
     return found if isinstance(found, dict) else {}
 
 
+def _head_node(extras: dict, nodes) -> int | None:
+    """The ``head`` node the export recorded (`retarget.gltf.head`), or None."""
+    head = extras.get("head")
+    node = head.get("node") if isinstance(head, dict) else None
+    if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < len(nodes):
+        return None
+    return node
+
+
 def _mesh_node(nodes, label: str) -> int:
     with_mesh = [i for i, node in enumerate(nodes) if node.mesh is not None]
     if len(with_mesh) != 1:
@@ -160,9 +181,10 @@ def _primitive(gltf: GltfDocument, node):
     return primitives[0]
 
 
-def _feature_nodes(gltf: GltfDocument, mesh_node: int) -> tuple[int, list[int]]:
+def _feature_nodes(gltf: GltfDocument, mesh_node: int, head: int | None) -> tuple[int, list[int]]:
     """(root node, feature nodes in joint order): the skin's joints after its root, or
-    the children of the scene's other root node for a morph-target mesh."""
+    the children of the scene's other root node for a morph-target mesh (the ``head``
+    node, when there is one, stands for its children)."""
     nodes, label = gltf.doc.nodes, gltf.label
     skin = nodes[mesh_node].skin
     if skin is not None:
@@ -176,7 +198,9 @@ def _feature_nodes(gltf: GltfDocument, mesh_node: int) -> tuple[int, list[int]]:
                                 "others (not a static root with feature joints)")
     else:
         scenes = gltf.doc.scenes or []
-        roots = scenes[gltf.doc.scene or 0].nodes if scenes else []
+        roots = list(scenes[gltf.doc.scene or 0].nodes or []) if scenes else []
+        if head is not None and head in roots:
+            roots = [i for i in roots if i != head] + list(nodes[head].children or [])
         parents = [i for i in roots
                    if i != mesh_node and gltf.item(nodes, i, "scene node").children]
         if len(parents) != 1:
@@ -195,9 +219,11 @@ def _translation(node) -> np.ndarray:
     return np.array(node.translation or (0.0, 0.0, 0.0), dtype=np.float64)
 
 
-def _mesh(gltf: GltfDocument, node, primitive) -> Mesh:
+def _mesh(gltf: GltfDocument, node, primitive, scale: float) -> Mesh:
     attributes = primitive.attributes
     vertices = gltf.accessor(attributes.POSITION)
+    if scale != 1.0:  # back to the mesh's units, float32-rounded as the file's numbers are
+        vertices = (vertices.astype(np.float64) / scale).astype(np.float32)
     if primitive.indices is not None:
         faces = gltf.accessor(primitive.indices)[:, 0].astype(np.int64)
     else:
@@ -260,12 +286,15 @@ def _skin_weights(gltf: GltfDocument, primitive, n_features: int, method: str) -
     return weights_from_influences(joints.astype(np.int64), influence, n_features, method)
 
 
-def _clip(gltf: GltfDocument, k: int, joint_position: dict) -> Clip:
-    """Animation k as a Clip: feature translations minus neutral, at the shared times."""
+def _clip(gltf: GltfDocument, k: int, joint_position: dict, head: int | None, scale: float) -> Clip:
+    """Animation k as a Clip: feature translations minus neutral, at the shared times,
+    over `scale`; the head node's rotations."""
     animation = gltf.doc.animations[k]
     name = str(animation.name or f"animation_{k}")
-    times, moved = None, {}
+    times, moved, turns = None, {}, None
     for node, path, keys, values, interpolation in animation_channels(gltf, animation):
+        if node == head and path == "rotation":
+            turns = keys, values
         if path != "translation" or node not in joint_position:
             continue
         if interpolation != "LINEAR":
@@ -283,4 +312,12 @@ def _clip(gltf: GltfDocument, k: int, joint_position: dict) -> Clip:
     for i, (node, rest) in enumerate(joint_position.items()):
         if node in moved:
             displacements[:, i] = moved[node] - rest
-    return Clip(name, displacements, times)
+    if scale != 1.0:
+        displacements = displacements / np.float32(scale)
+    rotations = None
+    if turns is not None:
+        if not np.array_equal(turns[0], times):
+            raise RetargetError(f"{gltf.label}: animation {name!r} keys the head at other times "
+                                "than its joints")
+        rotations = turns[1]
+    return Clip(name, displacements, times, head_rotations=rotations)

@@ -38,12 +38,14 @@ the jaw joint's rotation quaternion (LINEAR: slerp about one axis is the angle
 interpolated linearly). glTF morphs, then skins: a viewer draws
 `retarget.muscles.morphs.played_displacements`, to float32 rounding.
 
-Units: the mesh's own, unscaled. glTF's convention is metres and +y up; the sample face
-and the ICT data are centimetres with +y up, so they appear 100 times too large in a
-viewer that trusts the convention. Scaling would change every position and displacement
-the round trip (`retarget.gltf.reader`) must give back, so it is left to the
-viewer. The scene's ``extras.retarget`` records the landmarks (`SurfacePoints.to_json`),
-the rig's method and the deformation kind for that round trip.
+Units: metres by default (glTF's convention, what Unity, Unreal and Blender assume): the
+mesh's unit (given, or guessed from its size by `retarget.units.guess_units`) scales every
+length in the vertex data before it is written, ``units="keep"`` writes the mesh's own
+numbers; the scale is recorded and `retarget.gltf.reader` undoes it (`retarget.gltf.units`
+says why the data and not a node scale). Head motion: clips with ``head_rotations`` animate
+a ``head`` node over the face (`retarget.gltf.head`). The scene's ``extras.retarget``
+records the landmarks (`SurfacePoints.to_json`), the rig's method, the deformation kind,
+the units and the head node for the round trip.
 """
 
 from __future__ import annotations
@@ -58,10 +60,12 @@ from retarget import __version__
 from retarget.errors import RetargetError
 from retarget.clips import Clip, ContractionClip
 from retarget.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
+from retarget.gltf.head import add_head_motion, head_pivot
 from retarget.gltf.influences import is_joint_based, joint_influences
 from retarget.gltf.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
                                    morph_scale, target_bounds, target_names)
 from retarget.gltf.sparse import add_morph_targets
+from retarget.gltf.units import export_units, scaled_clip, scaled_mesh
 from retarget.landmarks import SurfacePoints
 from retarget.layouts import get_layout
 from retarget.material import Material
@@ -91,10 +95,10 @@ def joint_names(points: SurfacePoints) -> list[str]:
 
 
 def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
-                progress=None) -> bytes:
+                units: str = "m", mesh_units: str = "guess", progress=None) -> bytes:
     """The .glb bytes of `mesh` rigged with `weights` at `points`, with `clips` animated
     (arguments as for `write_gltf`)."""
-    built = _built(mesh, points, weights, clips, progress)
+    built = _built(mesh, points, weights, clips, progress, units, mesh_units)
     data = built.glb_bytes()
     if progress is not None:
         progress(1.0)
@@ -102,51 +106,58 @@ def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(
 
 
 def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
-               progress=None) -> int:
+               units: str = "m", mesh_units: str = "guess", progress=None) -> int:
     """Write the .glb of `mesh` rigged with `weights` at `points`, with `clips` animated,
     to a binary file object, piece by piece (a large morph-target file is never whole in
     memory twice); returns the number of bytes written.
 
-    mesh : the target, V vertices (units kept, see the module docstring).
+    mesh : the target, V vertices, in `mesh_units`.
     points : its N landmarks; the joints sit at ``points.positions(mesh.vertices)``.
     weights : (V, K) skin weights over the N features (any method; see the module
         docstring for skin versus morph targets).
-    clips : `Clip` objects of N features each, one glTF animation per clip, in order.
+    clips : `Clip` objects of N features each, one glTF animation per clip, in order;
+        their ``head_rotations`` animate a ``head`` node (`retarget.gltf.head`).
+    units : "m" (every length in metres, the default) or "keep" (the mesh's numbers).
+    mesh_units : the mesh's unit, "m", "cm", "mm", "in" or "guess" (from its size,
+        `retarget.units.guess_units`).
     progress : optional callable taking the fraction done in [0, 1].
 
     Raises `RetargetError` when the sizes disagree (naming both) or the file would pass
     the GLB format's 4 GiB.
     """
-    built = _built(mesh, points, weights, clips, progress)
+    built = _built(mesh, points, weights, clips, progress, units, mesh_units)
     n_bytes = built.write(file)
     if progress is not None:
         progress(1.0)
     return n_bytes
 
 
-def export_muscles_gltf(mesh: Mesh, morphs: MuscleMorphs, clips=(), *, progress=None) -> bytes:
+def export_muscles_gltf(mesh: Mesh, morphs: MuscleMorphs, clips=(), *, units: str = "m",
+                        mesh_units: str = "guess", progress=None) -> bytes:
     """The .glb bytes of `mesh` driven by its muscles, with `clips` animated (arguments as
     for `write_muscles_gltf`)."""
-    built = _built_muscles(mesh, morphs, clips, progress)
+    built = _built_muscles(mesh, morphs, clips, progress, units, mesh_units)
     data = built.glb_bytes()
     if progress is not None:
         progress(1.0)
     return data
 
 
-def write_muscles_gltf(file, mesh: Mesh, morphs: MuscleMorphs, clips=(), *, progress=None) -> int:
+def write_muscles_gltf(file, mesh: Mesh, morphs: MuscleMorphs, clips=(), *, units: str = "m",
+                       mesh_units: str = "guess", progress=None) -> int:
     """Write the .glb of `mesh` driven by its muscles, with `clips` animated, to a binary
     file object (see the module docstring); returns the number of bytes written.
 
-    mesh : the face, V vertices (units kept).
+    mesh : the face, V vertices, in `mesh_units`.
     morphs : its muscles' played form (`retarget.muscles.morphs.muscle_morphs`), on V
         vertices.
     clips : `ContractionClip` objects of D = M + 1 dofs each, one animation per clip.
+    units, mesh_units : as for `write_gltf`.
     progress : optional callable taking the fraction done in [0, 1].
 
     Raises `RetargetError` when the sizes disagree (naming both).
     """
-    built = _built_muscles(mesh, morphs, clips, progress)
+    built = _built_muscles(mesh, morphs, clips, progress, units, mesh_units)
     n_bytes = built.write(file)
     if progress is not None:
         progress(1.0)
@@ -170,10 +181,11 @@ def export_mesh_gltf(mesh: Mesh) -> bytes:
     return out.glb_bytes()
 
 
-def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
+def _built(mesh, points, weights, clips, progress, units, mesh_units) -> GlbBuilder:
     """The document and buffer of the export; progress reaches 0.95 (writing is left)."""
     clips = tuple(clips)
     _check_sizes(mesh, points, weights, clips)
+    mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
     names = joint_names(points)
     neutral = points.positions(mesh.vertices).astype(np.float32)  # (N, 3)
     skinned = is_joint_based(weights)
@@ -199,6 +211,7 @@ def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
             "deformation": "skin" if skinned else "morph",
             "method": weights.method,
             "landmarks": points.to_json(),
+            **scaling,
         }},
     }]
     if clips:
@@ -206,13 +219,32 @@ def _built(mesh, points, weights, clips, progress) -> GlbBuilder:
         for clip in clips:
             doc["animations"].append(_animation(out, clip, neutral, scale))
             step()
+    _head(out, clips, mesh, [ROOT_NODE] if skinned else [MESH_NODE, ROOT_NODE])
     return out
 
 
-def _built_muscles(mesh, morphs, clips, progress) -> GlbBuilder:
+def _scaled(mesh, clips, units, mesh_units):
+    """(mesh, clips) in the file's units and the ``extras.retarget`` units record
+    (`retarget.gltf.units`)."""
+    chosen = export_units(mesh, units, mesh_units)
+    scale = chosen.scale
+    return scaled_mesh(mesh, scale), tuple(scaled_clip(c, scale) for c in clips), chosen.record()
+
+
+def _head(out: GlbBuilder, clips, mesh: Mesh, moved: list[int]) -> None:
+    """The ``head`` node over `moved` for clips with head rotations, recorded in the
+    scene's extras (`retarget.gltf.head`)."""
+    record = add_head_motion(out, clips, head_pivot(mesh.vertices), moved)
+    if record is not None:
+        out.document["scenes"][0]["extras"]["retarget"]["head"] = record
+
+
+def _built_muscles(mesh, morphs, clips, progress, units, mesh_units) -> GlbBuilder:
     """The document and buffer of the muscle export; progress reaches 0.95."""
     clips = tuple(clips)
     _check_muscle_sizes(mesh, morphs, clips)
+    mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
+    morphs = _scaled_morphs(morphs, scaling["scale"])
     names = list(morphs.names) + list(morphs.corrective_names)
     step = _stepper(progress, 1 + len(names) + len(clips))
     out, doc, primitive = _face_document(mesh)
@@ -230,14 +262,25 @@ def _built_muscles(mesh, morphs, clips, progress) -> GlbBuilder:
     doc["scenes"] = [{
         "name": mesh.name or "face",
         "nodes": [MESH_NODE, ROOT_NODE],
-        "extras": {"retarget": {"format": FORMAT, "deformation": "muscles", "method": "muscles"}},
+        "extras": {"retarget": {"format": FORMAT, "deformation": "muscles", "method": "muscles",
+                                **scaling}},
     }]
     if clips:
         doc["animations"] = []
         for clip in clips:
             doc["animations"].append(_muscle_animation(out, clip, morphs))
             step()
+    _head(out, clips, mesh, [ROOT_NODE])
     return out
+
+
+def _scaled_morphs(morphs: MuscleMorphs, scale: float) -> MuscleMorphs:
+    """`morphs` with its lengths (targets, correctives, the hinge) times `scale`."""
+    if scale == 1.0:
+        return morphs
+    return dataclasses.replace(morphs, targets=morphs.targets * np.float32(scale),
+                               correctives=morphs.correctives * np.float32(scale),
+                               jaw_pivot=morphs.jaw_pivot * scale)
 
 
 def _stepper(progress, steps: int):

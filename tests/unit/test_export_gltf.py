@@ -85,20 +85,27 @@ def _instance(path) -> dict:
     return instance
 
 
+def _file_scale(path) -> float:
+    """What the export multiplied every length by (``extras.retarget.scale``: 0.01 for the
+    sample face, in centimetres, exported in metres)."""
+    return _load(path).doc.scenes[0].extras["retarget"]["scale"]
+
+
 def _sample(times, values, t) -> np.ndarray:
     """LINEAR sampling of (F, k) keyed `values` at time t (clamped at the ends)."""
     return np.array([np.interp(t, times, values[:, c]) for c in range(values.shape[1])])
 
 
 def _gltf_vertices(path, animation: int, t: float) -> np.ndarray:
-    """(V, 3) float64 positions a glTF viewer draws at time t of an animation."""
+    """(V, 3) float64 positions a glTF viewer draws at time t of an animation, in the
+    mesh's units (the file's over its scale)."""
     gltf, instance = _load(path), _instance(path)
     channels = animation_channels(gltf, gltf.doc.animations[animation])
     times = np.array([t], dtype=np.float64)
     world = node_transforms(gltf, gltf.doc.nodes, channels, times)
     rows = np.arange(len(instance["positions"]))
     return posed_vertices(gltf, instance, rows, world, animated_weights(gltf, channels, times),
-                          times)[0]
+                          times)[0] / _file_scale(path)
 
 
 def _expected(face, weights, clip, t) -> np.ndarray:
@@ -130,7 +137,8 @@ def test_skin_structure(face, exported):
                for node in nodes)  # translation-only joints
     neutral = face["points"].positions(face["mesh"].vertices)
     joints_at = np.array([nodes[j].translation for j in skin.joints[1:]])
-    np.testing.assert_allclose(joints_at, neutral, atol=1e-5)
+    assert _file_scale(exported["ellipsoid"]) == 0.01  # centimetres to metres
+    np.testing.assert_allclose(joints_at, 0.01 * neutral, atol=1e-7)
     ibm = gltf.accessor(skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
     np.testing.assert_array_equal(ibm[0], np.eye(4))
     np.testing.assert_array_equal(ibm[1:, :3, 3], -joints_at.astype(np.float32))
@@ -161,7 +169,7 @@ def test_morph_structure(face, exported):
     # target (i, y) is feature i's weights along y only, times a power of two that puts
     # the animated weights (displacements over it) within [-1, 1]
     scale = gmesh.extras["targetScale"]
-    largest = max(np.abs(c.displacements).max() for c in face["clips"])
+    largest = _file_scale(exported["rbf"]) * max(np.abs(c.displacements).max() for c in face["clips"])
     assert largest <= scale < 2 * largest and np.log2(scale) % 1 == 0
     dense = face["rigs"]["rbf"].dense()
     target = gltf.accessor(targets[3 * 5 + 1]["POSITION"])
@@ -193,7 +201,9 @@ def test_round_trip(face, exported, method):
     back = read_gltf(exported[method])
     mesh, weights = face["mesh"], face["rigs"][method]
     assert back.deformation == ("skin" if method == "ellipsoid" else "morph")
-    np.testing.assert_array_equal(back.mesh.vertices, mesh.vertices.astype(np.float32))
+    # exported in metres, read back in centimetres: to float32 rounding (one ulp)
+    assert back.units == "cm"
+    np.testing.assert_allclose(back.mesh.vertices, mesh.vertices, rtol=2.4e-7, atol=0)
     np.testing.assert_array_equal(back.mesh.faces, mesh.faces)
     np.testing.assert_allclose(back.mesh.uv, mesh.uv, atol=1e-6)
     assert back.mesh.normals is None and back.mesh.name == "sample_face"

@@ -69,13 +69,15 @@ def exported(files):
 
 
 def _viewer(path, times) -> np.ndarray:
-    """(F, V, 3) float64 positions a glTF viewer draws at `times` of the first animation."""
+    """(F, V, 3) float64 positions a glTF viewer draws at `times` of the first animation, in
+    the mesh's units (the file's, in metres, over the export's recorded scale)."""
     gltf = GltfDocument(path.read_bytes(), path.name, None)
     (instance,) = mesh_instances(gltf)
     channels = animation_channels(gltf, gltf.doc.animations[0])
     world = node_transforms(gltf, gltf.doc.nodes, channels, times)
     rows = np.arange(len(instance["positions"]))
-    return posed_vertices(gltf, instance, rows, world, animated_weights(gltf, channels, times), times)
+    drawn = posed_vertices(gltf, instance, rows, world, animated_weights(gltf, channels, times), times)
+    return drawn / gltf.doc.scenes[0].extras["retarget"]["scale"]
 
 
 def test_the_export_is_valid_and_names_its_targets_after_the_muscles(exported):
@@ -89,7 +91,8 @@ def test_the_export_is_valid_and_names_its_targets_after_the_muscles(exported):
     assert "orbicularis_oris*jaw" in names and len(gltf.meshes[0].primitives[0].targets) == len(names)
     (skin,) = gltf.skins
     assert [gltf.nodes[j].name for j in skin.joints] == ["root", "jaw"]
-    np.testing.assert_allclose(gltf.nodes[skin.joints[1]].translation, model.jaw.hinge_right, atol=1e-5)
+    assert gltf.scenes[0].extras["retarget"]["scale"] == 0.01  # the centimetre face in metres
+    np.testing.assert_allclose(gltf.nodes[skin.joints[1]].translation, 0.01 * model.jaw.hinge_right, atol=1e-7)
     assert gltf.animations[0].name == "s"
 
 
