@@ -23,6 +23,12 @@ class Clip:
     displacements : (F, N, 3) float32, d_f of `retarget.pipeline.Retargeter`, mesh units.
     times : (F,) float64 seconds, strictly increasing also as float32 (glTF stores
         keyframe times in float32).
+    head_rotations : (F, 4) float64 unit quaternions x, y, z, w, or None: the performer's
+        head rotation per frame, turning the whole target about its head pivot as the app's
+        viewer does ("turn the head", `ConditionSettings.apply_rotation`); the export
+        animates a ``head`` node with it (`retarget.gltf.head`).
+    head_translations : (F, 3) float64 mesh units, or None: the head's translation per
+        frame on top of that rotation (only with `head_rotations`).
 
     Build it with `clip_at_rate` for frames at a constant rate, or directly for a take's
     own times. Construction validates and makes read-only copies.
@@ -31,6 +37,8 @@ class Clip:
     name: str
     displacements: np.ndarray
     times: np.ndarray
+    head_rotations: np.ndarray | None = None
+    head_translations: np.ndarray | None = None
 
     def __post_init__(self):
         d = np.array(self.displacements, dtype=np.float32)
@@ -44,6 +52,7 @@ class Clip:
             array.setflags(write=False)
         object.__setattr__(self, "displacements", d)
         object.__setattr__(self, "times", t)
+        checked_head_motion(self, len(d))
 
     @property
     def n_frames(self) -> int:
@@ -64,11 +73,14 @@ class ContractionClip:
     contractions : (F, D) float64, the D dofs of a `retarget.muscles.MuscleFace` per frame
         (the muscles' contractions, then the jaw angle in radians).
     times : (F,) float64 seconds, as for `Clip`.
+    head_rotations, head_translations : as for `Clip`.
     """
 
     name: str
     contractions: np.ndarray
     times: np.ndarray
+    head_rotations: np.ndarray | None = None
+    head_translations: np.ndarray | None = None
 
     def __post_init__(self):
         c = np.array(self.contractions, dtype=np.float64)
@@ -82,6 +94,7 @@ class ContractionClip:
             array.setflags(write=False)
         object.__setattr__(self, "contractions", c)
         object.__setattr__(self, "times", t)
+        checked_head_motion(self, len(c))
 
     @property
     def n_frames(self) -> int:
@@ -100,6 +113,33 @@ def _checked_times(name: str, times, n_frames: int) -> np.ndarray:
         raise RetargetError(f"clip {name!r}: times must be finite, >= 0 and strictly "
                             "increasing (also in float32)")
     return t
+
+
+def checked_head_motion(clip, n_frames: int) -> None:
+    """Check and freeze a clip's ``head_rotations`` (F, 4) unit quaternions (normalised
+    here) and ``head_translations`` (F, 3), each None or finite with one row per frame;
+    translations need rotations."""
+    q, t = clip.head_rotations, clip.head_translations
+    if q is not None:
+        q = np.array(q, dtype=np.float64)
+        if q.shape != (n_frames, 4) or not np.isfinite(q).all():
+            raise RetargetError(f"clip {clip.name!r}: head_rotations must be finite quaternions of "
+                                f"shape ({n_frames}, 4); got {q.shape}")
+        length = np.linalg.norm(q, axis=1)
+        if (length < 1e-6).any():
+            raise RetargetError(f"clip {clip.name!r}: head_rotations hold a zero quaternion")
+        q = q / length[:, None]
+        q.setflags(write=False)
+        object.__setattr__(clip, "head_rotations", q)
+    if t is not None:
+        if q is None:
+            raise RetargetError(f"clip {clip.name!r}: head_translations need head_rotations")
+        t = np.array(t, dtype=np.float64)
+        if t.shape != (n_frames, 3) or not np.isfinite(t).all():
+            raise RetargetError(f"clip {clip.name!r}: head_translations must be finite, of shape "
+                                f"({n_frames}, 3); got {t.shape}")
+        t.setflags(write=False)
+        object.__setattr__(clip, "head_translations", t)
 
 
 def clip_at_rate(name: str, displacements, fps: float) -> Clip:

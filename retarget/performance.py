@@ -244,10 +244,13 @@ class Performance:
 
     def play(self, take: Take, name: str = "take", settings=None) -> Clip:
         """The whole take retargeted (`cue`, then every frame) as a `Clip` named `name`, at
-        the take's own times from 0 s at its first frame. The head's rotation is not
-        part of a clip (feature displacements carry no rigid head motion)."""
+        the take's own times from 0 s at its first frame. When the settings turn the head
+        (``apply_rotation``), the clip's ``head_rotations`` are the quaternions the take
+        player streams with each frame (the viewer turns the face by them; the export
+        animates a ``head`` node, `retarget.gltf.head`)."""
         cue = self.cue(take, settings)
-        return Clip(name, self.displacements(cue.points), cue.times)
+        turns = None if cue.rotations is None else Rotation.from_matrix(cue.rotations).as_quat()
+        return Clip(name, self.displacements(cue.points), cue.times, head_rotations=turns)
 
     # -- recording --------------------------------------------------------------------------
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from retarget.arkit.reference import ARKIT_NAMES
-from retarget.clips import _checked_times  # one definition of a glTF clip's valid key times
+from retarget.clips import _checked_times, checked_head_motion  # one definition of each check
 from retarget.errors import RetargetError
 
 __all__ = ["ArkitClip"]
@@ -22,6 +22,8 @@ class ArkitClip:
     name : the animation's name.
     weights : (F, 52) float64 in [0, 1], `ARKIT_NAMES` order (`retarget.arkit.solve`).
     times : (F,) float64 seconds, strictly increasing also as float32 (as `retarget.clips.Clip`).
+    head_rotations, head_translations : (F, 4) quaternions and (F, 3) mesh units, or None,
+        as for `retarget.clips.Clip`.
 
     Construction validates and makes read-only copies.
     """
@@ -29,6 +31,8 @@ class ArkitClip:
     name: str
     weights: np.ndarray
     times: np.ndarray
+    head_rotations: np.ndarray | None = None
+    head_translations: np.ndarray | None = None
 
     def __post_init__(self):
         w = np.array(self.weights, dtype=np.float64)
@@ -43,6 +47,7 @@ class ArkitClip:
             array.setflags(write=False)
         object.__setattr__(self, "weights", w)
         object.__setattr__(self, "times", t)
+        checked_head_motion(self, len(w))
 
     @property
     def n_frames(self) -> int:

@@ -1,0 +1,90 @@
+"""Head motion in an export: a ``head`` node turning the face as the app's viewer does.
+
+With "turn the head" on (`retarget.sources.conditioning.ConditionSettings.apply_rotation`),
+the app turns the whole target by the performer's head rotation q_f about the centre of the
+rest mesh's bounding sphere, which three.js computes as the centre of its bounding box
+(`SkinnedFace.setHeadRotation`): a vertex v is drawn at ``c + R_f (v - c)``. A clip that
+carries ``head_rotations`` (`retarget.clips.Clip`) is exported the same way: one more node,
+``head``, a parent of what moves with the head, animated per frame by
+
+    rotation q_f,  translation c - R_f c + t_f
+
+(``t_f`` a clip's ``head_translations``, zero when it has none), so that its children are
+drawn at ``R_f x + c - R_f c + t_f``. LINEAR keys: glTF slerps the rotation; the
+translation is interpolated linearly, which between two keys of a turning head leaves the
+pivot off by at most |c| (1 - cos(dθ/2)) for a per-frame turn dθ (2e-4 of |c| at 2°/frame);
+at the keys it is exact. The quaternions are put on one hemisphere (each the sign nearer
+the last), as Blender's importer interpolates their components.
+
+Which nodes go under ``head``: a skinned mesh ignores its own node's transform (glTF
+§3.7.3.1; the Khronos validator warns about a skinned mesh node that is not a root), so for
+a skin only the skeleton's root joint does, and the mesh node stays at the scene's root;
+a mesh without a skin (morph targets, ARKit) goes under it itself. The scene's
+``extras.retarget.head`` records the node and the pivot (file units) for
+`retarget.gltf.read_gltf`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from retarget.gltf.glb import GlbBuilder
+
+__all__ = ["HEAD_NAME", "add_head_motion", "head_pivot"]
+
+HEAD_NAME = "head"
+
+
+def head_pivot(vertices) -> np.ndarray:
+    """(3,) float64 the centre of the bounding box of (V, 3) rest `vertices`, where the
+    app's viewer turns the face (three.js's bounding-sphere centre)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    return 0.5 * (v.min(axis=0) + v.max(axis=0))
+
+
+def add_head_motion(out: GlbBuilder, clips, pivot, moved: list[int]) -> dict | None:
+    """Add the ``head`` node over nodes `moved` (taken out of the scene's roots) and key it
+    in each animation of a clip with ``head_rotations`` (animation k is clip k); nothing
+    when no clip has them. `pivot` (3,) file units. Returns the ``extras.retarget.head``
+    record, or None."""
+    if not any(getattr(clip, "head_rotations", None) is not None for clip in clips):
+        return None
+    doc = out.document
+    node = len(doc["nodes"])
+    doc["nodes"].append({"name": _unique(HEAD_NAME, doc["nodes"]), "children": list(moved)})
+    scene = doc["scenes"][doc.get("scene", 0)]
+    scene["nodes"] = [n for n in scene["nodes"] if n not in moved] + [node]
+    c = np.asarray(pivot, dtype=np.float64)
+    for animation, clip in zip(doc.get("animations", []), clips):
+        q = getattr(clip, "head_rotations", None)
+        if q is None:
+            continue
+        q = _one_hemisphere(q)
+        moved_pivot = Rotation.from_quat(q).apply(c)                           # (F, 3) R_f c
+        translation = c - moved_pivot
+        if clip.head_translations is not None:
+            translation = translation + clip.head_translations
+        times = animation["samplers"][0]["input"]  # the clip's key times, already written
+        for path, values in (("rotation", q), ("translation", translation)):
+            animation["channels"].append({"sampler": len(animation["samplers"]),
+                                          "target": {"node": node, "path": path}})
+            animation["samplers"].append({"input": times, "interpolation": "LINEAR",
+                                          "output": out.accessor(np.ascontiguousarray(values, np.float32))})
+    return {"node": node, "pivot": [float(x) for x in c]}
+
+
+def _one_hemisphere(q: np.ndarray) -> np.ndarray:
+    """(F, 4) quaternions, each row's sign chosen nearer the previous row's."""
+    q = np.array(q, dtype=np.float64)
+    for f in range(1, len(q)):
+        if np.dot(q[f], q[f - 1]) < 0:
+            q[f] = -q[f]
+    return q
+
+
+def _unique(name: str, nodes: list[dict]) -> str:
+    taken = {n.get("name") for n in nodes}
+    while name in taken:
+        name += "_"
+    return name
