@@ -521,6 +521,8 @@ def _named_tracks(points: np.ndarray, lay, first_found: int, path: Path) -> np.n
 _SCORE_RADII = (2.0, 2.6, 3.4, 4.4)   # px, outer ring radii of the matched filter's templates
 _BIRTH_SCORE = 0.55    # correlation that starts a track, with a dot brighter than its ring
 _MIN_DOT_CONTRAST = 8.0  # grey levels by which a new marker's dot outshines its ring all round
+_JOIN = 0.45           # a track that starts this near (times the spacing of the markers
+                       # there) where one that ended would be now continues it
 _CLEAR_DOT = 40.0      # grey levels of a dot over its ring that start a track whatever the
                        # correlation (skin features never passed 35 on the hard material)
 _KEEP_SCORE = 0.25     # correlation of a peak that keeps a track near its prediction
@@ -649,12 +651,12 @@ class RingTracks:
     def __init__(self, *, radii=_SCORE_RADII, birth: float = _BIRTH_SCORE, keep: float = _KEEP_SCORE,
                  snap: float = _SNAP, reacquire: float = _REACQUIRE, neighbours: int = _NEIGHBOURS,
                  min_frames: int = 3, min_score: float = 0.4, min_spread: float = _MIN_SPREAD,
-                 min_contrast: float = _MIN_DOT_CONTRAST) -> None:
+                 min_contrast: float = _MIN_DOT_CONTRAST, join: float = _JOIN) -> None:
         self.radii = tuple(float(r) for r in radii)
         self.birth, self.keep = float(birth), float(keep)
         self.snap, self.reacquire = float(snap), float(reacquire)
         self.neighbours, self.min_frames, self.min_score = int(neighbours), int(min_frames), float(min_score)
-        self.min_spread, self.min_contrast = float(min_spread), float(min_contrast)
+        self.min_spread, self.min_contrast, self.join = float(min_spread), float(min_contrast), float(join)
 
     def fit(self, frames) -> RingTracks:
         """Track the markers through frames, a sequence of (h, w) uint8 grey images."""
@@ -741,6 +743,7 @@ class RingTracks:
         born = np.array(born, dtype=np.int64)
         for m in np.flatnonzero(born > 0):
             self._backward(peaks, pts, sc, ct, m, born[m])
+        pts, sc, ct = _joined(pts, sc, ct, self.join, self.neighbours)
         seen = np.isfinite(pts[..., 0])
         with np.errstate(all="ignore"):
             quality = np.nanmedian(np.where(seen, sc, np.nan), 0)
@@ -810,6 +813,53 @@ class RingTracks:
             pts[t, m] = p = cand[k]
             sc[t, m] = val[k]
             ct[t, m] = contrast[k]
+
+
+def _joined(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, gate: float, k: int):
+    """(pts, sc, ct) with the tracks of one marker that was lost for a while (hidden,
+    edge-on) and found again as a new track joined into one column.
+
+    pts (F, M, 2), sc and ct (F, M): tracks, their scores and contrasts. A track b that
+    starts after a track a ends continues a when b's first position lies within `gate`
+    times the distance to the nearest other track (at either end) of a's last position
+    carried to b's first frame by the similarity that takes a's `k` nearest neighbours
+    (tracks seen in both frames) from the one frame to the other; the closest such pair
+    (relative to that spacing) is joined first, and again until none is left.
+    """
+    n = len(pts)
+    while pts.shape[1] > 1:
+        seen = np.isfinite(pts[..., 0])
+        if not seen.any():
+            break
+        first = np.where(seen.any(0), seen.argmax(0), n)
+        last = np.where(seen.any(0), n - 1 - seen[::-1].argmax(0), -1)
+        best = (np.inf, -1, -1)
+        for a in np.flatnonzero(last < n - 1):
+            for b in np.flatnonzero(first > last[a]):
+                if first[b] >= n:
+                    continue
+                ta, tb = last[a], first[b]
+                common = seen[ta] & seen[tb]
+                common[[a, b]] = False
+                if common.sum() < 3:
+                    continue
+                src, dst = pts[ta, common], pts[tb, common]
+                apart = np.linalg.norm(src - pts[ta, a], axis=1)
+                near = np.argsort(apart)[:k]
+                A, t = _fit(src[near], dst[near], affine=False)
+                d = np.linalg.norm(pts[ta, a] @ A.T + t - pts[tb, b])
+                # a marker alone (a cheek) may be looked for further than one in a row
+                spacing = min(apart.min(), np.linalg.norm(dst - pts[tb, b], axis=1).min())
+                if d < gate * spacing and d / spacing < best[0]:
+                    best = (d / spacing, a, b)
+        _, a, b = best
+        if a < 0:
+            break
+        later = seen[:, b]
+        pts[later, a], sc[later, a], ct[later, a] = pts[later, b], sc[later, b], ct[later, b]
+        keep = np.arange(pts.shape[1]) != b
+        pts, sc, ct = pts[:, keep], sc[:, keep], ct[:, keep]
+    return pts, sc, ct
 
 
 def _matched(d: np.ndarray, gate: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:
