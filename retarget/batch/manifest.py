@@ -13,9 +13,10 @@
     takes:
       - name: smile
         file: smile.csv                  # any file the app imports
-        settings: {filter: one_euro}     # ConditionSettings JSON, or a path to one
+        settings: {filter: one_euro}     # ConditionSettings JSON, or a JSON file of it
         regions: [mouth]                 # partial retargeting (default: all)
         fps: 30                          # mapping, labelled_vertices: as `retarget condition`
+                                         # (a mapping, or a JSON file of one)
     pairs: all                           # or [{character: alice, take: smile}, ...]
 
 Paths are relative to the manifest's folder. Only the manifest's structure is checked
@@ -248,13 +249,7 @@ def _take(entry, i: int, folder: Path) -> TakeEntry:
     if "name" not in entry:  # the file's stem names a take by default
         entry = {**entry, "name": file.stem}
     name = _name(entry, where)
-    settings = entry.get("settings") or {}
-    if isinstance(settings, str):  # a JSON file of settings, as `retarget condition --settings`
-        settings_path = _path(entry, "settings", folder, where)
-        try:
-            settings = json.loads(settings_path.read_text(encoding="utf-8-sig"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise RetargetError(f"{where}: settings file {str(settings_path)!r} is not readable JSON: {exc}") from None
+    settings = _json_file(entry, "settings", folder, where) or {}
     if not isinstance(settings, dict):
         raise RetargetError(f"{where}: 'settings' must be a mapping (ConditionSettings) or a JSON file")
     try:
@@ -271,9 +266,9 @@ def _take(entry, i: int, folder: Path) -> TakeEntry:
     fps = _number(entry.get("fps"), f"{where}: fps", positive=True)
     maps = {}
     for key in ("mapping", "labelled_vertices"):
-        value = entry.get(key)
+        value = _json_file(entry, key, folder, where)
         if value is not None and not isinstance(value, dict):
-            raise RetargetError(f"{where}: '{key}' must be a mapping")
+            raise RetargetError(f"{where}: '{key}' must be a mapping or a JSON file of one")
         maps[key] = value
     return TakeEntry(name, file, settings, regions, fps, maps["mapping"], maps["labelled_vertices"])
 
@@ -328,6 +323,21 @@ def _path(entry: dict, key: str, folder: Path, where: str) -> Path | None:
     if not isinstance(value, str) or not value.strip():
         raise RetargetError(f"{where}: '{key}' must be a file path; got {value!r}")
     return (folder / value).resolve()
+
+
+def _json_file(entry: dict, key: str, folder: Path, where: str):
+    """The entry's `key`: its value, or (a string) the JSON in that file, as `retarget
+    condition` reads --settings, --mapping and --labelled-vertices."""
+    value = entry.get(key)
+    if not isinstance(value, str):
+        return value
+    path = _path(entry, key, folder, where)
+    try:
+        if path.stat().st_size > MAX_MANIFEST_BYTES:
+            raise RetargetError(f"{where}: {key} file {str(path)!r} is over {MAX_MANIFEST_BYTES} bytes")
+        return json.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RetargetError(f"{where}: {key} file {str(path)!r} is not readable JSON: {exc}") from None
 
 
 def _number(value, what: str, *, positive: bool) -> float | None:

@@ -166,3 +166,14 @@ def test_killed_worker_is_survived(manifest_path, reference, client, tmp_path):
     assert killed, "no worker was busy to kill"
     assert set(report.succeeded) == GOOD and set(report.failed) == BROKEN
     assert _files(tmp_path) == _files(reference)
+
+
+def test_missing_mesh_fails_only_its_pairs(manifest_path, tmp_path):
+    data = yaml.safe_load(manifest_path.read_text())
+    data["characters"].append({"name": "ghost", "mesh": "ghost.obj", "landmarks": "wide.json"})
+    data["pairs"] = [{"character": c, "take": "take0"} for c in ("wide", "ghost")]
+    changed = manifest_path.parent / "ghost.yaml"
+    changed.write_text(yaml.safe_dump(data))
+    report = run_batch(plan_batch(read_manifest(changed), tmp_path), workers=0)
+    assert report.succeeded == ["wide/take0"]
+    assert "character 'ghost'" in report.failed["ghost/take0"] and "does not exist" in report.failed["ghost/take0"]
