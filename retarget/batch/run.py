@@ -114,14 +114,14 @@ def run_batch(plan: Plan, *, client=None, scheduler: str | None = None, workers:
 
 
 def _run_here(plan: Plan, take) -> None:
-    """Each character once, then its pairs, in this process."""
-    states = {}
+    """Each character once, then its pairs, in this process (one rig held at a time)."""
+    by_character: dict[str, list] = {}
     for job in plan.jobs:
-        if job.character not in states:
-            states.clear()  # jobs come grouped by character: hold one rig at a time
-            states[job.character] = character_state(plan.manifest.character(job.character),
-                                                    job.character in plan.arkit)
-        take(pair_outputs(states[job.character], job))
+        by_character.setdefault(job.character, []).append(job)
+    for name, jobs in by_character.items():
+        state = character_state(plan.manifest.character(name), name in plan.arkit)
+        for job in jobs:
+            take(pair_outputs(state, job))
 
 
 def _run_dask(plan: Plan, client, take) -> None:
