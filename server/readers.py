@@ -32,6 +32,7 @@ from retarget.sources.facemesh_video import track_video_facemesh
 from retarget.sources.stereo import stereo_pair_calibration, track_stereo_videos
 from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
+from retarget.units import face_size, guess_units
 from retarget.weights import METHODS, compute_weights
 
 __all__ = ["FoundLandmarks", "ImportedProject", "OpenedMesh", "arkit", "face_mesh_take", "found_landmarks",
@@ -39,14 +40,17 @@ __all__ = ["FoundLandmarks", "ImportedProject", "OpenedMesh", "arkit", "face_mes
            "video_opens"]
 
 def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
-                max_bytes: int) -> tuple[int, int]:
-    """(vertices, triangles) of an uploaded mesh that `retarget.mesh.load_mesh` accepts."""
+                max_bytes: int) -> tuple[int, int, dict]:
+    """(vertices, triangles, unit guess) of an uploaded mesh that `retarget.mesh.load_mesh`
+    accepts; the guess is ``{"unit", "size"}``, `retarget.units.guess_units` and the
+    largest extent of its bounding box in its own numbers."""
     try:
         mesh = load_mesh(data, ext, max_vertices=max_vertices, max_bytes=max_bytes)
     except RetargetError as exc:
         text = str(exc).replace("the given bytes", "the file")
         raise RetargetError(f"uploaded mesh {shown!r} refused: {text}") from None
-    return mesh.n_vertices, mesh.n_faces
+    guess = {"unit": guess_units(mesh.vertices), "size": round(face_size(mesh.vertices), 6)}
+    return mesh.n_vertices, mesh.n_faces, guess
 
 
 @dataclass(frozen=True)
@@ -155,6 +159,7 @@ class ImportedProject:
     weights: SkinWeights
     deformation: str
     animations: list[str]
+    units: str | None = None
 
 
 def imported_project(data: bytes, shown: str, max_vertices: int) -> ImportedProject:
@@ -175,7 +180,7 @@ def imported_project(data: bytes, shown: str, max_vertices: int) -> ImportedProj
         raise RetargetError(f"{shown!r}: its mesh does not read back as {mesh.n_vertices} vertices")
     return ImportedProject(mesh_file, mesh.n_vertices, mesh.n_faces, face.points.to_json(),
                            face.points.n_points, face.points.layout or "", face.weights,
-                           face.deformation, [clip.name for clip in face.clips])
+                           face.deformation, [clip.name for clip in face.clips], face.units)
 
 
 @contextmanager

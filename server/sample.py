@@ -36,7 +36,7 @@ def ensure_sample_project(store: ProjectStore) -> str | None:
         store.set_meta(_META_KEY, "")
         return None
     face = sample_face(1)
-    project = store.create(SAMPLE_NAME, {"sample": True})
+    project = store.create(SAMPLE_NAME, {"sample": True, "mesh_units": "cm"})  # generated in cm
     project_id = project["id"]
     with tempfile.TemporaryDirectory(dir=store.folder(project_id), prefix=".tmp-") as tmp:
         path = Path(tmp) / "sample_face.obj"

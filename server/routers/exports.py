@@ -1,7 +1,7 @@
 """A project as a glTF 2.0 binary, and a project from one.
 
     GET  /api/projects/{id}/export.glb[?takes=<id>,<id>|all][&settings=<JSON>][&regions=<a>,<b>]
-                                       [&drive=points|muscles|arkit]
+                                       [&drive=points|muscles|arkit][&units=m|keep]
     POST /api/projects/import          multipart: file (.glb), name (optional)
 
 The export (`retarget.gltf.export_gltf`) holds the project's mesh, landmarks and the rig
@@ -20,11 +20,18 @@ the muscle IK (`retarget.muscles.drive.MuscleDrive`, from the take's first frame
 user's painted fixes) as 52 named morph targets (`retarget.gltf.export_arkit_gltf`), each
 take solved into their weights with the user's gains as the stream solves it
 (`retarget.arkit.ArkitDrive`); 409 when the shapes are not made for the current landmarks.
+Lengths are in metres (``units=m``, the default) from the mesh's unit in the project's
+settings (``mesh_units``, `server.routers.meshes`; guessed from the mesh's size when a
+project has none), or the mesh's own numbers with ``units=keep``; the file records the scale
+(`retarget.gltf.units`). With "turn the head" on in ``settings`` (``apply_rotation``) each
+take's head rotations turn a ``head`` node as the app's viewer turns the face
+(`retarget.gltf.head`).
 
 The import reads a .glb this app exported (`retarget.gltf.read_gltf`) into a new
 project: its mesh (stored as a mesh-only .glb, `retarget.gltf.export_mesh_gltf`), its
 landmarks and its rig, which becomes the new project's automatic rig (a painted rig
-comes in as painted, with nothing to reset to). Animations are not imported: they hold
+comes in as painted, with nothing to reset to); the scale the export applied is undone, and
+the unit it recorded becomes the new project's ``mesh_units``. Animations are not imported: they hold
 the target's feature displacements, not a performer's points, so they cannot be takes;
 the answer names them. A file another tool made, a corrupt one or one over the upload
 limit is refused (415 for another extension, 413 over the limit, 422 with the reason)
@@ -51,7 +58,7 @@ from server.deps import IsolationDep, LimitsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.limits import body_limit
 from server.readers import imported_project
-from server.routers.meshes import read_capped, upload_extension
+from server.routers.meshes import MESH_UNITS_KEY, read_capped, units_settings, upload_extension
 from server.routers.arkit import project_drive, project_settings
 from server.routers.muscles import project_muscles
 
@@ -68,6 +75,8 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                    regions: str = Query(default="", description="regions that move, comma-separated"),
                    drive: Literal["points", "muscles", "arkit"] = Query(
                        default="points", description="points: the rig; muscles: the muscles; arkit: ARKit's 52 shapes"),
+                   units: Literal["m", "keep"] = Query(
+                       default="m", description="m: lengths in metres (glTF's unit); keep: the mesh's own numbers"),
                    ) -> Response:
     """The project rigged and animated as a .glb download (see the module docstring)."""
     landmarks = store.landmarks(project["id"])
@@ -80,6 +89,7 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
     points = landmarks_from_json(landmarks, mesh.vertices, mesh.faces)
     target, layout = points.positions(mesh.vertices), landmarks.get("layout") or ""
     conditioning = _settings(settings)
+    scaling = {"units": units, "mesh_units": project["settings"].get(MESH_UNITS_KEY) or "guess"}
     moving = [r.strip() for r in regions.split(",") if r.strip()] or None
     clips, names = [], set()
     for info in _takes(store, project["id"], takes):
@@ -97,21 +107,23 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
         solved = []
         for clip in clips:
             arkit.reset()
-            solved.append(ArkitClip(clip.name, arkit.weights_frames(clip.displacements), clip.times))
+            solved.append(ArkitClip(clip.name, arkit.weights_frames(clip.displacements), clip.times,
+                                    head_rotations=clip.head_rotations))
         shapes = arkit.shapes
         fixed = type(shapes)(shapes.names, project_settings(store, project).fixed_deltas(shapes.deltas),
                              shapes.at_points)
-        data = export_arkit_gltf(mesh, fixed, solved)
+        data = export_arkit_gltf(mesh, fixed, solved, **scaling)
     elif drive == "muscles":
         model, _ = project_muscles(store, project, mesh)
         muscles = MuscleDrive(model, points)
         solved = []
         for clip in clips:
             muscles.reset()
-            solved.append(ContractionClip(clip.name, muscles.contractions(clip.displacements), clip.times))
-        data = export_muscles_gltf(mesh, muscle_morphs(model), solved)
+            solved.append(ContractionClip(clip.name, muscles.contractions(clip.displacements), clip.times,
+                                          head_rotations=clip.head_rotations))
+        data = export_muscles_gltf(mesh, muscle_morphs(model), solved, **scaling)
     else:
-        data = export_gltf(mesh, points, weights, clips)
+        data = export_gltf(mesh, points, weights, clips, **scaling)
     return Response(data, media_type=GLB_MEDIA_TYPE, headers={
         "Content-Disposition": f'attachment; filename="{_file_name(project["name"])}.glb"'})
 
@@ -139,6 +151,8 @@ def import_project(store: StoreDep, limits: LimitsDep, isolation: IsolationDep,
         project = store.put_landmarks(project["id"], face.landmarks, n_points=face.n_points,
                                       layout=face.layout, revision=project["revision"])
         project = store.put_rig(project["id"], face.weights, revision=project["revision"])
+        if face.units is not None:
+            project = store.update(project["id"], settings=units_settings(face.units))
     except BaseException:
         store.delete(project["id"])  # no half-imported project
         raise

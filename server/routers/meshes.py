@@ -1,5 +1,12 @@
 """The project's mesh: upload, download the original, and compact arrays for the browser
-(``GET .../mesh/arrays``: `server.wire`'s RTMA format)."""
+(``GET .../mesh/arrays``: `server.wire`'s RTMA format).
+
+The mesh's unit: an upload guesses it from the mesh's size (`retarget.units.guess_units`) and
+stores it in the project's settings as ``mesh_units`` ("m", "cm", "mm" or "in"), with the
+guess as ``mesh_units_guess`` (``{"unit", "size"}``); the user changes it with ``PATCH
+/api/projects/{id}`` ``{"settings": {"mesh_units": "mm"}}`` (checked there: another value
+is 422 with the reason), and the glTF export scales from it to metres
+(`server.routers.exports`)."""
 
 from __future__ import annotations
 
@@ -17,6 +24,8 @@ from server.limits import body_limit
 from server.readers import mesh_counts
 from server.store import MESH_EXTENSIONS
 from server.wire import mesh_arrays
+
+MESH_UNITS_KEY, MESH_UNITS_GUESS_KEY = "mesh_units", "mesh_units_guess"
 
 router = APIRouter(prefix="/api/projects/{project_id}/mesh", tags=["meshes"],
                    responses=responses(404))
@@ -91,11 +100,19 @@ def put_mesh(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolation:
             raise RetargetError("a zip already holds the mesh's files: upload it alone")
         data, ext = _zipped(file.filename, data, files, limits), "zip"
     unpacked = 2 * limits.max_upload_bytes if ext == "zip" else limits.max_upload_bytes
-    n_vertices, n_faces = isolation.call(
+    n_vertices, n_faces, guess = isolation.call(
         mesh_counts, data, ext, file.filename, limits.max_vertices, unpacked,
         what=f"uploaded mesh {file.filename!r} refused: not a readable {ext.upper()} file")
-    return store.put_mesh(project["id"], data, ext, filename=file.filename or "",
-                          n_vertices=n_vertices, n_faces=n_faces)
+    store.put_mesh(project["id"], data, ext, filename=file.filename or "",
+                   n_vertices=n_vertices, n_faces=n_faces)
+    return store.update(project["id"], settings=units_settings(guess["unit"], guess))
+
+
+def units_settings(unit: str, guess: dict | None = None) -> dict:
+    """The project settings that record the mesh's unit (`MESH_UNITS_KEY`: the unit the
+    export scales from, one of `retarget.units.UNITS`) and the guess made at upload
+    (`MESH_UNITS_GUESS_KEY`: ``{"unit", "size"}``, None when the unit came otherwise)."""
+    return {MESH_UNITS_KEY: unit, MESH_UNITS_GUESS_KEY: guess}
 
 
 def _zipped(name: str | None, data: bytes, files: list[UploadFile], limits) -> bytes:

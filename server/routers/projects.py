@@ -8,6 +8,9 @@ A project is JSON::
      "rig": {"method"} | null,
      "revision": int,          # bumped whenever the mesh or the landmarks change
      "settings": {...}}        # free-form JSON object kept for the browser
+
+One settings key is the server's own: ``mesh_units``, the unit of the mesh ("m", "cm", "mm",
+"in"; `server.routers.meshes`), which the export scales from; another value is refused.
 """
 
 from __future__ import annotations
@@ -19,8 +22,10 @@ from fastapi import APIRouter, Response, status
 from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
+from retarget.units import unit_scale
 from server.deps import LimitsDep, ProjectDep, StoreDep
 from server.errors import responses
+from server.routers.meshes import MESH_UNITS_KEY
 
 router = APIRouter(prefix="/api/projects", tags=["projects"], responses=responses())
 
@@ -70,6 +75,9 @@ def patch_project(project: ProjectDep, body: ProjectPatch, store: StoreDep, limi
     """Rename the project and/or merge `settings` into its settings."""
     name = None if body.name is None else body.name.strip()
     if body.settings:
+        if body.settings.get(MESH_UNITS_KEY) is not None:
+            unit = body.settings[MESH_UNITS_KEY]
+            unit_scale(unit if isinstance(unit, str) else repr(unit))  # 422 naming the value
         merged = {**project["settings"], **body.settings}
         _bounded({k: v for k, v in merged.items() if v is not None}, limits)
     return store.update(project["id"], name=name, settings=body.settings)

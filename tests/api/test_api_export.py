@@ -98,7 +98,9 @@ def test_the_export_is_valid_gltf_with_the_project_and_its_take(app, client, sam
     face = read_gltf(path)
     store = app.state.store
     mesh = store.mesh(pid)
-    np.testing.assert_array_equal(face.mesh.vertices, mesh.vertices.astype(np.float32))
+    # in metres in the file (the sample's mesh_units: cm), back in centimetres to float32 rounding
+    assert face.units == "cm"
+    np.testing.assert_allclose(face.mesh.vertices, mesh.vertices, rtol=2.4e-7)
     np.testing.assert_array_equal(face.mesh.faces, mesh.faces)
     assert face.points.to_json() == store.landmarks(pid)
     np.testing.assert_allclose(face.weights.dense(), store.rig(pid).dense(), atol=1e-6)
@@ -121,8 +123,10 @@ def test_an_import_of_the_export_is_the_same_project(app, client, sample, export
     new = answer["project"]
     assert new["id"] != pid and new["name"] == "sample" and new["rig"] == {"method": "biharmonic"}
     assert client.get(f"/api/projects/{new['id']}").json() == new
-    for got, want in zip(mesh_arrays(client, new["id"]), mesh_arrays(client, pid)):
-        np.testing.assert_array_equal(got, want)
+    assert new["settings"]["mesh_units"] == "cm"
+    (got, got_faces), (want, want_faces) = mesh_arrays(client, new["id"]), mesh_arrays(client, pid)
+    np.testing.assert_allclose(got, want, rtol=2.4e-7)   # through metres: float32 rounding
+    np.testing.assert_array_equal(got_faces, want_faces)
     assert client.get(f"/api/projects/{new['id']}/landmarks").json() == \
         client.get(f"/api/projects/{pid}/landmarks").json()
     store = app.state.store
@@ -182,7 +186,7 @@ def test_drive_muscles_exports_the_muscles_animated_by_the_takes_contractions(ap
     at = times[k:k + 1]
     drawn = posed_vertices(gltf, instance, np.arange(mesh.n_vertices),
                            node_transforms(gltf, gltf.doc.nodes, channels, at),
-                           animated_weights(gltf, channels, at), at)[0]
+                           animated_weights(gltf, channels, at), at)[0] / 0.01   # metres to cm
     np.testing.assert_allclose(drawn - mesh.vertices,
                                played_displacements(muscle_morphs(model), model.rest, contractions[k]),
                                atol=1e-4)
