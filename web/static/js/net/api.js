@@ -386,6 +386,21 @@ export const api = {
 	},
 
 	/**
+	 * A project and its takes as a batch for `retarget batch` (GET .../manifest.zip): the
+	 * project as an exported .glb, its takes with `settings` (ConditionSettings), a manifest.json.
+	 * @returns {Promise<{blob: Blob, filename: string}>}
+	 */
+	async exportManifest( id, { settings = null, outputs = 'gltf,arkit_csv,npy' } = {} ) {
+
+		const query = new URLSearchParams( { outputs } );
+		if ( settings ) query.set( 'settings', JSON.stringify( settings ) );
+		const response = await request( 'GET', `/api/projects/${ id }/manifest.zip?${ query }`, { raw: true } );
+		const disposition = response.headers.get( 'Content-Disposition' ) ?? '';
+		return { blob: await response.blob(), filename: /filename="([^"]+)"/.exec( disposition )?.[ 1 ] ?? 'project.manifest.zip' };
+
+	},
+
+	/**
 	 * Upload a .glb exported by this app as a new project, with progress.
 	 * @returns {Promise<{project: object, deformation: string, animations: string[]}>}
 	 */

@@ -7,7 +7,9 @@ import { $ } from './dom.js';
  * takes as animations, retargeted with the project's conditioning settings and region
  * mask, the same objects the stream plays with: `app.conditioning`, `app.regions`; driven
  * as the Performance panel's *Drive by* says: the rig, or the muscles as morph targets and
- * a jaw joint), and import such a file as a new project, which is then opened.
+ * a jaw joint), and import such a file as a new project, which is then opened. *Batch
+ * manifest* downloads the project and all its takes with the conditioning settings as a
+ * zip for `retarget batch` (GET /api/projects/{id}/manifest.zip).
  *
  * The panel holds no maths: the server retargets and writes the file. Refusals show the
  * server's reason in the panel's note and the page's error banner.
@@ -79,14 +81,41 @@ export class ExportPanel {
 		try {
 
 			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions(), drive: this.app.sources.drive } );
-			const link = document.createElement( 'a' );
-			link.href = URL.createObjectURL( blob );
-			link.download = filename;
-			document.body.append( link );
-			link.click();
-			link.remove();
-			setTimeout( () => URL.revokeObjectURL( link.href ), 0 );
+			this._save( blob, filename );
 			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB${ count ? `, ${ count } animation${ count > 1 ? 's' : '' }` : '' }).` );
+			return { filename, size: blob.size };
+
+		} catch ( error ) {
+
+			this._refused( error );
+			return null;
+
+		} finally {
+
+			button.disabled = false;
+
+		}
+
+	}
+
+	/**
+	 * Download the current project and all its takes as a batch manifest zip (the takes
+	 * with the Performance panel's conditioning), to run with `retarget batch`.
+	 * @returns {Promise<{filename: string, size: number}|null>} what was saved; null on a
+	 *   refusal (no takes, no rig), which is shown.
+	 */
+	async exportManifest() {
+
+		const id = this.app.projectId;
+		if ( ! id ) return null;
+		const button = $( 'export-manifest' );
+		button.disabled = true;
+		this._note( 'Writing the batch manifest…' );
+		try {
+
+			const { blob, filename } = await api.exportManifest( id, { settings: this.app.conditioning.toJSON() } );
+			this._save( blob, filename );
+			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB): unzip it and run "retarget batch manifest.json --out DIR".` );
 			return { filename, size: blob.size };
 
 		} catch ( error ) {
@@ -141,6 +170,7 @@ export class ExportPanel {
 
 		const signal = this._events.signal;
 		$( 'export-gltf' ).addEventListener( 'click', () => this.exportGltf(), { signal } );
+		$( 'export-manifest' ).addEventListener( 'click', () => this.exportManifest(), { signal } );
 		$( 'export-all' ).addEventListener( 'change', () => this._render(), { signal } );
 		$( 'export-takes' ).addEventListener( 'change', ( event ) => {
 
@@ -180,6 +210,18 @@ export class ExportPanel {
 
 		} ) );
 		$( 'export-none' ).hidden = this.takes.length > 0;
+
+	}
+
+	_save( blob, filename ) {
+
+		const link = document.createElement( 'a' );
+		link.href = URL.createObjectURL( blob );
+		link.download = filename;
+		document.body.append( link );
+		link.click();
+		link.remove();
+		setTimeout( () => URL.revokeObjectURL( link.href ), 0 );
 
 	}
 
