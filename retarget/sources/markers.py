@@ -521,6 +521,8 @@ def _named_tracks(points: np.ndarray, lay, first_found: int, path: Path) -> np.n
 _SCORE_RADII = (2.0, 2.6, 3.4, 4.4)   # px, outer ring radii of the matched filter's templates
 _BIRTH_SCORE = 0.55    # correlation that starts a track, with a dot brighter than its ring
 _MIN_DOT_CONTRAST = 8.0  # grey levels by which a new marker's dot outshines its ring all round
+_APART = 4.0           # px: two markers' centres are at least this far apart (a marker
+                       # of 3 mm radius at 60 cm is 5.5 px across)
 _JOIN = 0.45           # a track that starts this near (times the spacing of the markers
                        # there) where one that ended would be now continues it
 _CLEAR_DOT = 40.0      # grey levels of a dot over its ring that start a track whatever the
@@ -709,6 +711,7 @@ class RingTracks:
                 again = _matched(np.linalg.norm(pos[lost][:, None] - cand[back][None], axis=2),
                                  np.full((lost.size, 1), 2.5 * self.reacquire))
                 take[lost[again >= 0]] = back[again[again >= 0]]
+            take = _apart(take, cand, d, _APART)
             hit = take >= 0
             pts[t, hit] = cand[take[hit]]
             sc[t, hit] = val[take[hit]]
@@ -860,6 +863,26 @@ def _joined(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, gate: float, k: int
         keep = np.arange(pts.shape[1]) != b
         pts, sc, ct = pts[:, keep], sc[:, keep], ct[:, keep]
     return pts, sc, ct
+
+
+def _apart(take: np.ndarray, cand: np.ndarray, cost: np.ndarray, apart: float) -> np.ndarray:
+    """take (M,) (each track's candidate, -1 for none) with the dearer (cost (M, K)) of any
+    two matches closer than `apart` px undone: two markers' centres are at least a
+    marker's width apart, so two peaks that close are one marker, or a ghost between two
+    whose rings merge."""
+    take = take.copy()
+    while True:
+        rows = np.flatnonzero(take >= 0)
+        if rows.size < 2:
+            return take
+        c = cand[take[rows]]
+        d = np.linalg.norm(c[:, None] - c[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        i, j = np.unravel_index(d.argmin(), d.shape)
+        if d[i, j] >= apart:
+            return take
+        ri, rj = rows[i], rows[j]
+        take[ri if cost[ri, take[ri]] > cost[rj, take[rj]] else rj] = -1
 
 
 def _matched(d: np.ndarray, gate: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:
