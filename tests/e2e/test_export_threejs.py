@@ -22,6 +22,7 @@ from __future__ import annotations
 import base64
 import io
 import struct
+import urllib.parse
 
 import httpx
 import numpy as np
@@ -118,6 +119,18 @@ window.check = {
 		this.face.setDisplacements( new Float32Array( decoded( displacements ) ) );
 		return encoded( this.face.deformedPositions() );
 	},
+	// our app's viewer turning the head: the shader's positions through the face mesh's matrix
+	turned( displacements, q ) {
+		this.face.setDisplacements( new Float32Array( decoded( displacements ) ) );
+		this.face.setHeadRotation( q );
+		this.face.mesh.updateMatrixWorld( true );
+		const out = this.face.deformedPositions(), v = new THREE.Vector3();
+		for ( let i = 0; i < out.length; i += 3 ) {
+			v.fromArray( out, i ).applyMatrix4( this.face.mesh.matrixWorld ).toArray( out, i );
+		}
+		this.face.setHeadRotation( null );
+		return encoded( out );
+	},
 };
 window.ready = true;
 </script>
@@ -173,11 +186,18 @@ def _rig(server, pid, method: str) -> None:
     assert job["state"] == "done", job
 
 
+def _file_scale(data: bytes) -> float:
+    """What the export multiplied every length by (0.01: the centimetre sample in metres)."""
+    return GltfDocument(data, "export", None).doc.scenes[0].extras["retarget"]["scale"]
+
+
 def _three_matches_ours(page, server, pid, take) -> dict:
     """Load the project's export with its take in three.js and compare its posed vertices
-    with our LBS and our shader at a key time and between keys; what three.js loaded."""
+    (in metres, over the file's scale) with our LBS and our shader at a key time and between
+    keys; what three.js loaded."""
     url = f"/api/projects/{pid}/export.glb?takes={take['id']}"
-    clip = read_gltf(server.read(url)).clips[0]
+    data = server.read(url)
+    clip, scale = read_gltf(data).clips[0], _file_scale(data)
     loaded = page.evaluate("(url) => check.load(url)", url)
     assert loaded["animations"] == [[take["name"], pytest.approx(clip.duration, abs=1e-6)]]
     page.evaluate("(id) => check.loadFace(id)", pid)
@@ -188,7 +208,7 @@ def _three_matches_ours(page, server, pid, take) -> dict:
         d = np.stack([np.interp(t, clip.times, clip.displacements[:, i, a])
                       for i in range(clip.displacements.shape[1]) for a in range(3)]).reshape(-1, 3)
         lbs = rest + skin_displacements(rig, d)
-        three = _decoded(page.evaluate("(t) => check.posed(t)", float(t)))
+        three = _decoded(page.evaluate("(t) => check.posed(t)", float(t))) / scale
         shaded = _decoded(page.evaluate("(d) => check.shaded(d)",
                                         base64.b64encode(d.astype("<f4").tobytes()).decode()))
         moved = float(np.abs(lbs - rest).max()) / size
@@ -255,7 +275,7 @@ def test_three_js_plays_the_arkit_export(server, page):
     weights[1, [ARKIT_NAMES.index(n) for n in ("jawOpen", "mouthSmileLeft", "eyeBlinkRight")]] = [0.8, 0.6, 1.0]
     weights[2, ARKIT_NAMES.index("browInnerUp")] = 0.7
     data = export_arkit_gltf(mesh_from_arrays(f.vertices, f.faces), shapes,
-                             [ArkitClip.at_rate("arkit", weights, FPS)])
+                             [ArkitClip.at_rate("arkit", weights, FPS)], units="keep")
     page.route(server.url + "/three-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
     page.route(server.url + "/arkit.glb", lambda route: route.fulfill(body=data, content_type="model/gltf-binary"))
     page.goto(server.url + "/three-check")
@@ -272,6 +292,42 @@ def test_three_js_plays_the_arkit_export(server, page):
               f"mesh size (bound {bound / size:.1e}, moved up to {np.abs(expected - f.vertices).max() / size:.3f})")
         assert np.abs(three - expected).max() < bound
         assert np.abs(expected - f.vertices).max() > 0.03 * size
+
+
+def test_three_js_turns_the_head_as_our_app_does(server, page, sample):
+    """'Turn the head' (issue 19): the server's export of a take whose performer turns the
+    head, with apply_rotation, played by three.js at its keys, against our app's viewer (the
+    shader's positions through the face mesh's matrix that `SkinnedFace.setHeadRotation`
+    sets) on the project's rig with the take's displacements and streamed quaternion."""
+    from tests.unit.test_export_head import turning_take
+
+    pid, _ = sample
+    take, _ = turning_take(20)
+    buffer = io.BytesIO()
+    np.save(buffer, take.points)
+    r = httpx.post(f"{server.url}/api/projects/{pid}/takes", timeout=30,
+                   files={"file": ("turn.npy", buffer.getvalue())}, data={"layout": "ibug68", "fps": str(FPS)})
+    assert r.status_code == 201, r.text
+    settings = '{"neutral": {"mode": "frame", "frame": 0}, "apply_rotation": true}'
+    url = f"/api/projects/{pid}/export.glb?takes={r.json()['id']}&settings={urllib.parse.quote(settings)}"
+    data = server.read(url)
+    clip, scale = read_gltf(data).clips[0], _file_scale(data)
+    page.route(server.url + "/three-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
+    page.route(server.url + "/turn.glb", lambda route: route.fulfill(body=data, content_type="model/gltf-binary"))
+    page.goto(server.url + "/three-check")
+    page.wait_for_function("window.ready === true")
+    page.evaluate("(url) => check.load(url)", "/turn.glb")
+    page.evaluate("(id) => check.loadFace(id)", pid)
+    rest = _rest(server, pid)
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    for k in (5, 12, 19):
+        d = base64.b64encode(clip.displacements[k].astype("<f4").tobytes()).decode()
+        three = _decoded(page.evaluate("(t) => check.posed(t)", float(clip.times[k]))) / scale
+        app = _decoded(page.evaluate("([d, q]) => check.turned(d, q)", [d, clip.head_rotations[k].tolist()]))
+        still = _decoded(page.evaluate("(d) => check.shaded(d)", d))
+        error, turned = np.abs(three - app).max() / size, np.abs(app - still).max() / size
+        print(f"head motion, frame {k}: |three.js - app| = {error:.1e} of the mesh size (turned up to {turned:.3f})")
+        assert error < TOLERANCE and turned > 0.02
 
 
 def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
@@ -309,7 +365,7 @@ def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
     new = page.evaluate("() => window.app.projectId")
     assert new not in before and page.input_value("#project-name") == "exported"
     assert "Its 1 animation was not imported" in page.inner_text("#export-note")
-    np.testing.assert_array_equal(_rest(server, new), _rest(server, pid))
+    np.testing.assert_allclose(_rest(server, new), _rest(server, pid), rtol=2.4e-7)  # through metres
     assert server.api("GET", f"/api/projects/{new}/landmarks") == server.api("GET", f"/api/projects/{pid}/landmarks")
     np.testing.assert_allclose(_server_rig(server, new).dense(), _server_rig(server, pid).dense(), atol=1e-6)
 

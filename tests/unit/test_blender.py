@@ -85,15 +85,22 @@ def _blender(face, method, tmp_path_factory):
     return weights, _evaluated(path, d)
 
 
-def _evaluated(path, d) -> dict:
-    """Blender's import of the .glb at `path` evaluated at FRAMES."""
+def _evaluated(path, d, frames=FRAMES) -> dict:
+    """Blender's import of the .glb at `path` evaluated at `frames`, positions in the mesh's
+    units (Blender's, in the file's metres, over the export's recorded scale)."""
     run = subprocess.run([str(blender_python()), str(EVALUATE), str(path), str(d / "out.npz"),
-                          str(FPS), *map(str, FRAMES)], capture_output=True, text=True, timeout=300)
+                          str(FPS), *map(str, frames)], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
+    scale = _file_scale(Path(path).read_bytes())
     with np.load(d / "out.npz") as z:
-        result = {key: z[key] for key in ("positions", "rest", "bone_heads")}
+        result = {key: z[key] / scale for key in ("positions", "rest", "bone_heads")}
         result["info"] = json.loads(str(z["info"]))
     return result
+
+
+def _file_scale(data: bytes) -> float:
+    """What the export multiplied every length by (0.01: the centimetre face in metres)."""
+    return GltfDocument(data, "face.glb", None).doc.scenes[0].extras["retarget"]["scale"]
 
 
 @pytest.fixture(scope="module")
@@ -174,7 +181,7 @@ def test_blender_plays_the_muscle_export_as_gltf_defines_it(face, tmp_path_facto
     times = np.array(FRAMES) / FPS
     expected = gltf_vertices(gltf, instance, np.arange(mesh.n_vertices),
                              node_transforms(gltf, gltf.doc.nodes, channels, times),
-                             animated_weights(gltf, channels, times), times)
+                             animated_weights(gltf, channels, times), times) / _file_scale(data)
     assert np.abs(result["positions"] - expected).max() < 1e-4 * face["size"]
     assert np.abs(expected - mesh.vertices).max() > 100 * 1e-4 * face["size"]
 
@@ -208,3 +215,28 @@ def test_blender_plays_the_arkit_export_from_sparse_targets(face, tmp_path_facto
               f"of the mesh size (bound {bound / face['size']:.1e})")
         assert np.abs(got - expected).max() < bound, frame
         assert np.abs(expected - v0).max() > 0.03 * face["size"]       # the pose moves the face
+
+
+def test_blender_turns_the_head_as_the_app_does(face, tmp_path_factory):
+    """'Turn the head' (issue 19): a take whose performer turns the head (up to 25°), played
+    with apply_rotation, exported with an ellipsoid skin: the ``head`` node above the skeleton
+    root becomes an animated empty over the armature, and Blender's positions at the keys are
+    the app's (the skinned face turned about its rest bounding-box centre by the streamed
+    quaternion) within 1e-4 of the mesh size."""
+    from retarget.performance import Performance
+    from tests.unit.test_export_head import SETTINGS, app_vertices, turning_take
+
+    mesh, points = face["mesh"], face["points"]
+    weights = compute_weights("ellipsoid", mesh.vertices, mesh.faces, points, get_layout("ibug68"))
+    clip = Performance(points.positions(mesh.vertices), "ibug68", SETTINGS).play(turning_take(32)[0], "turn")
+    d = tmp_path_factory.mktemp("blender_head")
+    (d / "face.glb").write_bytes(export_gltf(mesh, points, weights, [clip]))
+    keys = (0, 10, 16, 31)
+    result = _evaluated(d / "face.glb", d, [float(k) for k in keys])
+    worst = 0.0
+    for k, got in zip(keys, result["positions"]):
+        worst = max(worst, np.abs(got - app_vertices(mesh, weights, clip, k)).max() / face["size"])
+    print(f"head motion: |Blender - app| = {worst:.1e} of the mesh size")
+    assert worst < 1e-4
+    turned = app_vertices(mesh, weights, clip, 16) - (mesh.vertices + skin_displacements(weights, clip.displacements[16]))
+    assert np.abs(turned).max() > 0.1 * face["size"]                   # the head does turn
