@@ -117,7 +117,13 @@ def test_single_process_tree(reference):
 
 
 def test_cluster_gives_the_same_bytes(manifest_path, reference, client, tmp_path):
-    report = run_batch(plan_batch(read_manifest(manifest_path), tmp_path), client=client)
+    from distributed import get_task_stream
+
+    with get_task_stream(client) as stream:
+        report = run_batch(plan_batch(read_manifest(manifest_path), tmp_path), client=client)
+    keys = [task["key"] for task in stream.data]
+    assert sum(key.startswith("character-") for key in keys) == 3  # a rig once per character
+    assert sum(key.startswith("pair-") for key in keys) == 12
     assert set(report.succeeded) == GOOD
     assert set(report.failed) == BROKEN
     assert all("broken.csv" in reason for reason in report.failed.values())
