@@ -330,6 +330,30 @@ def test_three_js_turns_the_head_as_our_app_does(server, page, sample):
         assert error < TOLERANCE and turned > 0.02
 
 
+def test_the_mesh_unit_is_shown_changed_and_exported_in(server, page, sample, tmp_path):
+    """The header shows the mesh's unit (the sample: cm) with a select; a change is saved to
+    the project's settings, and the Export panel's *Units* downloads metres from it or the
+    mesh's own numbers."""
+    pid, _ = sample
+    open_project(page, server, pid)
+    assert page.is_visible("#mesh-units") and page.input_value("#mesh-units") == "cm"
+    page.select_option("#mesh-units", "mm")
+    page.wait_for_function("(id) => window.app.project.settings.mesh_units === 'mm'", arg=pid)
+    assert server.api("GET", f"/api/projects/{pid}")["settings"]["mesh_units"] == "mm"
+    top = sample_face(1).vertices.max(0)
+    for units, scale in (("m", 0.001), ("keep", 1.0)):
+        page.select_option("#export-units", units)
+        with page.expect_download() as download:
+            page.click("#export-gltf")
+        download.value.save_as(tmp_path / f"{units}.glb")
+        gltf = GltfDocument((tmp_path / f"{units}.glb").read_bytes(), units, None)
+        position = gltf.doc.accessors[gltf.doc.meshes[0].primitives[0].attributes.POSITION]
+        np.testing.assert_allclose(position.max, scale * top, rtol=1e-6)
+    page.select_option("#mesh-units", "cm")
+    page.select_option("#export-units", "m")
+    page.wait_for_function("() => window.app.project.settings.mesh_units === 'cm'")
+
+
 def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
     """Export glTF with a ticked take downloads what the server exports for the panel's
     conditioning; Import .glb makes and opens a project with the same mesh, landmarks and

@@ -374,9 +374,9 @@ export const api = {
 	 *   target per muscle and a jaw joint).
 	 * @returns {Promise<{blob: Blob, filename: string}>} the file and the server's name for it
 	 */
-	async exportGltf( id, { takes = '', settings = null, regions = null, drive = 'points' } = {} ) {
+	async exportGltf( id, { takes = '', settings = null, regions = null, drive = 'points', units = 'm' } = {} ) {
 
-		const query = new URLSearchParams( { takes, drive } );
+		const query = new URLSearchParams( { takes, drive, units } );
 		if ( settings ) query.set( 'settings', JSON.stringify( settings ) );
 		if ( regions ) query.set( 'regions', regions.join( ',' ) );
 		const response = await request( 'GET', `/api/projects/${ id }/export.glb?${ query }`, { raw: true } );

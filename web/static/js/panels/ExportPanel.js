@@ -1,5 +1,6 @@
 import { api } from '../net/api.js';
 import { $ } from './dom.js';
+import { MeshUnits } from './MeshUnits.js';
 
 /**
  * The Export panel (index.html #export-panel): download the project as a glTF binary
@@ -9,7 +10,9 @@ import { $ } from './dom.js';
  * as the Performance panel's *Drive by* says: the rig, or the muscles as morph targets and
  * a jaw joint), and import such a file as a new project, which is then opened. *Batch
  * manifest* downloads the project and all its takes with the conditioning settings as a
- * zip for `retarget batch` (GET /api/projects/{id}/manifest.zip).
+ * zip for `retarget batch` (GET /api/projects/{id}/manifest.zip). *Units*: metres (the
+ * default, the mesh scaled from its unit, which `MeshUnits` shows and changes beside the
+ * mesh info) or the mesh's own numbers (`units=keep`).
  *
  * The panel holds no maths: the server retargets and writes the file. Refusals show the
  * server's reason in the panel's note and the page's error banner.
@@ -25,6 +28,7 @@ export class ExportPanel {
 		this.takes = [];
 		this._chosen = new Set(); // take ids ticked, kept across refreshes of the list
 		this._events = new AbortController();
+		this.meshUnits = new MeshUnits( app );
 		this._bind();
 
 	}
@@ -34,6 +38,7 @@ export class ExportPanel {
 
 		this.takes = [];
 		this._chosen.clear();
+		this.meshUnits.setProject( project );
 		this._note( '' );
 		this._render();
 		if ( project ) await this.refresh();
@@ -80,7 +85,7 @@ export class ExportPanel {
 		this._note( count ? `Retargeting ${ count } take${ count > 1 ? 's' : '' } and writing the glTF…` : 'Writing the glTF…' );
 		try {
 
-			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions(), drive: this.app.sources.drive } );
+			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions(), drive: this.app.sources.drive, units: $( 'export-units' ).value } );
 			this._save( blob, filename );
 			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB${ count ? `, ${ count } animation${ count > 1 ? 's' : '' }` : '' }).` );
 			return { filename, size: blob.size };
@@ -163,6 +168,7 @@ export class ExportPanel {
 	dispose() {
 
 		this._events.abort();
+		this.meshUnits.dispose();
 
 	}
 
