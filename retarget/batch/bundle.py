@@ -1,7 +1,8 @@
 """A batch as one zip: characters as exported projects (.glb), takes as take files
 (``.npz``) with their conditioning settings, and the ``manifest.json`` that lists them,
-what the web app's projects export as (``GET /api/manifest.zip``); unzipped, ``retarget
-batch manifest.json --out DIR`` runs it.
+what the web app's projects export as (``GET /api/manifest.zip``); ``retarget batch
+BATCH.zip --out DIR`` runs it (`unpacked_bundle`: into ``DIR/.inputs/``), as does
+``retarget batch manifest.json`` once unzipped.
 
 The zip is deterministic: entries in a fixed order with a fixed date, so the same
 projects give the same bytes (and a batch's content hashes do not change).
@@ -9,16 +10,22 @@ projects give the same bytes (and a batch's content hashes do not change).
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import re
 import zipfile
+from pathlib import Path, PurePosixPath
 
 from retarget.batch.manifest import OUTPUTS, manifest_from_dict
 from retarget.errors import RetargetError
 from retarget.sources.take import Take
+from retarget.zips import check_members, opened_zip, unpacked
 
-__all__ = ["ZIP_DATE", "manifest_bundle", "safe_name"]
+__all__ = ["MAX_BUNDLE_BYTES", "ZIP_DATE", "manifest_bundle", "safe_name", "unpacked_bundle"]
+
+MAX_BUNDLE_BYTES = 16 * 2**30  # unpacked, all members: many takes of many characters
+MAX_BUNDLE_MEMBER = 4 * 2**30
 
 ZIP_DATE = (2000, 1, 1, 0, 0, 0)  # a fixed entry date: no time in the bytes
 
@@ -83,3 +90,35 @@ def _dated(npz: bytes) -> bytes:
     """`numpy.savez`'s archive with its entries dated `ZIP_DATE` (numpy dates them now)."""
     with zipfile.ZipFile(io.BytesIO(npz)) as zf:
         return _zip([(info.filename, zf.read(info)) for info in zf.infolist()])
+
+
+def unpacked_bundle(path, out) -> Path:
+    """The ``manifest.json`` of the batch zip `path`, unpacked (bounds checked first,
+    `retarget.zips`) into ``out/.inputs/<its sha256, 16 hex>/``, where Dask workers see it as
+    the outputs (a shared folder); a zip already unpacked there is not unpacked again."""
+    path = Path(path)
+    label = repr(str(path))
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise RetargetError(f"could not read the batch zip {label}: {exc}") from None
+    folder = Path(out) / ".inputs" / hashlib.sha256(data).hexdigest()[:16]
+    manifest = folder / "manifest.json"
+    if (folder / ".complete").is_file():
+        return manifest
+    archive = opened_zip(data, label)
+    infos = [info for info in archive.infolist() if not info.is_dir()]
+    check_members(infos, label, MAX_BUNDLE_BYTES, MAX_BUNDLE_MEMBER)
+    if "manifest.json" not in {info.filename for info in infos}:
+        raise RetargetError(f"{label} holds no manifest.json at its top: not a batch zip")
+    for info in infos:  # every name checked before anything is written
+        name = PurePosixPath(info.filename)
+        if name.is_absolute() or ".." in name.parts or "\\" in info.filename:
+            raise RetargetError(f"{label}: member {info.filename!r} points outside the archive's folder")
+    budget = [MAX_BUNDLE_BYTES]
+    for info in infos:
+        target = folder.joinpath(*PurePosixPath(info.filename).parts)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(unpacked(archive, info, label, budget))
+    (folder / ".complete").write_text("")  # a zip unpacked halfway is unpacked again
+    return manifest

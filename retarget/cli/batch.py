@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from retarget.batch import plan_batch, read_manifest, run_batch
+from retarget.batch.bundle import unpacked_bundle
 
 __all__ = ["add_batch"]
 
@@ -27,7 +28,8 @@ def add_batch(commands, parents) -> None:
         "pair's outputs into OUT/<character>/<take>/, on a Dask LocalCluster sized to the machine "
         "(default), the scheduler given, or in this process. A rerun skips the pairs done "
         "(OUT/.retarget-batch.json) and redoes the failed or changed ones.")
-    p.add_argument("manifest", metavar="MANIFEST", help="the manifest (.yaml, .yml or .json)")
+    p.add_argument("manifest", metavar="MANIFEST", help="the manifest (.yaml, .yml or .json), or a batch "
+                   ".zip the web app exported (unpacked into DIR/.inputs/)")
     p.add_argument("--out", required=True, metavar="DIR", help="the output root (created if missing)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
@@ -44,7 +46,10 @@ def add_batch(commands, parents) -> None:
 
 
 def _batch(args) -> int:
-    manifest = read_manifest(args.manifest)
+    path = args.manifest
+    if str(path).lower().endswith(".zip"):  # the web app's export: unpacked beside the outputs
+        path = unpacked_bundle(path, args.out)
+    manifest = read_manifest(path)
     plan = plan_batch(manifest, args.out, force=args.force, retry_failed=args.retry_failed)
     if not args.quiet:
         print(f"{len(manifest.pairs)} pairs ({len(manifest.characters)} characters x "

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from retarget.batch import plan_batch, read_manifest, run_batch
+from retarget.cli import main
 from retarget.gltf import read_gltf
 from retarget.sample_face import demo_weights, sample_face
 
@@ -44,6 +45,11 @@ def test_project_manifest_runs_as_a_batch(client, project, tmp_path):
     exported = read_gltf(client.get(f"/api/projects/{pid}/export.glb", params={"takes": take["id"]}).content)
     np.testing.assert_allclose(made.clips[0].displacements, exported.clips[0].displacements, atol=1e-4)
     assert next((tmp_path / "out").rglob("vertices.npy")).is_file()
+    # the zip as it is: `retarget batch BATCH.zip` unpacks it beside the outputs and runs it
+    (tmp_path / "batch.zip").write_bytes(r.content)
+    assert main(["batch", str(tmp_path / "batch.zip"), "--out", str(tmp_path / "out2"), "--no-dask", "-q"]) == 0
+    assert (next((tmp_path / "out2").rglob("animation.glb")).read_bytes()
+            == next((tmp_path / "out").rglob("animation.glb")).read_bytes())
 
 
 def test_manifest_refusals(client, project):

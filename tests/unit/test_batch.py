@@ -183,3 +183,19 @@ def test_missing_mesh_fails_only_its_pairs(manifest_path, tmp_path):
     report = run_batch(plan_batch(read_manifest(changed), tmp_path), workers=0)
     assert report.succeeded == ["wide/take0"]
     assert "character 'ghost'" in report.failed["ghost/take0"] and "does not exist" in report.failed["ghost/take0"]
+
+
+def test_batch_zip_members_stay_inside(tmp_path):
+    import io
+    import zipfile
+
+    from retarget.batch.bundle import unpacked_bundle
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as zf:
+        zf.writestr("manifest.json", "{}")
+        zf.writestr("../evil.txt", "x")
+    (tmp_path / "b.zip").write_bytes(buffer.getvalue())
+    with pytest.raises(RetargetError, match="points outside"):
+        unpacked_bundle(tmp_path / "b.zip", tmp_path / "out")
+    assert not (tmp_path / "out" / ".inputs" / "evil.txt").exists() and not (tmp_path / "evil.txt").exists()
