@@ -15,7 +15,9 @@ with takes of muscle contractions (`retarget.clips.ContractionClip`);
 `export_arkit_gltf` and `write_arkit_gltf` (`arkit`) a face with ARKit's 52 blendshapes
 as named morph targets animated by their weights (`retarget.arkit.ArkitClip`). `glb` is
 the binary container, `influences` the weights as JOINTS_n / WEIGHTS_n, `morph` the
-weights as morph targets, `sparse` morph targets that keep only the vertices they move.
+weights as morph targets, `sparse` morph targets that keep only the vertices they move,
+`units` the export's scale to metres (recorded, undone by `read_gltf`), `head` the ``head``
+node that turns the face by a take's head rotations.
 """
 
 import importlib
