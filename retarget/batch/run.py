@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from tqdm import tqdm
 
 from retarget.batch.plan import Plan, write_index
-from retarget.batch.work import PairResult, character_state, pair_outputs
+from retarget.batch.work import PairResult, character_state, pair_outputs, remove_leftovers
 
 __all__ = ["INDEX_INTERVAL", "BatchReport", "run_batch"]
 
@@ -108,6 +108,8 @@ def run_batch(plan: Plan, *, client=None, scheduler: str | None = None, workers:
                 _run_dask(plan, own, take)
     finally:
         bar.close()
+        for job in plan.jobs:  # a worker killed mid-write leaves its temporary file
+            remove_leftovers(job.folder)
         write_index(plan)
     report.seconds = time.perf_counter() - start
     return report

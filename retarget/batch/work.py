@@ -34,7 +34,7 @@ from retarget.sources.arkit_curves import ArkitCurves, live_link_csv
 from retarget.sources.files import read_take
 
 __all__ = ["CharacterFailure", "CharacterState", "PairJob", "PairResult", "character_state",
-           "pair_outputs", "write_atomic"]
+           "pair_outputs", "remove_leftovers", "write_atomic"]
 
 
 @dataclass(frozen=True)
@@ -209,3 +209,13 @@ def write_atomic(path: Path, data: bytes) -> None:
     finally:
         if temporary.exists():
             temporary.unlink()
+
+
+def remove_leftovers(folder) -> None:
+    """Delete the temporary files `write_atomic` left in `folder` when its process was killed
+    mid-write (called where no task writes there: before and after a batch)."""
+    for path in Path(folder).glob(".*.tmp"):
+        try:
+            path.unlink()
+        except OSError:
+            pass  # gone already, or not ours to delete: harmless either way

@@ -25,9 +25,10 @@ def add_batch(commands, parents) -> None:
     p = commands.add_parser(
         "batch", parents=parents, help="retarget every take of a manifest onto every character",
         description="Read a manifest (YAML or JSON: characters, takes, outputs) and make each "
-        "pair's outputs into OUT/<character>/<take>/, on a Dask LocalCluster sized to the machine "
+        "pair's outputs into DIR/<character>/<take>/, on a Dask LocalCluster sized to the machine "
         "(default), the scheduler given, or in this process. A rerun skips the pairs done "
-        "(OUT/.retarget-batch.json) and redoes the failed or changed ones.")
+        "(DIR/.retarget-batch.json) and redoes the changed ones and those that failed for a "
+        "passing reason. Exit status 1 when a pair failed, 2 for a bad manifest.")
     p.add_argument("manifest", metavar="MANIFEST", help="the manifest (.yaml, .yml or .json), or a batch "
                    ".zip the web app exported (unpacked into DIR/.inputs/)")
     p.add_argument("--out", required=True, metavar="DIR", help="the output root (created if missing)")
