@@ -9,7 +9,8 @@ there, or as a lasting failure (reported again as failed, unless `retry_failed`)
 other failed pair, a pair whose hash changed (an input's bytes, a setting, the outputs
 asked for, the project's version) or whose files are gone runs again. The hash reads every input file
 once per plan (sha256; a missing file hashes as missing, and its pairs run to fail with the
-reason). The index is rewritten atomically, so a batch killed at any point leaves it valid.
+reason), a mesh's side files too (`side_files`: an OBJ's MTL and texture, a .gltf's
+buffers and images), so a new texture redoes the glTF outputs. The index is rewritten atomically, so a batch killed at any point leaves it valid.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from retarget import __version__
 from retarget.batch.manifest import OUTPUTS, Manifest
 from retarget.batch.work import PairJob, PairResult, write_atomic
 from retarget.errors import RetargetError
+from retarget.material import material_from_mtl
 
-__all__ = ["INDEX_NAME", "Plan", "plan_batch", "read_index", "write_index"]
+__all__ = ["INDEX_NAME", "Plan", "plan_batch", "read_index", "side_files", "write_index"]
 
 INDEX_NAME = ".retarget-batch.json"
 INDEX_FORMAT = 1
@@ -84,7 +86,8 @@ def plan_batch(manifest: Manifest, out, *, force: bool = False, retry_failed: bo
     for c in manifest.characters:
         settings = {"layout": c.layout, "rig": c.rig.to_dict(), "project": c.project is not None,
                     "rig_file": c.rig_file is not None}
-        characters[c.name] = _digest({"settings": settings, "files": [file_digest(p) for p in c.files()]})
+        files = list(c.files()) + (side_files(c.mesh) if c.mesh is not None else [])
+        characters[c.name] = _digest({"settings": settings, "files": [file_digest(p) for p in files]})
     jobs, skipped, failed_before, arkit = [], [], {}, set()
     for character, take_name in manifest.pairs:
         take = manifest.take(take_name)
@@ -108,6 +111,38 @@ def plan_batch(manifest: Manifest, out, *, force: bool = False, retry_failed: bo
         if "arkit_csv" in manifest.outputs:
             arkit.add(character)
     return Plan(manifest, out, jobs, skipped, failed_before, arkit, index)
+
+
+def side_files(mesh: Path) -> list[Path]:
+    """The files `retarget.mesh.load_mesh` reads beside the mesh file `mesh`, found by base
+    name in its folder as the loader finds them: an OBJ's MTL libraries and the texture
+    they name (`retarget.material.material_from_mtl`), a .gltf's external buffers and
+    images. Unreadable or missing ones are listed all the same (they hash as missing)."""
+    folder, found = mesh.parent, []
+
+    def read(name: str):
+        path = folder / name
+        found.append(path)
+        try:
+            return path.read_bytes()
+        except OSError:
+            return None
+
+    try:
+        kind = mesh.suffix.lower()
+        if kind == ".obj":
+            text = mesh.read_bytes().decode("utf-8", errors="replace")
+            if "mtllib" in text:
+                material_from_mtl(text, read)
+        elif kind == ".gltf":
+            doc = json.loads(mesh.read_text(encoding="utf-8"))
+            for item in [*(doc.get("buffers") or []), *(doc.get("images") or [])]:
+                uri = item.get("uri") if isinstance(item, dict) else None
+                if isinstance(uri, str) and not uri.startswith("data:"):
+                    found.append(folder / uri.replace("\\", "/").rsplit("/", 1)[-1])
+    except (OSError, ValueError, AttributeError, RetargetError):
+        pass  # the mesh itself is unreadable: its own hash says so, and its pairs fail with the reason
+    return list(dict.fromkeys(found))
 
 
 def read_index(out: Path) -> dict:

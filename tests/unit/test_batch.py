@@ -199,3 +199,13 @@ def test_batch_zip_members_stay_inside(tmp_path):
     with pytest.raises(RetargetError, match="points outside"):
         unpacked_bundle(tmp_path / "b.zip", tmp_path / "out")
     assert not (tmp_path / "out" / ".inputs" / "evil.txt").exists() and not (tmp_path / "evil.txt").exists()
+
+
+def test_side_files_of_an_obj_and_a_gltf(tmp_path):
+    from retarget.batch.plan import side_files
+
+    (tmp_path / "face.obj").write_text("mtllib face.mtl\nusemtl skin\nv 0 0 0\n")
+    (tmp_path / "face.mtl").write_text("newmtl skin\nKd 1 1 1\nmap_Kd -s 1 1 1 textures/skin.png\n")
+    assert side_files(tmp_path / "face.obj") == [tmp_path / "face.mtl", tmp_path / "skin.png"]
+    (tmp_path / "face.gltf").write_text('{"buffers": [{"uri": "face.bin"}], "images": [{"uri": "data:x"}]}')
+    assert side_files(tmp_path / "face.gltf") == [tmp_path / "face.bin"]
