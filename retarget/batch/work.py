@@ -11,11 +11,11 @@ worker dies, is retried by the scheduler).
 
 from __future__ import annotations
 
-import io
 import os
 import time
 import uuid
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -169,7 +169,7 @@ def pair_outputs(state: CharacterState | CharacterFailure, job: PairJob) -> Pair
         folder.mkdir(parents=True, exist_ok=True)
         for kind in job.outputs:
             path = folder / OUTPUTS[kind]
-            write_atomic(path, _output(kind, state, clip, take.fps))
+            write_atomic(path, partial(_write_output, kind, state, clip, take.fps))
             files.append(path.name)
         return PairResult(job.key, job.digest, True, files=tuple(files), seconds=time.perf_counter() - start)
     except (RetargetError, OSError) as exc:
@@ -177,34 +177,45 @@ def pair_outputs(state: CharacterState | CharacterFailure, job: PairJob) -> Pair
                           seconds=time.perf_counter() - start, lasting=isinstance(exc, RetargetError))
 
 
-def _output(kind: str, state: CharacterState, clip, fps: float) -> bytes:
-    """The bytes of one output of the retargeted `clip` ((F, N, 3) feature displacements)."""
+def _write_output(kind: str, state: CharacterState, clip, fps: float, f) -> None:
+    """Write one output of the retargeted `clip` ((F, N, 3) feature displacements, mesh
+    units) to the binary file `f`."""
     if kind == "gltf":
         from retarget.gltf import export_gltf
 
-        return export_gltf(state.mesh, state.points, state.weights, [clip])
-    if kind == "npy":
+        f.write(export_gltf(state.mesh, state.points, state.weights, [clip]))
+    elif kind == "npy":
+        # streamed in chunks of frames: a long take on a dense face is (F, V, 3) float32 of
+        # gigabytes, never held at once; the bytes are np.save's
         rest = state.mesh.vertices.astype(np.float64)
         matrix = state.weights.matrix()
-        vertices = np.empty((clip.n_frames, len(rest), 3), np.float32)
-        for i in range(0, clip.n_frames, 64):  # chunks: (64, V, 3) float64 at most at once
-            vertices[i:i + 64] = rest + skin_displacements(matrix, clip.displacements[i:i + 64])
-        buffer = io.BytesIO()
-        np.save(buffer, vertices)
-        return buffer.getvalue()
-    if kind == "arkit_csv":
+        np.lib.format.write_array_header_1_0(f, {"descr": np.lib.format.dtype_to_descr(np.dtype("<f4")),
+                                                 "fortran_order": False,
+                                                 "shape": (clip.n_frames, len(rest), 3)})
+        for i in range(0, clip.n_frames, NPY_CHUNK):
+            frames = rest + skin_displacements(matrix, clip.displacements[i:i + NPY_CHUNK])
+            f.write(np.ascontiguousarray(frames, dtype="<f4").tobytes())
+    elif kind == "arkit_csv":
         weights = ArkitSolver(state.shapes.at_points).solve_frames(clip.displacements)
-        return live_link_csv(ArkitCurves(weights, float(fps), None, None, {})).encode()
-    raise RetargetError(f"unknown output {kind!r}")
+        f.write(live_link_csv(ArkitCurves(weights, float(fps), None, None, {})).encode())
+    else:
+        raise RetargetError(f"unknown output {kind!r}")
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write `data` to `path` so that a reader (or a rerun after a crash) sees the old file
-    or the whole new one, never a part: a temporary file beside it, then `os.replace`."""
+NPY_CHUNK = 64  # frames skinned at once: (64, V, 3) float64 at most in memory
+
+
+def write_atomic(path: Path, data) -> None:
+    """Write `data` (bytes, or a callable writing to a binary file) to `path` so that a
+    reader (or a rerun after a crash) sees the old file or the whole new one, never a part:
+    a temporary file beside it, then `os.replace`."""
     temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
         with open(temporary, "wb") as f:
-            f.write(data)
+            if callable(data):
+                data(f)
+            else:
+                f.write(data)
         os.replace(temporary, path)
     finally:
         if temporary.exists():
