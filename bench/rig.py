@@ -10,7 +10,7 @@ CPU seconds, the ratio of the medians, and the largest weight difference.
 
 Download: the bytes of `GET .../rig/weights` for that rig in RTSW version 1 (float32) and
 version 2 (quantised, what the page reads), raw and gzip-encoded as the server sends it
-(level 6), with the time to encode, against float16 weights (no indices) for comparison;
+(level 1), with the time to encode, against float16 weights (no indices) for comparison;
 and what the quantisation costs: the largest weight error, and on random poses that move
 each feature by 3 % of the face's size (as tests/e2e/test_shader.py does) the largest
 vertex error relative to the face's size and the largest turn of a vertex normal. With
@@ -78,6 +78,15 @@ def float16_rig(rig: SkinWeights) -> SkinWeights:
     return SkinWeights(rig.indices, rig.weights.astype(np.float16).astype(np.float32), rig.n_joints)
 
 
+def int16_rig(rig: SkinWeights) -> tuple[SkinWeights, bytes]:
+    """The rig rounded to 16 bits over a power-of-two step (the first draft of version 2),
+    and those 16 bits as two slot-major byte planes."""
+    step = 2.0 ** np.ceil(np.log2(np.abs(rig.weights).max() / 32767))
+    q = np.round(rig.weights / step).astype(np.int16)
+    planes = np.ascontiguousarray(q.T).view(np.uint8).reshape(-1, 2).T.tobytes()
+    return SkinWeights(rig.indices, (q * step).astype(np.float32), rig.n_joints), planes
+
+
 def pose_cost(face, rig: SkinWeights, other: SkinWeights, seeds=(1, 2, 3)) -> tuple[float, float, float]:
     """(largest vertex error / face size, largest and 99.9th-percentile normal turn in
     degrees) of skinning with `other` instead of `rig` over random poses."""
@@ -110,7 +119,7 @@ def ict_rows() -> None:
     points = from_vertex_indices(feats, len(tgt0), layout.name)
     report, _ = vertex_regions(tgt0, model.faces, feats, layout, model.face_count)
     rig = compute_weights("biharmonic", tgt0, model.faces, points, layout)
-    rigs = {"float32 (version 1)": rig, "int16 (version 2)": weights_from_binary(weights_binary(rig, 2)),
+    rigs = {"float32 (version 1)": rig, "20-bit (version 2)": weights_from_binary(weights_binary(rig, 2)),
             "float16": float16_rig(rig)}
     d = offsets[:, feats]
     truth = tgt0 + offsets
@@ -163,18 +172,21 @@ def main(argv=None) -> int:
     v2 = weights_binary(rig, 2)
     v2_s = time.perf_counter() - t
     t = time.perf_counter()
-    v2_gz = gzip.compress(v2, compresslevel=6, mtime=0)
+    v2_gz = gzip.compress(v2, compresslevel=1, mtime=0)
     gz_s = time.perf_counter() - t
     f16 = rig.weights.astype("<f2").tobytes()
+    rig16, planes16 = int16_rig(rig)
     print(f"  RTSW version 1, float32:           {len(v1) / MiB:6.2f} MiB (encode {v1_s:.2f} s)")
     print(f"  float16 weights, no indices:       {len(f16) / MiB:6.2f} MiB, gzip "
           f"{len(gzip.compress(f16, 6, mtime=0)) / MiB:.2f} MiB (not used)")
-    print(f"  RTSW version 2, int16 planes:      {len(v2) / MiB:6.2f} MiB (encode {v2_s:.2f} s)")
+    print(f"  16-bit planes, no indices:         {len(planes16) / MiB:6.2f} MiB, gzip "
+          f"{len(gzip.compress(planes16, 1, mtime=0)) / MiB:.2f} MiB (not used)")
+    print(f"  RTSW version 2, 20-bit planes:     {len(v2) / MiB:6.2f} MiB (encode {v2_s:.2f} s)")
     print(f"  RTSW version 2, gzip (as sent):    {len(v2_gz) / MiB:6.2f} MiB (gzip {gz_s:.2f} s); "
           f"{len(v1) / len(v2_gz):.0f} times smaller than version 1")
     quantised = weights_from_binary(v2)
     step = float(np.frombuffer(v2, "<f4", 1, 24)[0])
-    for name, other in (("version 2", quantised), ("float16", float16_rig(rig))):
+    for name, other in (("version 2", quantised), ("16-bit", rig16), ("float16", float16_rig(rig))):
         position, angle, p999 = pose_cost(face, rig, other)
         print(f"  cost of {name:<9}: weights off by up to {np.abs(other.weights - rig.weights).max():.1e}"
               + (f" (step {step:.1e})" if name == "version 2" else "")

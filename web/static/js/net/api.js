@@ -248,8 +248,8 @@ export const api = {
 	},
 
 	/**
-	 * The rig's skin weights (the "RTSW" format of server/wire.py, version 2: quantised to
-	 * within 2^-15 of the largest weight, gzip-encoded on the way).
+	 * The rig's skin weights (the "RTSW" format of server/wire.py, version 2: 20 bits a weight,
+	 * within 2^-20 of the largest weight, gzip-encoded on the way).
 	 * @returns {Promise<{nJoints: number, nInfluences: number, indices: Uint16Array, weights: Float32Array}>}
 	 *   indices and weights are (V, k) row-major.
 	 */

@@ -273,8 +273,8 @@ export class MeshArraysDecoder {
  * V x K uint16 joint indices, 0 or 2 bytes of padding and V x K float32 weights; version 2
  * (GET .../rig/weights?version=2), a 28-byte header (the same, then uint32 flags and a
  * float32 step) followed by the indices unless flag bit 0 (dense: joints 0..K-1 in order),
- * padding, and the int16 weights over step as a plane of low bytes then one of high bytes,
- * slot-major.
+ * padding, and the weights over step as 20-bit signed integers in three byte planes (bits
+ * 0-3, 4-11, 12-19), slot-major.
  */
 export class RigWeightsDecoder {
 
@@ -319,7 +319,7 @@ export class RigWeightsDecoder {
 		const step = view.getFloat32( 24, true );
 		const vk = v * k;
 		const start = header + ( dense ? 0 : paddedUint16Bytes( vk ) );
-		const size = start + 2 * vk;
+		const size = start + 3 * vk;
 		if ( buffer.byteLength !== size || ( dense && k !== n ) ) {
 
 			throw new Error( `RigWeightsDecoder: ${ v } rows of ${ k } influences of ${ n } joints need ${ size } bytes, got ${ buffer.byteLength }.` );
@@ -338,12 +338,17 @@ export class RigWeightsDecoder {
 
 		}
 
-		// q = low | high << 8 as int16; step is a power of two, so q * step is exact in float32
-		const low = new Uint8Array( buffer, start, vk ), high = new Uint8Array( buffer, start + vk, vk );
+		// q = bits 12-19 (signed) | 4-11 | 0-3; |q| < 2^19 and step is a power of two, so q * step
+		// is exact in float32
+		const planes = new Uint8Array( buffer, start, 3 * vk );
 		const weights = new Float32Array( vk );
 		for ( let s = 0, t = 0; s < k; s ++ ) {
 
-			for ( let i = s; i < vk; i += k, t ++ ) weights[ i ] = ( ( low[ t ] | high[ t ] << 8 ) << 16 >> 16 ) * step;
+			for ( let i = s; i < vk; i += k, t ++ ) {
+
+				weights[ i ] = ( ( planes[ 2 * vk + t ] << 24 >> 12 ) | planes[ vk + t ] << 4 | planes[ t ] ) * step;
+
+			}
 
 		}
 
