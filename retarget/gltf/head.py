@@ -4,36 +4,32 @@ With "turn the head" on (`retarget.sources.conditioning.ConditionSettings.apply_
 the app turns the whole target by the performer's head rotation q_f about the centre of the
 rest mesh's bounding sphere, which three.js computes as the centre of its bounding box
 (`SkinnedFace.setHeadRotation`): a vertex v is drawn at ``c + R_f (v - c)``. A clip that
-carries ``head_rotations`` (`retarget.clips.Clip`) is exported the same way: one more node,
-``head``, a parent of what moves with the head, animated per frame by
-
-    rotation q_f,  translation c - R_f c + t_f
-
-(``t_f`` a clip's ``head_translations``, zero when it has none), so that its children are
-drawn at ``R_f x + c - R_f c + t_f``. LINEAR keys: glTF slerps the rotation; the
-translation is interpolated linearly, which between two keys of a turning head leaves the
-pivot off by at most |c| (1 - cos(dθ/2)) for a per-frame turn dθ (2e-4 of |c| at 2°/frame);
-at the keys it is exact. The quaternions are put on one hemisphere (each the sign nearer
-the last), as Blender's importer interpolates their components.
+carries ``head_rotations`` (`retarget.clips.Clip`) is exported the same way, with two more
+nodes: ``head``, at the pivot c and animated per frame by the rotation q_f (and by the
+translation ``c + t_f`` when the clip has ``head_translations`` t_f), and its one child
+``head_pivot``, a static translation by -c, the parent of what moves with the head; its
+children are then drawn at ``c + t_f + R_f (x - c)``. LINEAR keys: glTF slerps the rotation
+about the pivot, so between the keys the face turns as a rigid head does, and at the keys
+it is exactly the app's pose. The quaternions are put on one hemisphere (each the sign
+nearer the last), as Blender's importer interpolates their components.
 
 Which nodes go under ``head``: a skinned mesh ignores its own node's transform (glTF
 §3.7.3.1; the Khronos validator warns about a skinned mesh node that is not a root), so for
 a skin only the skeleton's root joint does, and the mesh node stays at the scene's root;
 a mesh without a skin (morph targets, ARKit) goes under it itself. The scene's
-``extras.retarget.head`` records the node and the pivot (file units) for
+``extras.retarget.head`` records the two nodes and the pivot (file units) for
 `retarget.gltf.read_gltf`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from retarget.gltf.glb import GlbBuilder
 
-__all__ = ["HEAD_NAME", "add_head_motion", "head_pivot"]
+__all__ = ["HEAD_NAME", "PIVOT_NAME", "add_head_motion", "head_pivot"]
 
-HEAD_NAME = "head"
+HEAD_NAME, PIVOT_NAME = "head", "head_pivot"
 
 
 def head_pivot(vertices) -> np.ndarray:
@@ -44,34 +40,35 @@ def head_pivot(vertices) -> np.ndarray:
 
 
 def add_head_motion(out: GlbBuilder, clips, pivot, moved: list[int]) -> dict | None:
-    """Add the ``head`` node over nodes `moved` (taken out of the scene's roots) and key it
-    in each animation of a clip with ``head_rotations`` (animation k is clip k); nothing
-    when no clip has them. `pivot` (3,) file units. Returns the ``extras.retarget.head``
-    record, or None."""
+    """Add the ``head`` and ``head_pivot`` nodes over nodes `moved` (taken out of the
+    scene's roots) and key the head in each animation of a clip with ``head_rotations``
+    (animation k is clip k); nothing when no clip has them. `pivot` (3,) file units.
+    Returns the ``extras.retarget.head`` record, or None."""
     if not any(getattr(clip, "head_rotations", None) is not None for clip in clips):
         return None
     doc = out.document
-    node = len(doc["nodes"])
-    doc["nodes"].append({"name": _unique(HEAD_NAME, doc["nodes"]), "children": list(moved)})
-    scene = doc["scenes"][doc.get("scene", 0)]
-    scene["nodes"] = [n for n in scene["nodes"] if n not in moved] + [node]
     c = np.asarray(pivot, dtype=np.float64)
+    head, inner = len(doc["nodes"]), len(doc["nodes"]) + 1
+    doc["nodes"].append({"name": _unique(HEAD_NAME, doc["nodes"]), "translation": [float(x) for x in c],
+                         "children": [inner]})
+    doc["nodes"].append({"name": _unique(PIVOT_NAME, doc["nodes"]), "translation": [float(-x) for x in c],
+                         "children": list(moved)})
+    scene = doc["scenes"][doc.get("scene", 0)]
+    scene["nodes"] = [n for n in scene["nodes"] if n not in moved] + [head]
     for animation, clip in zip(doc.get("animations", []), clips):
         q = getattr(clip, "head_rotations", None)
         if q is None:
             continue
-        q = _one_hemisphere(q)
-        moved_pivot = Rotation.from_quat(q).apply(c)                           # (F, 3) R_f c
-        translation = c - moved_pivot
+        keyed = [("rotation", _one_hemisphere(q))]
         if clip.head_translations is not None:
-            translation = translation + clip.head_translations
+            keyed.append(("translation", c + clip.head_translations))
         times = animation["samplers"][0]["input"]  # the clip's key times, already written
-        for path, values in (("rotation", q), ("translation", translation)):
+        for path, values in keyed:
             animation["channels"].append({"sampler": len(animation["samplers"]),
-                                          "target": {"node": node, "path": path}})
+                                          "target": {"node": head, "path": path}})
             animation["samplers"].append({"input": times, "interpolation": "LINEAR",
                                           "output": out.accessor(np.ascontiguousarray(values, np.float32))})
-    return {"node": node, "pivot": [float(x) for x in c]}
+    return {"node": head, "pivot_node": inner, "pivot": [float(x) for x in c]}
 
 
 def _one_hemisphere(q: np.ndarray) -> np.ndarray:

@@ -156,13 +156,16 @@ def _retarget_extras(gltf: GltfDocument) -> dict:
     return found if isinstance(found, dict) else {}
 
 
-def _head_node(extras: dict, nodes) -> int | None:
-    """The ``head`` node the export recorded (`retarget.gltf.head`), or None."""
+def _head_node(extras: dict, nodes) -> tuple[int, int] | None:
+    """The ``head`` and ``head_pivot`` nodes the export recorded (`retarget.gltf.head`), or
+    None."""
     head = extras.get("head")
-    node = head.get("node") if isinstance(head, dict) else None
-    if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < len(nodes):
+    if not isinstance(head, dict):
         return None
-    return node
+    found = head.get("node"), head.get("pivot_node")
+    if any(isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(nodes) for i in found):
+        return None
+    return found
 
 
 def _mesh_node(nodes, label: str) -> int:
@@ -181,10 +184,10 @@ def _primitive(gltf: GltfDocument, node):
     return primitives[0]
 
 
-def _feature_nodes(gltf: GltfDocument, mesh_node: int, head: int | None) -> tuple[int, list[int]]:
+def _feature_nodes(gltf: GltfDocument, mesh_node: int, head) -> tuple[int, list[int]]:
     """(root node, feature nodes in joint order): the skin's joints after its root, or
     the children of the scene's other root node for a morph-target mesh (the ``head``
-    node, when there is one, stands for its children)."""
+    node, when there is one, stands for the children of its ``head_pivot``)."""
     nodes, label = gltf.doc.nodes, gltf.label
     skin = nodes[mesh_node].skin
     if skin is not None:
@@ -199,8 +202,8 @@ def _feature_nodes(gltf: GltfDocument, mesh_node: int, head: int | None) -> tupl
     else:
         scenes = gltf.doc.scenes or []
         roots = list(scenes[gltf.doc.scene or 0].nodes or []) if scenes else []
-        if head is not None and head in roots:
-            roots = [i for i in roots if i != head] + list(nodes[head].children or [])
+        if head is not None and head[0] in roots:
+            roots = [i for i in roots if i != head[0]] + list(nodes[head[1]].children or [])
         parents = [i for i in roots
                    if i != mesh_node and gltf.item(nodes, i, "scene node").children]
         if len(parents) != 1:
@@ -286,14 +289,14 @@ def _skin_weights(gltf: GltfDocument, primitive, n_features: int, method: str) -
     return weights_from_influences(joints.astype(np.int64), influence, n_features, method)
 
 
-def _clip(gltf: GltfDocument, k: int, joint_position: dict, head: int | None, scale: float) -> Clip:
+def _clip(gltf: GltfDocument, k: int, joint_position: dict, head, scale: float) -> Clip:
     """Animation k as a Clip: feature translations minus neutral, at the shared times,
     over `scale`; the head node's rotations."""
     animation = gltf.doc.animations[k]
     name = str(animation.name or f"animation_{k}")
     times, moved, turns = None, {}, None
     for node, path, keys, values, interpolation in animation_channels(gltf, animation):
-        if node == head and path == "rotation":
+        if head is not None and node == head[0] and path == "rotation":
             turns = keys, values
         if path != "translation" or node not in joint_position:
             continue

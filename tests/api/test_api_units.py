@@ -86,7 +86,7 @@ def test_turn_the_head_exports_a_head_node(client, sample_id):
         gltf = GltfDocument(data, "turn", None)
         head = gltf.doc.scenes[0].extras["retarget"]["head"]
         paths = {(c.target.node, c.target.path) for c in gltf.doc.animations[0].channels}
-        assert {(head["node"], "rotation"), (head["node"], "translation")} <= paths, drive
+        assert (head["node"], "rotation") in paths, drive
     points = client.get(f"/api/projects/{sample_id}/export.glb", params={"takes": take_id, "settings": settings})
     assert read_gltf(points.content).clips[0].head_rotations.shape == (20, 4)
     plain = GltfDocument(client.get(f"/api/projects/{sample_id}/export.glb", params={"takes": take_id}).content,

@@ -93,6 +93,7 @@ def test_the_export_turns_the_head_as_the_app_does(played, method, tmp_path):
     head = gltf.doc.scenes[0].extras["retarget"]["head"]
     assert gltf.doc.nodes[head["node"]].name == "head" and gltf.doc.scenes[0].nodes == (
         [0, head["node"]] if method == "ellipsoid" else [head["node"]])
+    assert gltf.doc.nodes[head["pivot_node"]].children == ([1] if method == "ellipsoid" else [0, 1])
     (instance,) = mesh_instances(gltf)
     channels = animation_channels(gltf, gltf.doc.animations[0])
     size = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
@@ -119,3 +120,22 @@ def test_head_motion_refusals():
         Clip("x", d, [0.0, 1.0], head_rotations=np.zeros((2, 4)))
     with pytest.raises(RetargetError, match="head_translations need head_rotations"):
         Clip("x", d, [0.0, 1.0], head_translations=np.zeros((2, 3)))
+
+
+def test_a_head_translation_moves_the_turned_face(played):
+    """A clip's head_translations (a source that tracks the head's position) add to the turn:
+    a viewer draws ``c + t_f + R_f (v - c)``, in metres in the file."""
+    import dataclasses
+
+    mesh, points, clip = played["mesh"], played["points"], played["clip"]
+    weights = compute_weights("ellipsoid", mesh.vertices, mesh.faces, points, IBUG)
+    shift = np.outer(np.linspace(0, 1, clip.n_frames), [2.0, -1.0, 0.5])               # cm
+    moved = dataclasses.replace(clip, head_translations=shift)
+    gltf = GltfDocument(export_gltf(mesh, points, weights, [moved]), "moved", None)
+    (instance,) = mesh_instances(gltf)
+    channels = animation_channels(gltf, gltf.doc.animations[0])
+    k = 25
+    t = np.array([clip.times[k]])
+    drawn = gltf_posed(gltf, instance, np.arange(mesh.n_vertices), node_transforms(gltf, gltf.doc.nodes, channels, t),
+                       animated_weights(gltf, channels, t), t)[0] / 0.01
+    np.testing.assert_allclose(drawn, app_vertices(mesh, weights, clip, k) + shift[k], atol=1e-5)
