@@ -68,7 +68,7 @@ def main() -> None:
         weights = compute_weights(method, mesh.vertices, mesh.faces, points, get_layout("ibug68"))
         with tempfile.TemporaryDirectory() as folder:
             path, out = Path(folder) / "face.glb", Path(folder) / "out.npz"
-            path.write_bytes(export_gltf(mesh, points, weights, [clip]))
+            path.write_bytes(export_gltf(mesh, points, weights, [clip], units="keep"))  # mesh units
             run = subprocess.run([str(BLENDER_PYTHON), str(EVALUATE), str(path), str(out),
                                   str(args.fps), *map(str, frames)], capture_output=True, text=True)
             if run.returncode:
