@@ -50,7 +50,7 @@ def biharmonic_weights(vertices, faces, points, layout=None, *, k: int | None = 
     q = lap.T @ sp.diags(1.0 / m) @ lap
     t0 = points.positions(v)
     ell = float(np.sqrt(((t0 - t0.mean(0)) ** 2).sum(1).mean()))
-    q = q + (membrane / ell**2) * (-lap) + (damping / ell**4) * mass
+    q = q + ((membrane / ell**2) * (-lap) + (damping / ell**4) * mass)  # one merge with the 2-ring q
     supports = lip_supports(v, faces, points, layout) if separate_lips and layout is not None else ()
     w = constrained_weights(q, points, constraint_weight, progress, supports, vertices=v)
     return SkinWeights.from_dense(w, k, "biharmonic")

@@ -51,7 +51,8 @@ def constrained_weights(energy: sp.spmatrix, points, constraint_weight: float,
     w2 = constraint_weight * scale
     # A tiny ridge keeps pieces of the mesh that carry no feature point (a separate
     # eyeball, say) solvable: they stay still instead of making the system singular.
-    a = (q + w2 * (c.T @ c) + sp.identity(q.shape[0]) * (1e-10 * scale)).tocsc()
+    # (one merge with the large energy: the constraints and the ridge are summed first)
+    a = (q + (w2 * (c.T @ c) + sp.identity(q.shape[0], format="csc") * (1e-10 * scale))).tocsc()
     n = points.n_points
     free = np.ones(n, dtype=bool)
     groups = []
