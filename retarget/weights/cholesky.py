@@ -3,27 +3,30 @@ right-hand sides at once.
 
 The rigs of `quadratic.constrained_weights` solve ``A X = B`` for one column of B per
 feature (68 for ibug68) on a (V, V) system whose graph is the mesh's (two rings for the
-bilaplacian). A general sparse LU (SuperLU) orders it by minimum degree and solves one
-column at a time, reading its whole factor once per column: on a 133k-vertex face that is
-most of the rig's time. Here instead:
+bilaplacian). SuperLU, a general sparse LU, factorises it column by column and solves one
+right-hand side at a time, reading its whole factor (L and U, 19.4M entries each on the
+133k-vertex built-in face) once per column: most of the rig's time. Here instead:
 
 - **Geometric nested dissection** (George 1973, "Nested dissection of a regular finite
   element mesh"; Miller, Teng, Thurston & Vavasis 1997 for the geometric separators): the
-  vertices are split at the median of their longest extent, the vertices of one half that
-  touch the other half (in the system's graph, so two rings thick for the bilaplacian)
-  form a separator ordered after both halves, recursively down to blocks of `leaf_size`.
-  On a surface mesh this gives O(V log V) fill instead of minimum degree's larger one.
+  vertices are split at their median along the longest extent (near the top of the tree,
+  along whichever of the three axes gives the smallest separator); the vertices of one
+  half that touch the other half (in the system's graph, so two rings thick for the
+  bilaplacian) form a separator ordered after both halves, recursively down to blocks of
+  `leaf_size`.
 - **Multifrontal Cholesky** (Duff & Reid 1983; Liu 1992, "The multifrontal method for
   sparse matrix solution: theory and practice", SIAM Review 34(1), §4-5): each block of
   the dissection is one dense front, factorised with LAPACK and passing its Schur
   complement (update matrix) to its parent, the block that owns the first row of its
-  boundary.
+  boundary. One triangle instead of LU's two (26M entries on that face), in dense BLAS 3
+  blocks.
 - **Blocked triangular solves**: every right-hand side goes through each front at once as
-  a dense (rows, columns) block (BLAS 3), so the factor is read twice in all, not twice
-  per column.
+  a dense (rows, columns) block, so the factor is read twice in all, not twice per column;
+  fronts where every column is still zero are skipped.
 
-Everything is float64: the near-hard constraints (w² = 1e4 times the energy's scale) make
-the system too ill-conditioned for float32 factors to meet the rigs' 1e-6.
+On that face the biharmonic rig takes a quarter of SuperLU's time (`bench/rig.py`).
+Everything is float64: the near-hard constraints (w² = 1e4 times the energy's scale) and
+the ridge of 1e-10 put the condition number far beyond float32's 1 / eps = 1.7e7.
 """
 
 from __future__ import annotations
