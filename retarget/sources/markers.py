@@ -687,12 +687,13 @@ class RingTracks:
             live = np.isfinite(pts[t - 1, :, 0]) if t > 0 else np.zeros(len(pos), bool)
             cand, val, contrast = peaks[t]
             if t > 0 and pos.size:
-                own, guess, rel = self._flow(grays[t - 1], grays[t], pos, live, rel)
-                # three guesses: the marker's own flow, its neighbours' (the head's), and
+                own, guess, rel, head = self._flow(grays[t - 1], grays[t], pos, live, rel)
+                # four guesses: the marker's own flow, its neighbours' (the skin's round it),
                 # theirs plus its own last relative motion (an expression going on, which
-                # may also stop or turn): the candidate near any will do
+                # may also stop or turn), and the whole face's (a lip that stays while the
+                # jaw drops): the candidate near any will do
                 d = np.min([np.linalg.norm(pos[:, None] + step[:, None] - cand[None], axis=2)
-                            for step in (own, guess, guess - rel)], axis=0)
+                            for step in (own, guess, guess - rel, np.broadcast_to(head, own.shape))], axis=0)
                 pos = pos + guess
             else:
                 d = np.linalg.norm(pos[:, None] - cand[None], axis=2)
@@ -763,12 +764,13 @@ class RingTracks:
         return self
 
     def _flow(self, prev, cur, pos, live, rel):
-        """(own (M, 2), guess (M, 2), rel (M, 2)): two predictions of each track's image
-        motion from prev to cur, and the guess's part beyond its neighbours'. `own` is
-        its pyramidal LK flow (often pulled off by the skin round a marker a few pixels
-        across; the guess where LK fails); `guess` is the median LK flow of the
-        `neighbours` nearest seen tracks (the head's motion there) plus the track's own
-        relative motion of the last frame (the expression's, which is smooth)."""
+        """(own (M, 2), guess (M, 2), rel (M, 2), head (2,)): predictions of each track's
+        image motion from prev to cur, the guess's part beyond its neighbours', and the
+        whole face's motion. `own` is its pyramidal LK flow (often pulled off by the skin
+        round a marker a few pixels across; the guess where LK fails or disagrees);
+        `guess` is the median LK flow of the `neighbours` nearest seen tracks plus the
+        track's own relative motion of the last frame (the expression's, which is
+        smooth); `head` is the median LK flow of all seen tracks."""
         import cv2
 
         p = pos.astype(np.float32).reshape(-1, 1, 2)
@@ -780,7 +782,7 @@ class RingTracks:
         trusted = ok & live
         if trusted.sum() == 0:
             own = np.where(ok[:, None], own, 0.0)
-            return own, own, rel
+            return own, own, rel, np.zeros(2)
         src = np.flatnonzero(trusted)
         d = np.linalg.norm(pos[:, None] - pos[src][None], axis=2)
         near = np.argsort(d, 1)[:, :min(self.neighbours, len(src))]
@@ -788,7 +790,7 @@ class RingTracks:
         guess = head + rel
         # LK pulled off by the skin disagrees with the neighbours: the guess stands alone
         agree = ok & (np.linalg.norm(own - guess, axis=1) < 0.5 * self.snap)
-        return np.where(agree[:, None], own, guess), guess, rel
+        return np.where(agree[:, None], own, guess), guess, rel, np.median(own[src], axis=0)
     def _backward(self, peaks, pts, sc, ct, m, t0) -> None:
         """Follow track m from frame t0 back toward frame 0 (in place): its neighbours'
         motion from frame t to t - 1 moves it, the nearest free peak within `snap` px takes
