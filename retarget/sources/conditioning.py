@@ -67,7 +67,9 @@ class ConditionSettings:
         2D sources keep it whatever this says.
     apply_rotation : whether the consumer should turn the target's head by the
         performer's head rotation (`SourceConditioner.rotation_`); the points are the
-        same either way.
+        same either way. The app's "turn the head"; a take played with it carries the
+        rotations into its clip, which the glTF export plays as a ``head`` node
+        (`retarget.gltf.head`).
     filter : "none", "mean3" (Woodward §5, 3-frame mean) or "one_euro".
     one_euro : {selector: {"min_cutoff": Hz > 0, "beta": >= 0}}, optionally "d_cutoff"
         (Hz > 0) at the top level. beta is in seconds per face size: speeds are measured
