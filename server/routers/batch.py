@@ -27,6 +27,7 @@ from retarget.landmarks import landmarks_from_json
 from retarget.sources.conditioning import ConditionSettings
 from server.deps import ProjectDep, StoreDep
 from server.errors import responses
+from server.routers.meshes import MESH_UNITS_KEY
 
 router = APIRouter(tags=["batch"])
 
@@ -81,7 +82,9 @@ def _bundle(store, projects: list[dict], outputs: str, settings: str, name: str)
                                 f"project {project['name']!r} has no {missing} yet: place the landmarks "
                                 "and compute the rig before exporting")
         points = landmarks_from_json(landmarks, mesh.vertices, mesh.faces)
-        characters.append((project["name"], export_gltf(mesh, points, weights, [])))
+        # the unit the user chose for the mesh, as export.glb uses it (the batch reads it back)
+        units = project["settings"].get(MESH_UNITS_KEY) or "guess"
+        characters.append((project["name"], export_gltf(mesh, points, weights, [], mesh_units=units)))
         conditioning = given if given is not None else _saved(project)
         for info in store.takes(project["id"]):
             takes.append((info["name"], store.take(project["id"], info["id"]), conditioning))
