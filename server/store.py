@@ -75,6 +75,7 @@ from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
 from retarget.sources.take import Take
 from retarget.weights.painting import WeightEdit, painted_rig
+from server.wire import quantised_weights
 
 __all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig",
            "TAKE_ID_PATTERN", "TakeNotFound"]
@@ -636,6 +637,8 @@ class ProjectStore:
                 )
             # a rig may be recomputed at the same revision (another method): new name each time
             name = f"rig-r{revision}-{secrets.token_hex(4)}.npz"
+            # on the grid of the page's download (RTSW version 2): its copy is the stored rig
+            weights = quantised_weights(weights)
             write_atomic(folder / name, writer=weights.save)
             db.execute(
                 "UPDATE projects SET rig_method = ?, rig_file = ?, painted_file = NULL, "

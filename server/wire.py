@@ -129,10 +129,13 @@ for the dense biharmonic rig of the 132,907-vertex built-in face (`bench/rig.py`
     12          4       uint32 K, influences per vertex
     16          4       uint32 N, joint (feature point) count
     20          4       uint32 flags: bit 0 = dense, every vertex lists joints 0..K-1 in
-                        that order (K = N): the joint indices are not sent
-    24          4       float32 step, a power of two: a weight is step x q
+                        that order (K = N): the joint indices are not sent, and the
+                        weights are quantised
+    24          4       float32 step, a power of two: a weight is step x q (0 when not dense)
     28          2 V K   uint16 joint indices, (V, K) row-major (absent when dense)
     ...         0 or 2  zero padding, so the weights start at a multiple of 4
+    (not dense: the rest is version 1's, 4 V K float32 weights, (V, K) row-major; a sparse
+    rig is small, and painting and the glTF skin need its rows to sum as computed)
     ...         V K     bits 0-3 of the 20-bit signed q (0..15), slot-major: q[0, 0],
                         q[1, 0], ..., q[V-1, 0], q[0, 1], ... (a slot's weights over the
                         mesh are a smooth field: its bytes deflate well)
@@ -448,20 +451,48 @@ def weights_binary(rig: SkinWeights, version: int = WEIGHTS_VERSION) -> bytes:
         weights = np.ascontiguousarray(rig.weights, dtype="<f4").tobytes()
         header = WEIGHTS_HEADER.pack(WEIGHTS_MAGIC, 1, v, k, rig.n_joints)
         return header + indices + padding + weights
-    dense = k == rig.n_joints and bool((rig.indices == np.arange(k)).all())
-    top = float(np.abs(rig.weights).max(initial=0.0))
-    step = 2.0 ** int(np.ceil(np.log2(top / WEIGHTS_QUANTA))) if top > 0 else 1.0
+    dense = _is_dense(rig)
+    if not dense:
+        indices = np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
+        header = WEIGHTS_HEADER_V2.pack(WEIGHTS_MAGIC, 2, v, k, rig.n_joints, 0, 0.0)
+        return (header + indices + b"\0" * (-len(indices) % 4)
+                + np.ascontiguousarray(rig.weights, dtype="<f4").tobytes())
+    step = _weights_step(rig)
     q = np.round(rig.weights.T / step).astype(np.int32)  # (K, V), slot-major, |q| < 2^19
     planes = np.empty((3, k, v), dtype=np.uint8)  # a cast to uint8 keeps the low 8 bits
     np.bitwise_and(q, 0xF, out=planes[0], casting="unsafe")
     np.right_shift(q, 4, out=planes[1], casting="unsafe")
     np.right_shift(q, 12, out=planes[2], casting="unsafe")
     planes = planes.tobytes()
-    indices = b"" if dense else np.ascontiguousarray(rig.indices, dtype="<u2").tobytes()
-    padding = b"\0" * (-len(indices) % 4)
-    header = WEIGHTS_HEADER_V2.pack(WEIGHTS_MAGIC, 2, v, k, rig.n_joints,
-                                    WEIGHTS_DENSE if dense else 0, step)
-    return header + indices + padding + planes
+    header = WEIGHTS_HEADER_V2.pack(WEIGHTS_MAGIC, 2, v, k, rig.n_joints, WEIGHTS_DENSE, step)
+    return header + planes
+
+
+def _is_dense(rig: SkinWeights) -> bool:
+    """Whether every vertex lists joints 0..N-1 in that order (version 2 quantises it)."""
+    k = rig.indices.shape[1]
+    return k == rig.n_joints and bool((rig.indices == np.arange(k)).all())
+
+
+def _weights_step(rig: SkinWeights) -> float:
+    """Version 2's step for a rig: the smallest power of two with every |weight| <=
+    WEIGHTS_QUANTA steps (1 for an all-zero rig)."""
+    top = float(np.abs(rig.weights).max(initial=0.0))
+    return 2.0 ** int(np.ceil(np.log2(top / WEIGHTS_QUANTA))) if top > 0 else 1.0
+
+
+def quantised_weights(rig: SkinWeights) -> SkinWeights:
+    """The rig as version 2 carries it (a dense rig's weights rounded to the step, a sparse
+    rig as it is): bit for bit what
+    `weights_from_binary(weights_binary(rig, 2))` reads, with the rig's method. The store
+    keeps automatic rigs so (`server.store.ProjectStore.put_rig`): the page's copy is then the
+    stored rig exactly, and rows it sends back unpainted (a stroke's neighbours, an undo)
+    equal the automatic ones."""
+    if not _is_dense(rig):
+        return rig
+    step = _weights_step(rig)
+    weights = np.round(rig.weights / np.float32(step)).astype(np.float32) * np.float32(step)
+    return SkinWeights(rig.indices, weights, rig.n_joints, rig.method)
 
 
 def weights_from_binary(data: bytes) -> SkinWeights:
@@ -482,7 +513,7 @@ def weights_from_binary(data: bytes) -> SkinWeights:
     dense = bool(flags & WEIGHTS_DENSE)
     index_bytes = 0 if dense else 2 * v * k
     offset = start + index_bytes + (-index_bytes % 4)
-    size = offset + (3 if version == 2 else 4) * v * k
+    size = offset + (3 if dense else 4) * v * k
     if len(data) != size or (dense and k != n):
         raise RetargetError(f"rig weights: {v} rows of {k} influences of {n} joints need "
                             f"{size} bytes; got {len(data)}")
@@ -490,7 +521,7 @@ def weights_from_binary(data: bytes) -> SkinWeights:
         indices = np.broadcast_to(np.arange(k, dtype=np.int32), (v, k)).copy()
     else:
         indices = np.frombuffer(data, "<u2", v * k, start).reshape(v, k).astype(np.int32)
-    if version == 1:
+    if not dense:
         weights = np.frombuffer(data, "<f4", v * k, offset).reshape(v, k).astype(np.float32)
     else:
         low, middle, high = np.frombuffer(data, np.uint8, 3 * v * k, offset).reshape(3, k, v)

@@ -261,9 +261,10 @@ def test_javascript_refuses_broken_rig_weights_with_its_class_name(tmp_path):
                          [(1, 1, 1, True), (3, 3, 21, False), (5, 68, 68, True), (5, 68, 68, False),
                           (257, 3, 65535, False)])
 def test_javascript_decodes_version_2_rig_weights_as_python_does(tmp_path, n_vertices, k, n_joints, dense):
-    """Version 2 (20-bit quantised): both sides dequantise to the same float32 bits, within
-    step / 2 of the rig; a dense rig sends no indices."""
-    from server.wire import weights_from_binary
+    """Version 2: a dense rig's weights quantised to 20 bits (both sides dequantise to the
+    same float32 bits, within step / 2 of the rig, as `quantised_weights` rounds them) and
+    no indices; any other rig as version 1 carries it."""
+    from server.wire import quantised_weights, weights_from_binary
 
     rig = skin(n_vertices, k, n_joints, seed=n_vertices * k + 1)
     if dense:
@@ -271,12 +272,16 @@ def test_javascript_decodes_version_2_rig_weights_as_python_does(tmp_path, n_ver
                           rig.weights * 1.5, n_joints, "test")
     data = weights_binary(rig, 2)
     index_bytes = 0 if dense else 2 * n_vertices * k + (2 * n_vertices * k) % 4
-    assert len(data) == 28 + index_bytes + 3 * n_vertices * k
+    assert len(data) == 28 + index_bytes + (3 if dense else 4) * n_vertices * k
     python = weights_from_binary(data)
     step = struct.unpack_from("<f", data, 24)[0]
-    top = np.abs(rig.weights).max()
-    assert step == (2.0 ** np.ceil(np.log2(top / (2**19 - 1))) if top else 1.0)
-    assert np.abs(python.weights - rig.weights).max() <= step / 2
+    if dense:
+        top = np.abs(rig.weights).max()
+        assert step == (2.0 ** np.ceil(np.log2(top / (2**19 - 1))) if top else 1.0)
+        assert np.abs(python.weights - rig.weights).max() <= step / 2
+    else:
+        assert step == 0 and np.array_equal(python.weights, rig.weights)
+    assert np.array_equal(quantised_weights(rig).weights, python.weights)
     assert (python.indices == rig.indices).all() and python.n_joints == n_joints
     (js,) = decode_in_node(tmp_path, [data], "decode-weights")
     assert (js["nJoints"], js["nInfluences"]) == (n_joints, k)
@@ -295,7 +300,7 @@ def test_both_sides_refuse_broken_version_2_rig_weights(tmp_path):
     dense_k_not_n[16:20] = struct.pack("<I", 3)
     broken = [good[:-1], good[:24], bytes(dense_k_not_n)]
     messages = [d["error"] for d in decode_in_node(tmp_path, broken, "decode-weights")]
-    assert "3 rows of 3 influences of 21 joints need 75 bytes, got 74" in messages[0]
+    assert "3 rows of 3 influences of 21 joints need 84 bytes, got 83" in messages[0]
     assert "shorter than its 28-byte header" in messages[1]
     assert "2 rows of 1 influences of 3 joints" in messages[2]
     for data in broken:

@@ -272,9 +272,9 @@ export class MeshArraysDecoder {
  * a 20-byte header (magic "RTSW", uint32 version, uint32 V, uint32 K, uint32 N) followed by
  * V x K uint16 joint indices, 0 or 2 bytes of padding and V x K float32 weights; version 2
  * (GET .../rig/weights?version=2), a 28-byte header (the same, then uint32 flags and a
- * float32 step) followed by the indices unless flag bit 0 (dense: joints 0..K-1 in order),
- * padding, and the weights over step as 20-bit signed integers in three byte planes (bits
- * 0-3, 4-11, 12-19), slot-major.
+ * float32 step) followed, for a dense rig (flag bit 0: joints 0..K-1 in order), by the
+ * weights over step as 20-bit signed integers in three byte planes (bits 0-3, 4-11, 12-19),
+ * slot-major; otherwise by version 1's indices, padding and float32 weights.
  */
 export class RigWeightsDecoder {
 
@@ -319,24 +319,22 @@ export class RigWeightsDecoder {
 		const step = view.getFloat32( 24, true );
 		const vk = v * k;
 		const start = header + ( dense ? 0 : paddedUint16Bytes( vk ) );
-		const size = start + 3 * vk;
+		const size = start + ( dense ? 3 : 4 ) * vk;
 		if ( buffer.byteLength !== size || ( dense && k !== n ) ) {
 
 			throw new Error( `RigWeightsDecoder: ${ v } rows of ${ k } influences of ${ n } joints need ${ size } bytes, got ${ buffer.byteLength }.` );
 
 		}
 
-		let indices;
-		if ( dense ) {
+		if ( ! dense ) {
 
-			indices = new Uint16Array( vk );
-			for ( let i = 0; i < vk; i += k ) for ( let s = 0; s < k; s ++ ) indices[ i + s ] = s;
-
-		} else {
-
-			indices = new Uint16Array( buffer, header, vk );
+			// a sparse rig travels as in version 1: float32 weights
+			return { nJoints: n, nInfluences: k, indices: new Uint16Array( buffer, header, vk ), weights: new Float32Array( buffer, start, vk ) };
 
 		}
+
+		const indices = new Uint16Array( vk );
+		for ( let i = 0; i < vk; i += k ) for ( let s = 0; s < k; s ++ ) indices[ i + s ] = s;
 
 		// q = bits 12-19 (signed) | 4-11 | 0-3; |q| < 2^19 and step is a power of two, so q * step
 		// is exact in float32
