@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.file_seconds import file_seconds, longest_first
+
 
 def pytest_xdist_auto_num_workers(config) -> int:
     """``-n auto``: one worker more than the cores. The suite computes for less than half of
@@ -21,6 +23,12 @@ def pytest_xdist_auto_num_workers(config) -> int:
     played at their rate, countdowns, streams), which a third worker fills: 620 s against
     664 s for the tests on this 2-core machine."""
     return (os.cpu_count() or 1) + 1
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """The longest test files first (`tests.file_seconds`; with ``--no-loadscope-reorder``
+    xdist hands the files out in this order)."""
+    longest_first(items, file_seconds())
 
 
 @pytest.fixture(scope="session")
