@@ -63,6 +63,7 @@ from retarget.testing.marker_video import (  # noqa: E402
     GroundTruth,
     render_marker_video,
     render_webcam_marker_video,
+    unnamed_track_scores,
 )
 
 VIDEOS = (("mjpg.avi", 1), ("mp4v.mp4", 2))   # file name, seed
@@ -87,37 +88,6 @@ def ict_face() -> SampleFace | None:
                           d["landmarks_68"].astype(np.int64), EXPRESSION_NAMES, np.stack(shapes))
 
 
-def webcam_scores(points: np.ndarray, truth: GroundTruth) -> dict:
-    """Unnamed tracks (F, M, 2) image pixels against the truth (see the module notes)."""
-    p = np.asarray(points, dtype=np.float64)
-    gt = truth.points2d[:, 0]
-    clear = truth.visible[:, 0] & (truth.facing[:, 0] > 0.5)
-    oblique = truth.visible[:, 0] & (truth.facing[:, 0] <= 0.5)
-    d = np.linalg.norm(p[:, :, None] - gt[:, None], axis=3)
-    tracked = np.isfinite(p[..., 0])
-    nearest = np.where(tracked, np.nan_to_num(d, nan=np.inf).argmin(2), -1)
-    switches, owner = 0, np.full(p.shape[1], -1)
-    for m in range(p.shape[1]):
-        ids = nearest[tracked[:, m], m]
-        switches += int((np.diff(ids) != 0).sum())
-        if ids.size:
-            owner[m] = np.bincount(ids).argmax()
-    err = np.full(clear.shape, np.inf)
-    for n in range(gt.shape[1]):
-        mine = np.flatnonzero(owner == n)
-        if mine.size:
-            m = mine[tracked[:, mine].sum(0).argmax()]
-            err[:, n] = np.where(tracked[:, m], d[:, m, n], np.inf)
-    wanted = np.flatnonzero(clear.sum(0) >= 5)
-    e = err[clear]
-    return {
-        "found": len(set(owner.tolist()) & set(wanted.tolist())), "wanted": len(wanted),
-        "tracks": p.shape[1], "switches": switches, "median": float(np.median(e)),
-        "p95": float(np.percentile(e, 95)), "within3": float((e < 3).mean()),
-        "oblique": float((err[oblique] < 3).mean()) if oblique.any() else float("nan"),
-    }
-
-
 def webcam_section(folder: Path, seeds: int, n_frames: int) -> None:
     faces = [("sample", None)]
     ict = ict_face()
@@ -138,8 +108,8 @@ def webcam_section(folder: Path, seeds: int, n_frames: int) -> None:
             tracked_s = time.perf_counter() - t
             p = take.points.astype(np.float64)
             p[..., 1] = take.meta["size"][1] - p[..., 1]
-            s = webcam_scores(p, truth)
-            print(f"  {label:<6} seed {seed}: found {s['found']}/{s['wanted']} in clear view, "
+            s = unnamed_track_scores(p, truth)
+            print(f"  {label:<6} seed {seed}: found {len(s['found'] & s['wanted'])}/{len(s['wanted'])} in clear view, "
                   f"{s['tracks']} tracks, {s['switches']} identity switches; median {s['median']:.3f} px, "
                   f"p95 {s['p95']:.2f} px, {100 * s['within3']:.1f} % within 3 px; oblique "
                   f"{100 * s['oblique']:.0f} % within 3 px  (rendered or read in {rendered_s:.0f} s, "

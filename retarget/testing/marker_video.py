@@ -40,6 +40,7 @@ __all__ = [
     "webcam_camera",
     "webcam_marker_vertices",
     "render_webcam_marker_video",
+    "unnamed_track_scores",
 ]
 
 CODECS = {".avi": "MJPG", ".mp4": "mp4v", ".mkv": "FFV1"}
@@ -441,3 +442,48 @@ def _rotation_y(a):
 def _rotation_z(a):
     c, s, z, o = np.cos(a), np.sin(a), np.zeros_like(a), np.ones_like(a)
     return np.stack([c, -s, z, s, c, z, z, z, o], -1).reshape(-1, 3, 3)
+
+
+def unnamed_track_scores(points, truth: GroundTruth, facing: float = 0.5) -> dict:
+    """How tracks of unnamed markers fare against the truth of the first camera.
+
+    points : (F, M, 2) image pixels (x right, y down), NaN where a track has no point.
+    facing : cosine between a marker's normal and the view under which it counts as seen
+        clearly (0.5: within 60 degrees; an edge-on dot a few pixels across is a smudge).
+
+    Each track is the truth marker it is nearest in most of its frames; an identity switch
+    is a change of a track's nearest truth marker from one of its frames to the next. The
+    errors are over the marker-frames the truth calls visible and facing the camera, a
+    marker without a track there counting as lost (an infinite error). Returns a dict:
+    found (set of truth markers with a track), wanted (set of those seen clearly in 5
+    frames or more: a track needs 3 to be told from a skin feature), tracks (M), switches,
+    median and p95 (px, lost included), within3 (share within 3 px), lost (share), oblique
+    (share within 3 px of the visible marker-frames not facing the camera; NaN if none).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    gt = truth.points2d[:, 0]
+    clear = truth.visible[:, 0] & (truth.facing[:, 0] > facing)
+    oblique = truth.visible[:, 0] & (truth.facing[:, 0] <= facing)
+    d = np.linalg.norm(p[:, :, None] - gt[:, None], axis=3)              # (F, M, N)
+    tracked = np.isfinite(p[..., 0])
+    nearest = np.where(tracked, np.nan_to_num(d, nan=np.inf).argmin(2), -1)
+    switches, owner = 0, np.full(p.shape[1], -1)
+    for m in range(p.shape[1]):
+        ids = nearest[tracked[:, m], m]
+        switches += int((np.diff(ids) != 0).sum())
+        if ids.size:
+            owner[m] = np.bincount(ids).argmax()
+    err = np.full(clear.shape, np.inf)
+    for n in range(gt.shape[1]):
+        mine = np.flatnonzero(owner == n)
+        if mine.size:
+            m = mine[tracked[:, mine].sum(0).argmax()]
+            err[:, n] = np.where(tracked[:, m], d[:, m, n], np.inf)
+    e = err[clear]
+    return {
+        "found": set(owner[owner >= 0].tolist()), "wanted": set(np.flatnonzero(clear.sum(0) >= 5).tolist()),
+        "tracks": p.shape[1], "switches": switches, "median": float(np.median(e)),
+        "p95": float(np.percentile(e, 95)), "within3": float((e < 3.0).mean()),
+        "lost": float(np.isinf(e).mean()),
+        "oblique": float((err[oblique] < 3.0).mean()) if oblique.any() else float("nan"),
+    }

@@ -23,6 +23,7 @@ from retarget.testing.marker_video import (
     marker_vertices,
     render_marker_video,
     render_webcam_marker_video,
+    unnamed_track_scores,
     webcam_camera,
 )
 from retarget.testing.render import render_face
@@ -56,42 +57,10 @@ def webcam(tmp_path_factory):
     return path, render_webcam_marker_video(path, n_frames=WEBCAM_FRAMES, seed=2)
 
 
-def track_scores(points, truth, facing=0.5):
-    """How tracks (F, M, 2) image pixels (y down) of unnamed markers fare against the truth.
-
-    Each track is the truth marker it is nearest in most of its frames; an identity switch
-    is a change of the nearest truth marker from one of a track's frames to the next.
-    Errors are over the marker-frames the truth calls visible and facing the camera
-    within 60 degrees (cos > `facing`; an edge-on dot a few pixels across is a smudge),
-    a marker without a track there counting as lost. Returns a dict: found (truth
-    markers with a track), wanted (those so seen in 5 frames or more: a track needs 3
-    to be told from a skin feature), tracks, switches, median (px, tracked), within3
-    (share of all those marker-frames within 3 px), lost.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    gt = truth.points2d[:, 0]
-    seen = truth.visible[:, 0] & (truth.facing[:, 0] > facing)
-    d = np.linalg.norm(p[:, :, None] - gt[:, None], axis=3)           # (F, M, N)
-    tracked = np.isfinite(p[..., 0])
-    nearest = np.where(tracked, np.nan_to_num(d, nan=np.inf).argmin(2), -1)
-    switches, owner = 0, np.full(p.shape[1], -1)
-    for m in range(p.shape[1]):
-        ids = nearest[tracked[:, m], m]
-        switches += int((np.diff(ids) != 0).sum())
-        if ids.size:
-            owner[m] = np.bincount(ids).argmax()
-    err = np.full(seen.shape, np.inf)
-    for n in range(gt.shape[1]):
-        mine = np.flatnonzero(owner == n)
-        if mine.size:
-            m = mine[tracked[:, mine].sum(0).argmax()]
-            err[:, n] = np.where(tracked[:, m], d[:, m, n], np.inf)
-    e = err[seen]
-    return {
-        "found": set(owner[owner >= 0].tolist()), "wanted": set(np.flatnonzero(seen.sum(0) >= 5).tolist()),
-        "tracks": p.shape[1], "switches": switches, "median": float(np.median(e[np.isfinite(e)])),
-        "within3": float((e < 3.0).mean()), "lost": float(np.isinf(e).mean()),
-    }
+@pytest.fixture(scope="module")
+def webcam_take(webcam):
+    """The webcam footage tracked without a layout, once for the tests that read it."""
+    return track_marker_video(webcam[0], layout=None)
 
 
 def _write(path, frames, fps=30.0):
@@ -308,20 +277,18 @@ def test_webcam_material_is_as_hard_as_other_peoples_footage(webcam):
     assert not hidden[0] and hidden[WEBCAM_FRAMES // 2:].all()           # a finger, then not
 
 
-def test_every_marker_of_webcam_footage_is_tracked_without_a_layout(webcam):
-    path, truth = webcam
-    take = track_marker_video(path, layout=None)
+def test_every_marker_of_webcam_footage_is_tracked_without_a_layout(webcam, webcam_take):
+    truth, take = webcam[1], webcam_take
     assert take.layout is None and take.meta["tracker"] == "RingTracks"
     assert take.names == tuple(f"m{k:02d}" for k in range(1, take.n_points + 1))
-    s = track_scores(_image_points(take), truth)
+    s = unnamed_track_scores(_image_points(take), truth)
     assert s["wanted"] <= s["found"] and len(s["wanted"]) >= 20 and s["tracks"] == len(s["found"])
     assert s["switches"] == 0
     assert s["median"] <= 0.5 and s["within3"] >= 0.95
 
 
-def test_a_marker_hidden_in_the_first_frame_is_picked_up_when_it_appears(webcam):
-    path, truth = webcam
-    take = track_marker_video(path, layout=None)
+def test_a_marker_hidden_in_the_first_frame_is_picked_up_when_it_appears(webcam, webcam_take):
+    truth, take = webcam[1], webcam_take
     p = _image_points(take)
     col = np.nanargmin(np.nanmean(np.linalg.norm(p - truth.points2d[:, 0, HIDDEN, None], axis=2), 0))
     appears = int(np.argmax(truth.visible[:, 0, HIDDEN]))
