@@ -120,7 +120,7 @@ export class ExportPanel {
 
 			const { blob, filename } = await api.exportManifest( id, { settings: this.app.conditioning.toJSON() } );
 			this._save( blob, filename );
-			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB): unzip it and run "retarget batch manifest.json --out DIR".` );
+			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB): run it with "retarget batch ${ filename } --out DIR".` );
 			return { filename, size: blob.size };
 
 		} catch ( error ) {
