@@ -9,6 +9,7 @@ video stack.
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -45,6 +46,8 @@ def add_track(commands, parents) -> None:
     p.add_argument("--calibration", metavar="CALIB.npz", help="stereo: from 'retarget calibrate'")
     p.add_argument("--max-frames", type=positive_int, metavar="F",
                    help="markerless: track only the first F frames")
+    p.add_argument("--threads", type=positive_int, default=min(os.cpu_count() or 1, 4), metavar="T",
+                   help="markerless: the face-mesh models' inference threads (default: the cores, at most 4)")
     p.add_argument("--out", required=True, metavar="FRAMES.npy", help="(F, N, 3) float32 points")
     p.add_argument("--take", metavar="TAKE.npz",
                    help="also write the take (points, times, names) for upload to the web app")
@@ -78,7 +81,7 @@ def _track(args) -> int:
         elif args.method == "markerless":
             from retarget.sources.facemesh_video import track_video_facemesh
             take = track_video_facemesh(args.video, layout=layout, progress=progress,
-                                        max_frames=args.max_frames)
+                                        max_frames=args.max_frames, threads=args.threads)
         else:
             from retarget.sources.calibration import StereoCalibration
             from retarget.sources.stereo import track_stereo_videos

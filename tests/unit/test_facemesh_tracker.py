@@ -61,6 +61,19 @@ def test_the_points_of_a_rendered_face_lie_on_its_features(tracker, yaw, roll):
     assert level[17:27, 1].mean() > level[48:68, 1].mean()
 
 
+def test_two_inference_threads_find_the_same_points(tracker):
+    """`retarget track` runs the models on the machine's cores: the same points as one
+    thread, to float rounding."""
+    rgb, _ = rendered(10, 5)
+    tracker.reset()
+    one = [tracker.track(rgb) for _ in range(2)]
+    two_threads = FaceMeshTracker(threads=2)
+    two = [two_threads.track(rgb) for _ in range(2)]
+    for a, b in zip(one, two):
+        assert a is not None and b is not None
+        np.testing.assert_allclose(a, b, atol=1e-2)  # pixels
+
+
 def test_the_face_is_followed_from_frame_to_frame_without_the_detector(tracker, monkeypatch):
     rgb, _ = rendered()
     tracker.reset()
