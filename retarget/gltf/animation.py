@@ -13,8 +13,8 @@ import numpy as np
 from retarget.errors import RetargetError
 from retarget.gltf.document import GltfDocument
 
-__all__ = ["animated_weights", "animation_channels", "mesh_instances", "node_transforms",
-           "posed_vertices", "sampled", "transformed", "trs_matrices"]
+__all__ = ["animated_weights", "animation_channels", "drawn_vertices", "mesh_instances",
+           "node_transforms", "posed_vertices", "sampled", "transformed", "trs_matrices"]
 
 
 def mesh_instances(gltf: GltfDocument) -> list[dict]:
@@ -230,3 +230,14 @@ def posed_vertices(gltf, inst, rows, world, weights, times) -> np.ndarray:
     joint_matrices = world[:, joints] @ inverse[None]                      # (F, J, 4, 4)
     blended = np.einsum("nk,fnkab->fnab", weight, joint_matrices[:, index])  # (F, n, 4, 4)
     return np.einsum("fnab,fnb->fna", blended[..., :3, :3], morphed) + blended[..., :3, 3]
+
+
+def drawn_vertices(gltf, times, animation: int = 0) -> np.ndarray:
+    """(F, V, 3) float64 positions a glTF viewer draws at `times` (seconds) of an animation,
+    for a file of one mesh instance (an export of ours), in the file's units."""
+    (inst,) = mesh_instances(gltf)
+    times = np.asarray(times, dtype=np.float64)
+    channels = animation_channels(gltf, gltf.item(gltf.doc.animations, animation, "animation"))
+    world = node_transforms(gltf, gltf.doc.nodes, channels, times)
+    return posed_vertices(gltf, inst, np.arange(len(inst["positions"])), world,
+                          animated_weights(gltf, channels, times), times)

@@ -21,8 +21,7 @@ from retarget.arkit.shapes import ArkitShapes, arkit_shapes
 from retarget.cli import main
 from retarget.errors import RetargetError
 from retarget.gltf import export_arkit_gltf, read_gltf
-from retarget.gltf.animation import animated_weights, animation_channels, mesh_instances, node_transforms, \
-    posed_vertices
+from retarget.gltf.animation import animation_channels, drawn_vertices, mesh_instances
 from retarget.gltf.arkit import TOLERANCE, arkit_tolerance
 from retarget.gltf.document import GltfDocument
 from retarget.landmarks import from_vertex_indices
@@ -94,12 +93,7 @@ def _viewer(path, times) -> np.ndarray:
     """(F, V, 3) float64 positions a glTF viewer draws at `times` of the first animation, in
     the mesh's units (the file's, in metres, over the export's recorded scale)."""
     gltf = GltfDocument(path.read_bytes(), path.name, None)
-    (instance,) = mesh_instances(gltf)
-    channels = animation_channels(gltf, gltf.doc.animations[0])
-    world = node_transforms(gltf, gltf.doc.nodes, channels, times)
-    rows = np.arange(len(instance["positions"]))
-    drawn = posed_vertices(gltf, instance, rows, world, animated_weights(gltf, channels, times), times)
-    return drawn / gltf.doc.scenes[0].extras["retarget"]["scale"]
+    return drawn_vertices(gltf, times) / gltf.doc.scenes[0].extras["retarget"]["scale"]
 
 
 def test_the_export_is_valid_with_52_named_targets_and_their_animation(exported):

@@ -16,8 +16,7 @@ from retarget.cli import main
 from retarget.clips import clip_at_rate
 from retarget.errors import RetargetError
 from retarget.gltf import export_gltf, read_gltf
-from retarget.gltf.animation import animated_weights, animation_channels, mesh_instances, node_transforms
-from retarget.gltf.animation import posed_vertices as gltf_posed
+from retarget.gltf.animation import drawn_vertices
 from retarget.gltf.document import GltfDocument
 from retarget.landmarks import from_vertex_indices
 from retarget.layouts import get_layout
@@ -62,12 +61,7 @@ def _gltf(data) -> GltfDocument:
 
 def _drawn(gltf, t) -> np.ndarray:
     """(V, 3) what a glTF viewer draws at time t of the first animation, file units."""
-    (instance,) = mesh_instances(gltf)
-    channels = animation_channels(gltf, gltf.doc.animations[0])
-    times = np.array([t])
-    world = node_transforms(gltf, gltf.doc.nodes, channels, times)
-    return gltf_posed(gltf, instance, np.arange(len(instance["positions"])), world,
-                      animated_weights(gltf, channels, times), times)[0]
+    return drawn_vertices(gltf, [t])[0]
 
 
 @pytest.mark.parametrize("method", ["ellipsoid", "rbf"])
