@@ -243,13 +243,20 @@ def muscles_for(path, mesh: Mesh, points: SurfacePoints, layout: Layout | None) 
     return place_muscles(mesh.vertices, mesh.faces, points, layout)
 
 
-def _contractions(drive: MuscleDrive, performance: Performance, frames: np.ndarray, quiet: bool,
-                  chunk: int = 64) -> np.ndarray:
+def _contractions(drive: MuscleDrive, performance: Performance, frames: np.ndarray, quiet: bool) -> np.ndarray:
     """(F, D) contractions of (F, N, 2|3) source frames, solved in order, with a progress bar."""
-    out = np.empty((len(frames), len(drive.names)))
-    with progress_bar(len(frames), "muscle IK", "frame", quiet) as advance:
+    return _solved(drive.contractions, len(drive.names), performance, frames, quiet, "muscle IK", 64)
+
+
+def _solved(solve, width: int, performance: Performance, frames: np.ndarray, quiet: bool, label: str,
+            chunk: int) -> np.ndarray:
+    """(F, width) `solve` of the retargeted feature displacements of (F, N, 2|3) source frames,
+    `chunk` frames at a time in order (a solver warm-starts each frame from the last), with
+    a progress bar."""
+    out = np.empty((len(frames), width))
+    with progress_bar(len(frames), label, "frame", quiet) as advance:
         for i in range(0, len(frames), chunk):
-            out[i:i + chunk] = drive.contractions(performance.displacements(frames[i:i + chunk]))
+            out[i:i + chunk] = solve(performance.displacements(frames[i:i + chunk]))
             advance(min(1.0, (i + chunk) / max(len(frames), 1)))
     return out
 
@@ -296,17 +303,11 @@ def arkit_shapes_for(path, mesh: Mesh, points: SurfacePoints, layout: Layout | N
     return arkit_shapes(mesh.vertices, mesh.faces, points, layout, weights)
 
 
-def _arkit_weights(shapes: ArkitShapes, performance: Performance, frames: np.ndarray, quiet: bool,
-                   chunk: int = 256) -> np.ndarray:
+def _arkit_weights(shapes: ArkitShapes, performance: Performance, frames: np.ndarray, quiet: bool) -> np.ndarray:
     """(F, 52) ARKit weights of (F, N, 2|3) source frames: the retargeted feature
     displacements solved frame after frame (each warm-starting the next), with a progress bar."""
     solver = ArkitSolver(shapes.at_points)
-    out = np.empty((len(frames), len(shapes.names)))
-    with progress_bar(len(frames), "ARKit weights", "frame", quiet) as advance:
-        for i in range(0, len(frames), chunk):
-            out[i:i + chunk] = solver.solve_frames(performance.displacements(frames[i:i + chunk]))
-            advance(min(1.0, (i + chunk) / max(len(frames), 1)))
-    return out
+    return _solved(solver.solve_frames, len(shapes.names), performance, frames, quiet, "ARKit weights", 256)
 
 
 def write_live_link(path: Path, weights: np.ndarray, fps: float) -> None:
