@@ -1,8 +1,9 @@
 """glTF 2.0: reading any file safely, evaluating its animation, and the rigged export.
 
 Reading: `document` (`GltfDocument`, bounds-checked glTF/GLB parsing, and `scene_size`,
-what a scene would unpack to, counted before anything is read) and `animation` (glTF's
-skinning, morphing and node animation evaluated as the specification defines them).
+what a scene would unpack to, counted before anything is read), `decode` (the JSON into
+pygltflib's objects, as pygltflib makes them, at a fraction of its cost) and `animation`
+(glTF's skinning, morphing and node animation evaluated as the specification defines them).
 
 The export: `export_gltf` (bytes) and `write_gltf` (to a file) write a target mesh, its
 feature points as translation-only joints (Dutreve §3), its rig (a glTF skin, or morph

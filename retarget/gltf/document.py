@@ -65,7 +65,7 @@ class GltfDocument:
     """
 
     def __init__(self, data: bytes, label: str, folder):
-        import pygltflib
+        from retarget.gltf.decode import gltf_from_glb, gltf_from_json
 
         self.label = label
         binary = data[:4] == b"glTF"
@@ -79,8 +79,7 @@ class GltfDocument:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # pygltflib warns on odd chunks; errors come below
-                doc = pygltflib.GLTF2.load_from_bytes(data) if binary \
-                    else pygltflib.GLTF2.from_json(_utf8(data, label))
+                doc = gltf_from_glb(data) if binary else gltf_from_json(_utf8(data, label))
         except RetargetError:
             raise
         except Exception as exc:
