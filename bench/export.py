@@ -1,20 +1,25 @@
 """glTF export: time and file size for a large face with a long take.
 
     python bench/export.py [--resolution 4] [--seconds 30] [--fps 30] [--repeats 3]
-                           [--rigs ellipsoid rbf]
+                           [--rigs ellipsoid rbf] [--forms exact skin]
+                           [--rate 24] [--key-tolerance MM]
 
 The built-in procedural face at --resolution (4: 132,907 vertices, the smallest grid at
 or above 100k; see bench/upload.py) with uv, its 68 iBUG landmarks, and a take of
 --seconds at --fps: the face's own demo performance (`demo_weights`) at the landmarks,
 as feature displacements (no retargeting is timed). For each rig (ellipsoid: a glTF skin;
 rbf: dense with negative weights, so morph targets), after computing the weights (timed
-apart):
+apart), in each --forms (exact: the rig as it is; skin: any rig as a four-influence
+skin, `retarget.weights.skin_fit`), its keys at --rate and reduced to --key-tolerance
+(`retarget.gltf.keys`):
 
     export   retarget.gltf.export_gltf, to bytes in memory: wall and CPU seconds
     read     retarget.gltf.read_gltf of those bytes: wall and CPU seconds
     size     the .glb in MiB, split into mesh (positions, uv, triangles), rig (JOINTS /
              WEIGHTS and inverse bind matrices, or morph targets) and animation (key
              times, joint translations, morph weights)
+    fit      for the skin form: the fit's RMS error relative to the vertex motion, in mm,
+             and the RMS error of the worst vertex in mm (the face is taken in centimetres)
 
 Times are medians over --repeats. Progress on stderr; figures on stdout.
 """
@@ -83,6 +88,15 @@ def byte_split(data: bytes) -> dict[str, int]:
     return split
 
 
+def fit_summary(data: bytes) -> str:
+    """The skin fit's error as the file records it (``extras.retarget.fit``), or "-"."""
+    fit = GltfDocument(data, "the export", None).doc.scenes[0].extras["retarget"].get("fit")
+    if not fit or "rms_relative" not in fit:
+        return "-"
+    return (f"{100 * fit['rms_relative']:.1f} % rms ({fit['rms_mm']:.3f} mm), worst vertex "
+            f"{fit['worst_vertex_mm']:.2f} mm rms")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--resolution", type=int, default=4)
@@ -90,6 +104,9 @@ def main() -> None:
     parser.add_argument("--fps", type=float, default=30.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--rigs", nargs="+", default=["ellipsoid", "rbf"])
+    parser.add_argument("--forms", nargs="+", default=["exact"], choices=["exact", "skin"])
+    parser.add_argument("--rate", type=float, default=None, help="animation rate (24, 25, 30, 60)")
+    parser.add_argument("--key-tolerance", type=float, default=0.0, help="key reduction, mm")
     args = parser.parse_args()
 
     face = sample_face(args.resolution)
@@ -102,25 +119,29 @@ def main() -> None:
     print(f"# {machine()}")
     print(f"face: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, uv; "
           f"{points.n_points} joints; take: {n_frames} frames at {args.fps:g} fps "
-          f"({args.seconds:g} s); median of {args.repeats}")
-    print(f"{'rig':<10} {'kind':<6} {'weights s':>9} {'export s':>9} {'cpu s':>6} "
-          f"{'read s':>7} {'cpu s':>6} {'MiB':>7} {'mesh':>6} {'rig':>6} {'anim':>6}")
+          f"({args.seconds:g} s); median of {args.repeats}; keys at "
+          f"{'the take' if args.rate is None else f'{args.rate:g} fps'}, tolerance {args.key_tolerance:g} mm")
+    print(f"{'rig':<10} {'form':<5} {'kind':<6} {'weights s':>9} {'export s':>9} {'cpu s':>6} "
+          f"{'read s':>7} {'cpu s':>6} {'MiB':>7} {'mesh':>6} {'rig':>6} {'anim':>6}  fit")
     for method in args.rigs:
         print(f"{method} weights...", file=sys.stderr, flush=True)
         start = time.perf_counter()
         weights = compute_weights(method, mesh.vertices, mesh.faces, points, get_layout("ibug68"))
         weights_seconds = time.perf_counter() - start
-        print(f"{method} export...", file=sys.stderr, flush=True)
-        export_seconds, export_cpu, data = median_seconds(
-            lambda: export_gltf(mesh, points, weights, [clip]), args.repeats)
-        print(f"{method} read...", file=sys.stderr, flush=True)
-        read_seconds, read_cpu, back = median_seconds(lambda: read_gltf(data), args.repeats)
-        split = byte_split(data)
-        mib = 2.0**20
-        print(f"{method:<10} {back.deformation:<6} {weights_seconds:>9.2f} {export_seconds:>9.2f} "
-              f"{export_cpu:>6.2f} {read_seconds:>7.2f} {read_cpu:>6.2f} {len(data) / mib:>7.1f} "
-              f"{split['mesh'] / mib:>6.1f} {split['rig'] / mib:>6.1f} "
-              f"{split['animation'] / mib:>6.1f}", flush=True)
+        for form in args.forms:
+            print(f"{method} {form} export...", file=sys.stderr, flush=True)
+            options = {"form": form, "rate": args.rate, "key_tolerance": args.key_tolerance,
+                       "mesh_units": "cm"}
+            export_seconds, export_cpu, data = median_seconds(
+                lambda: export_gltf(mesh, points, weights, [clip], **options), args.repeats)
+            print(f"{method} {form} read...", file=sys.stderr, flush=True)
+            read_seconds, read_cpu, back = median_seconds(lambda: read_gltf(data), args.repeats)
+            split = byte_split(data)
+            mib = 2.0**20
+            print(f"{method:<10} {form:<5} {back.deformation:<6} {weights_seconds:>9.2f} "
+                  f"{export_seconds:>9.2f} {export_cpu:>6.2f} {read_seconds:>7.2f} {read_cpu:>6.2f} "
+                  f"{len(data) / mib:>7.1f} {split['mesh'] / mib:>6.1f} {split['rig'] / mib:>6.1f} "
+                  f"{split['animation'] / mib:>6.1f}  {fit_summary(data)}", flush=True)
 
 
 if __name__ == "__main__":

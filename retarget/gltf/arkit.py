@@ -36,6 +36,7 @@ from retarget.arkit.shapes import ArkitShapes
 from retarget.errors import RetargetError
 from retarget.gltf.glb import GlbBuilder
 from retarget.gltf.sparse import add_morph_targets
+from retarget.gltf.keys import Keys, KeyWriter
 from retarget.gltf.writer import FORMAT, MESH_NODE, _face_document, _head, _scaled, _stepper
 from retarget.mesh import Mesh
 
@@ -53,10 +54,11 @@ def arkit_tolerance(vertices) -> float:
 
 
 def export_arkit_gltf(mesh: Mesh, shapes: ArkitShapes, clips=(), *, tolerance: float | None = None,
-                      units: str = "m", mesh_units: str = "guess", progress=None) -> bytes:
+                      rate: float | None = None, key_tolerance: float = 0.0, units: str = "m",
+                      mesh_units: str = "guess", progress=None) -> bytes:
     """The .glb bytes of `mesh` with its ARKit `shapes`, with `clips` animated (arguments as
     for `write_arkit_gltf`)."""
-    built = _built(mesh, shapes, clips, tolerance, progress, units, mesh_units)
+    built = _built(mesh, shapes, clips, tolerance, progress, units, mesh_units, Keys(rate, key_tolerance))
     data = built.glb_bytes()
     if progress is not None:
         progress(1.0)
@@ -64,7 +66,8 @@ def export_arkit_gltf(mesh: Mesh, shapes: ArkitShapes, clips=(), *, tolerance: f
 
 
 def write_arkit_gltf(file, mesh: Mesh, shapes: ArkitShapes, clips=(), *,
-                     tolerance: float | None = None, units: str = "m", mesh_units: str = "guess",
+                     tolerance: float | None = None, rate: float | None = None,
+                     key_tolerance: float = 0.0, units: str = "m", mesh_units: str = "guess",
                      progress=None) -> int:
     """Write the .glb of `mesh` with its ARKit `shapes` as named morph targets and `clips`
     as animations of their weights to a binary file object (module docstring); returns the
@@ -75,22 +78,26 @@ def write_arkit_gltf(file, mesh: Mesh, shapes: ArkitShapes, clips=(), *,
     clips : `ArkitClip` objects, one animation each, in order.
     tolerance : mesh units; a vertex a shape moves no further is left out of its sparse
         target (default `arkit_tolerance` of the mesh; 0 keeps every vertex that moves).
-    units, mesh_units : as for `retarget.gltf.write_gltf` ("m" by default: metres).
+    rate, key_tolerance, units, mesh_units : as for `retarget.gltf.write_gltf` (units "m"
+        by default: metres; a weight's key tolerance is measured by the most its shape
+        moves a vertex).
     progress : optional callable taking the fraction done in [0, 1].
 
     Raises `RetargetError` when the sizes disagree (naming both).
     """
-    built = _built(mesh, shapes, clips, tolerance, progress, units, mesh_units)
+    built = _built(mesh, shapes, clips, tolerance, progress, units, mesh_units, Keys(rate, key_tolerance))
     n_bytes = built.write(file)
     if progress is not None:
         progress(1.0)
     return n_bytes
 
 
-def _built(mesh: Mesh, shapes: ArkitShapes, clips, tolerance, progress, units, mesh_units) -> GlbBuilder:
+def _built(mesh: Mesh, shapes: ArkitShapes, clips, tolerance, progress, units, mesh_units,
+           keys: Keys) -> GlbBuilder:
     """The document and buffer of the export; progress reaches 0.95 (writing is left)."""
     clips = tuple(clips)
     _check(mesh, shapes, clips)
+    clips = keys.resampled(clips)
     tolerance = arkit_tolerance(mesh.vertices) if tolerance is None else float(tolerance)
     if not np.isfinite(tolerance) or tolerance < 0:
         raise RetargetError(f"tolerance must be a finite number >= 0; got {tolerance!r}")
@@ -107,20 +114,20 @@ def _built(mesh: Mesh, shapes: ArkitShapes, clips, tolerance, progress, units, m
         "name": mesh.name or "face",
         "nodes": [MESH_NODE],
         "extras": {"retarget": {"format": FORMAT, "deformation": "arkit", "method": "arkit",
-                                "tolerance": tolerance, **scaling}},
+                                "tolerance": tolerance, **scaling, **keys.record()}},
     }]
+    writers = [KeyWriter(out, clip.times, keys.file_tolerance(scaling)) for clip in clips]
+    reach = max(float(np.linalg.norm(shapes.deltas, axis=2).max(initial=0.0)) * scale, 1e-12)
     if clips:
         doc["animations"] = []
-        for clip in clips:
-            times = out.accessor(clip.times.astype(np.float32), bounds=True)
-            weights = out.accessor(clip.weights.astype(np.float32).ravel())   # (F * 52,) frame-major
+        for clip, writer in zip(clips, writers):
             doc["animations"].append({
-                "name": clip.name,
-                "samplers": [{"input": times, "output": weights, "interpolation": "LINEAR"}],
+                "name": clip.name,   # the weights (F * 52,) frame-major
+                "samplers": [writer.sampler(clip.weights, scale=reach, weights=True)],
                 "channels": [{"sampler": 0, "target": {"node": MESH_NODE, "path": "weights"}}],
             })
             step()
-    _head(out, clips, mesh, [MESH_NODE])
+    _head(out, clips, mesh, [MESH_NODE], writers)
     return out
 
 

@@ -39,11 +39,13 @@ def head_pivot(vertices) -> np.ndarray:
     return 0.5 * (v.min(axis=0) + v.max(axis=0))
 
 
-def add_head_motion(out: GlbBuilder, clips, pivot, moved: list[int]) -> dict | None:
+def add_head_motion(out: GlbBuilder, clips, pivot, moved: list[int], writers, reach: float) -> dict | None:
     """Add the ``head`` and ``head_pivot`` nodes over nodes `moved` (taken out of the
     scene's roots) and key the head in each animation of a clip with ``head_rotations``
-    (animation k is clip k); nothing when no clip has them. `pivot` (3,) file units.
-    Returns the ``extras.retarget.head`` record, or None."""
+    (animation k is clip k, keyed by ``writers[k]``, a `retarget.gltf.keys.KeyWriter`);
+    nothing when no clip has them. `pivot` (3,) file units; `reach` how far from it the
+    face reaches (a turn by θ moves a vertex by at most reach θ: the key tolerance of the
+    rotation). Returns the ``extras.retarget.head`` record, or None."""
     if not any(getattr(clip, "head_rotations", None) is not None for clip in clips):
         return None
     doc = out.document
@@ -55,19 +57,18 @@ def add_head_motion(out: GlbBuilder, clips, pivot, moved: list[int]) -> dict | N
                          "children": list(moved)})
     scene = doc["scenes"][doc.get("scene", 0)]
     scene["nodes"] = [n for n in scene["nodes"] if n not in moved] + [head]
-    for animation, clip in zip(doc.get("animations", []), clips):
+    for animation, clip, keys in zip(doc.get("animations", []), clips, writers):
         q = getattr(clip, "head_rotations", None)
         if q is None:
             continue
-        keyed = [("rotation", _one_hemisphere(q))]
+        # a quaternion's components hold half the angle
+        keyed = [("rotation", _one_hemisphere(q), 2.0 * max(reach, 1e-12))]
         if clip.head_translations is not None:
-            keyed.append(("translation", c + clip.head_translations))
-        times = animation["samplers"][0]["input"]  # the clip's key times, already written
-        for path, values in keyed:
+            keyed.append(("translation", c + clip.head_translations, 1.0))
+        for path, values, scale in keyed:
             animation["channels"].append({"sampler": len(animation["samplers"]),
                                           "target": {"node": head, "path": path}})
-            animation["samplers"].append({"input": times, "interpolation": "LINEAR",
-                                          "output": out.accessor(np.ascontiguousarray(values, np.float32))})
+            animation["samplers"].append(keys.sampler(values, scale=scale))
     return {"node": head, "pivot_node": inner, "pivot": [float(x) for x in c]}
 
 

@@ -10,7 +10,8 @@ The round trip of the export. What comes back, against what went in:
   implicit remainder again), from the morph targets otherwise; per vertex the same
   non-zero weights (float32), K being the busiest vertex's count;
 - one `Clip` per animation: the feature joints' translations minus their neutral
-  positions, at the animation's key times, and the ``head`` node's rotations as its
+  positions, at the animation's key times (the union of its channels' keys when a
+  key-reduced export keys each channel apart), and the ``head`` node's rotations as its
   ``head_rotations`` when the export turned the head (`retarget.gltf.head`; a head
   translation beyond the turn about the pivot is not read back);
 - the units: the scale the export applied (``extras.retarget.scale``,
@@ -36,7 +37,7 @@ from retarget.errors import RetargetError
 from retarget.clips import Clip
 from retarget.gltf.influences import weights_from_influences
 from retarget.gltf.morph import weights_from_targets
-from retarget.gltf.animation import animation_channels
+from retarget.gltf.animation import animation_channels, sampled
 from retarget.gltf.document import GltfDocument
 from retarget.gltf.units import file_scale
 from retarget.landmarks import SurfacePoints, from_positions, landmarks_from_json
@@ -290,37 +291,41 @@ def _skin_weights(gltf: GltfDocument, primitive, n_features: int, method: str) -
 
 
 def _clip(gltf: GltfDocument, k: int, joint_position: dict, head, scale: float) -> Clip:
-    """Animation k as a Clip: feature translations minus neutral, at the shared times,
-    over `scale`; the head node's rotations."""
+    """Animation k as a Clip: feature translations minus neutral over `scale`, and the head
+    node's rotations, at every time any of them is keyed (each channel sampled there as a
+    viewer interpolates it: exact at its own keys, so an export whose channels share their
+    keys comes back at exactly those, and a key-reduced one at the union of its keys)."""
     animation = gltf.doc.animations[k]
     name = str(animation.name or f"animation_{k}")
-    times, moved, turns = None, {}, None
+    moved, turns = {}, None
     for node, path, keys, values, interpolation in animation_channels(gltf, animation):
-        if head is not None and node == head[0] and path == "rotation":
-            turns = keys, values
-        if path != "translation" or node not in joint_position:
+        read = head is not None and node == head[0] and path == "rotation"
+        if not read and (path != "translation" or node not in joint_position):
             continue
         if interpolation != "LINEAR":
             raise RetargetError(f"{gltf.label}: animation {name!r} interpolates "
                                 f"{interpolation}; LINEAR keys are read")
-        if times is None:
-            times = keys
-        elif not np.array_equal(times, keys):
-            raise RetargetError(f"{gltf.label}: animation {name!r} keys its joints at "
-                                "different times; one set of key times is read")
-        moved[node] = values
-    if times is None:
+        if read:
+            turns = keys, values
+        else:
+            moved[node] = keys, values
+    if not moved:
         raise RetargetError(f"{gltf.label}: animation {name!r} moves no feature joint")
+    keyed = [keys for keys, _ in moved.values()] + ([turns[0]] if turns is not None else [])
+    times = keyed[0] if all(np.array_equal(keyed[0], t) for t in keyed) else np.unique(np.concatenate(keyed))
     displacements = np.zeros((len(times), len(joint_position), 3), np.float32)
     for i, (node, rest) in enumerate(joint_position.items()):
         if node in moved:
-            displacements[:, i] = moved[node] - rest
+            displacements[:, i] = _at(times, *moved[node]) - rest
     if scale != 1.0:
         displacements = displacements / np.float32(scale)
-    rotations = None
-    if turns is not None:
-        if not np.array_equal(turns[0], times):
-            raise RetargetError(f"{gltf.label}: animation {name!r} keys the head at other times "
-                                "than its joints")
-        rotations = turns[1]
+    rotations = None if turns is None else _at(times, *turns, rotation=True)
     return Clip(name, displacements, times, head_rotations=rotations)
+
+
+def _at(times: np.ndarray, keys: np.ndarray, values: np.ndarray, rotation: bool = False) -> np.ndarray:
+    """A LINEAR channel's values at `times`: its own where they are its keys."""
+    if np.array_equal(keys, times):
+        return values
+    return sampled(keys.astype(np.float64), values.astype(np.float64), "LINEAR",
+                   times.astype(np.float64), rotation)

@@ -62,6 +62,7 @@ from retarget.clips import Clip, ContractionClip
 from retarget.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
 from retarget.gltf.head import add_head_motion, head_pivot
 from retarget.gltf.influences import is_joint_based, joint_influences
+from retarget.gltf.keys import Keys, KeyWriter
 from retarget.gltf.morph import (AXES, SPARSE_SHARE, axis_offsets, feature_columns,
                                    morph_scale, target_bounds, target_names)
 from retarget.gltf.sparse import add_morph_targets
@@ -72,12 +73,16 @@ from retarget.material import Material
 from retarget.mesh import Mesh
 from retarget.muscles.morphs import MuscleMorphs
 from retarget.skin import SkinWeights
+from retarget.units import mesh_units as unit_of
+from retarget.units import unit_scale
+from retarget.weights.skin_fit import SLOTS, four_influence_skin, skin_fit_error
 
 FORMAT = "retarget-gltf-1"
 ROOT_NAME = "root"
 JAW_NAME = "jaw"
 MESH_NODE, ROOT_NODE, FIRST_FEATURE_NODE = 0, 1, 2
 TRIANGLES = 4
+FORMS = ("exact", "skin")
 
 
 def joint_names(points: SurfacePoints) -> list[str]:
@@ -95,10 +100,12 @@ def joint_names(points: SurfacePoints) -> list[str]:
 
 
 def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
+                form: str = "exact", rate: float | None = None, key_tolerance: float = 0.0,
                 units: str = "m", mesh_units: str = "guess", progress=None) -> bytes:
     """The .glb bytes of `mesh` rigged with `weights` at `points`, with `clips` animated
     (arguments as for `write_gltf`)."""
-    built = _built(mesh, points, weights, clips, progress, units, mesh_units)
+    built = _built(mesh, points, weights, clips, progress, units, mesh_units, form,
+                   Keys(rate, key_tolerance))
     data = built.glb_bytes()
     if progress is not None:
         progress(1.0)
@@ -106,6 +113,7 @@ def export_gltf(mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(
 
 
 def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, clips=(), *,
+               form: str = "exact", rate: float | None = None, key_tolerance: float = 0.0,
                units: str = "m", mesh_units: str = "guess", progress=None) -> int:
     """Write the .glb of `mesh` rigged with `weights` at `points`, with `clips` animated,
     to a binary file object, piece by piece (a large morph-target file is never whole in
@@ -117,6 +125,13 @@ def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, cl
         docstring for skin versus morph targets).
     clips : `Clip` objects of N features each, one glTF animation per clip, in order;
         their ``head_rotations`` animate a ``head`` node (`retarget.gltf.head`).
+    form : "exact" (the rig as it is: a skin when joint-based, else morph targets) or
+        "skin" (any rig as a skin of four influences a vertex, fitted to the clips' motion
+        by `retarget.weights.skin_fit`; its error is recorded in ``extras.retarget.fit``).
+    rate : None (the clips' own frames) or 24, 25, 30, 60: keys resampled at that rate
+        (`retarget.gltf.keys.resampled`).
+    key_tolerance : millimetres; keys that linear interpolation reproduces this closely
+        are dropped, each channel its own (`retarget.gltf.keys`); 0 keeps every key.
     units : "m" (every length in metres, the default) or "keep" (the mesh's numbers).
     mesh_units : the mesh's unit, "m", "cm", "mm", "in" or "guess" (from its size,
         `retarget.units.guess_units`).
@@ -125,26 +140,29 @@ def write_gltf(file, mesh: Mesh, points: SurfacePoints, weights: SkinWeights, cl
     Raises `RetargetError` when the sizes disagree (naming both) or the file would pass
     the GLB format's 4 GiB.
     """
-    built = _built(mesh, points, weights, clips, progress, units, mesh_units)
+    built = _built(mesh, points, weights, clips, progress, units, mesh_units, form,
+                   Keys(rate, key_tolerance))
     n_bytes = built.write(file)
     if progress is not None:
         progress(1.0)
     return n_bytes
 
 
-def export_muscles_gltf(mesh: Mesh, morphs: MuscleMorphs, clips=(), *, units: str = "m",
-                        mesh_units: str = "guess", progress=None) -> bytes:
+def export_muscles_gltf(mesh: Mesh, morphs: MuscleMorphs, clips=(), *, rate: float | None = None,
+                        key_tolerance: float = 0.0, units: str = "m", mesh_units: str = "guess",
+                        progress=None) -> bytes:
     """The .glb bytes of `mesh` driven by its muscles, with `clips` animated (arguments as
     for `write_muscles_gltf`)."""
-    built = _built_muscles(mesh, morphs, clips, progress, units, mesh_units)
+    built = _built_muscles(mesh, morphs, clips, progress, units, mesh_units, Keys(rate, key_tolerance))
     data = built.glb_bytes()
     if progress is not None:
         progress(1.0)
     return data
 
 
-def write_muscles_gltf(file, mesh: Mesh, morphs: MuscleMorphs, clips=(), *, units: str = "m",
-                       mesh_units: str = "guess", progress=None) -> int:
+def write_muscles_gltf(file, mesh: Mesh, morphs: MuscleMorphs, clips=(), *, rate: float | None = None,
+                       key_tolerance: float = 0.0, units: str = "m", mesh_units: str = "guess",
+                       progress=None) -> int:
     """Write the .glb of `mesh` driven by its muscles, with `clips` animated, to a binary
     file object (see the module docstring); returns the number of bytes written.
 
@@ -152,12 +170,12 @@ def write_muscles_gltf(file, mesh: Mesh, morphs: MuscleMorphs, clips=(), *, unit
     morphs : its muscles' played form (`retarget.muscles.morphs.muscle_morphs`), on V
         vertices.
     clips : `ContractionClip` objects of D = M + 1 dofs each, one animation per clip.
-    units, mesh_units : as for `write_gltf`.
+    rate, key_tolerance, units, mesh_units : as for `write_gltf`.
     progress : optional callable taking the fraction done in [0, 1].
 
     Raises `RetargetError` when the sizes disagree (naming both).
     """
-    built = _built_muscles(mesh, morphs, clips, progress, units, mesh_units)
+    built = _built_muscles(mesh, morphs, clips, progress, units, mesh_units, Keys(rate, key_tolerance))
     n_bytes = built.write(file)
     if progress is not None:
         progress(1.0)
@@ -181,10 +199,16 @@ def export_mesh_gltf(mesh: Mesh) -> bytes:
     return out.glb_bytes()
 
 
-def _built(mesh, points, weights, clips, progress, units, mesh_units) -> GlbBuilder:
+def _built(mesh, points, weights, clips, progress, units, mesh_units, form, keys) -> GlbBuilder:
     """The document and buffer of the export; progress reaches 0.95 (writing is left)."""
     clips = tuple(clips)
     _check_sizes(mesh, points, weights, clips)
+    if form not in FORMS:
+        raise RetargetError(f"the export form must be one of {', '.join(FORMS)}; got {form!r}")
+    clips = keys.resampled(clips)
+    fit = None
+    if form == "skin":
+        weights, fit = _fitted_skin(mesh, points, weights, clips, mesh_units)
     mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
     names = joint_names(points)
     neutral = points.positions(mesh.vertices).astype(np.float32)  # (N, 3)
@@ -212,15 +236,33 @@ def _built(mesh, points, weights, clips, progress, units, mesh_units) -> GlbBuil
             "method": weights.method,
             "landmarks": points.to_json(),
             **scaling,
+            **({"fit": fit} if fit is not None else {}),
+            **keys.record(),
         }},
     }]
+    writers = [KeyWriter(out, clip.times, keys.file_tolerance(scaling)) for clip in clips]
     if clips:
         doc["animations"] = []
-        for clip in clips:
-            doc["animations"].append(_animation(out, clip, neutral, scale))
+        for clip, writer in zip(clips, writers):
+            doc["animations"].append(_animation(writer, clip, neutral, scale))
             step()
-    _head(out, clips, mesh, [ROOT_NODE] if skinned else [MESH_NODE, ROOT_NODE])
+    _head(out, clips, mesh, [ROOT_NODE] if skinned else [MESH_NODE, ROOT_NODE], writers)
     return out
+
+
+def _fitted_skin(mesh, points, weights, clips, mesh_units) -> tuple[SkinWeights, dict]:
+    """The four-influence skin of `weights` fitted to the clips' motion, and the
+    ``extras.retarget.fit`` record of its error (millimetres; None without clips)."""
+    neutral = points.positions(mesh.vertices)
+    motion = np.concatenate([c.displacements for c in clips]) if clips else None
+    fitted = four_influence_skin(weights, neutral, motion)
+    record = {"from": "skin" if is_joint_based(weights) else "morph", "influences": SLOTS}
+    if motion is not None:
+        error = skin_fit_error(weights, fitted, motion)
+        mm = 1000.0 * unit_scale(unit_of(mesh_units, mesh.vertices))
+        record.update(rms_relative=error.rms_relative, rms_mm=error.rms * mm,
+                      worst_vertex_mm=error.worst_vertex * mm, frames=error.frames)
+    return fitted, record
 
 
 def _scaled(mesh, clips, units, mesh_units):
@@ -231,18 +273,21 @@ def _scaled(mesh, clips, units, mesh_units):
     return scaled_mesh(mesh, scale), tuple(scaled_clip(c, scale) for c in clips), chosen.record()
 
 
-def _head(out: GlbBuilder, clips, mesh: Mesh, moved: list[int]) -> None:
-    """The ``head`` node over `moved` for clips with head rotations, recorded in the
-    scene's extras (`retarget.gltf.head`)."""
-    record = add_head_motion(out, clips, head_pivot(mesh.vertices), moved)
+def _head(out: GlbBuilder, clips, mesh: Mesh, moved: list[int], writers) -> None:
+    """The ``head`` node over `moved` for clips with head rotations, keyed by each clip's
+    `KeyWriter`, recorded in the scene's extras (`retarget.gltf.head`)."""
+    pivot = head_pivot(mesh.vertices)
+    reach = float(np.linalg.norm(mesh.vertices - pivot, axis=1).max(initial=0.0))
+    record = add_head_motion(out, clips, pivot, moved, writers, reach)
     if record is not None:
         out.document["scenes"][0]["extras"]["retarget"]["head"] = record
 
 
-def _built_muscles(mesh, morphs, clips, progress, units, mesh_units) -> GlbBuilder:
+def _built_muscles(mesh, morphs, clips, progress, units, mesh_units, keys) -> GlbBuilder:
     """The document and buffer of the muscle export; progress reaches 0.95."""
     clips = tuple(clips)
     _check_muscle_sizes(mesh, morphs, clips)
+    clips = keys.resampled(clips)
     mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
     morphs = _scaled_morphs(morphs, scaling["scale"])
     names = list(morphs.names) + list(morphs.corrective_names)
@@ -263,14 +308,17 @@ def _built_muscles(mesh, morphs, clips, progress, units, mesh_units) -> GlbBuild
         "name": mesh.name or "face",
         "nodes": [MESH_NODE, ROOT_NODE],
         "extras": {"retarget": {"format": FORMAT, "deformation": "muscles", "method": "muscles",
-                                **scaling}},
+                                **scaling, **keys.record()}},
     }]
+    writers = [KeyWriter(out, clip.times, keys.file_tolerance(scaling)) for clip in clips]
+    jawed = mesh.vertices[morphs.jaw_weights > 0]
+    jaw_reach = float(np.linalg.norm(jawed - pivot, axis=1).max(initial=0.0))
     if clips:
         doc["animations"] = []
-        for clip in clips:
-            doc["animations"].append(_muscle_animation(out, clip, morphs))
+        for clip, writer in zip(clips, writers):
+            doc["animations"].append(_muscle_animation(writer, clip, morphs, jaw_reach))
             step()
-    _head(out, clips, mesh, [ROOT_NODE])
+    _head(out, clips, mesh, [ROOT_NODE], writers)
     return out
 
 
@@ -451,38 +499,38 @@ def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, n
     gltf_mesh["extras"] = {"targetNames": target_names(names), "targetScale": scale}
 
 
-def _muscle_animation(out: GlbBuilder, clip: ContractionClip, morphs: MuscleMorphs) -> dict:
+def _muscle_animation(keys: KeyWriter, clip: ContractionClip, morphs: MuscleMorphs,
+                      jaw_reach: float) -> dict:
     """One animation: the jaw joint's rotation by each frame's jaw angle about the hinge
-    axis, and the mesh's morph weights (muscles, then correctives), LINEAR."""
-    times = out.accessor(clip.times.astype(np.float32), bounds=True)
+    axis, and the mesh's morph weights (muscles, then correctives), LINEAR. Key reduction
+    measures a weight by the most its target moves a vertex, a quaternion component
+    (half the angle) by twice `jaw_reach`, how far from the hinge the jaw's vertices lie."""
     weights, angle = morphs.weights(clip.contractions)                   # (F, M), (F,)
     keyed = np.hstack([weights, morphs.corrective_weights(clip.contractions)])
     half = 0.5 * angle
     rotation = np.column_stack([np.sin(half)[:, None] * morphs.jaw_axis, np.cos(half)])  # (F, 4) xyzw
-    samplers = [{"input": times, "output": out.accessor(output.astype(np.float32)), "interpolation": "LINEAR"}
-                for output in (rotation, keyed.ravel())]
+    reach = float(np.linalg.norm(morphs.targets, axis=2).max(initial=0.0))
+    for corrective in morphs.correctives:
+        reach = max(reach, float(np.linalg.norm(corrective, axis=1).max(initial=0.0)))
+    samplers = [keys.sampler(rotation, scale=2.0 * max(jaw_reach, 1e-12)),
+                keys.sampler(keyed, scale=max(reach, 1e-12), weights=True)]
     channels = [{"sampler": 0, "target": {"node": FIRST_FEATURE_NODE, "path": "rotation"}},
                 {"sampler": 1, "target": {"node": MESH_NODE, "path": "weights"}}]
     return {"name": clip.name, "samplers": samplers, "channels": channels}
 
 
-def _animation(out: GlbBuilder, clip: Clip, neutral: np.ndarray, scale: float | None) -> dict:
+def _animation(keys: KeyWriter, clip: Clip, neutral: np.ndarray, scale: float | None) -> dict:
     """One animation: every feature joint's translation p_i + d_if (LINEAR), and for a
     morph rig (`scale` s given) the mesh's 3N target weights d_if / s."""
     f, n = clip.n_frames, len(neutral)
-    times = out.accessor(clip.times.astype(np.float32), bounds=True)
     moved = (neutral.astype(np.float64)[:, None] + clip.displacements.transpose(1, 0, 2))
-    translations = np.ascontiguousarray(moved, dtype=np.float32)  # (N, F, 3)
-    view = out.view(translations)
-    samplers, channels = [], []
-    for i in range(n):
-        output = out.accessor(translations[i], view=view, offset=i * f * 12)
-        channels.append({"sampler": len(samplers),
-                         "target": {"node": FIRST_FEATURE_NODE + i, "path": "translation"}})
-        samplers.append({"input": times, "output": output, "interpolation": "LINEAR"})
+    samplers = [keys.sampler(moved[i]) for i in range(n)]
+    channels = [{"sampler": i, "target": {"node": FIRST_FEATURE_NODE + i, "path": "translation"}}
+                for i in range(n)]
     if scale is not None:
-        output = out.accessor(clip.displacements.reshape(f * n * 3) / np.float32(scale))
         channels.append({"sampler": len(samplers),
                          "target": {"node": MESH_NODE, "path": "weights"}})
-        samplers.append({"input": times, "output": output, "interpolation": "LINEAR"})
+        samplers.append(keys.sampler(clip.displacements.reshape(f, n * 3) / np.float32(scale),
+                                     scale=scale, weights=True))
     return {"name": clip.name, "samplers": samplers, "channels": channels}
+
