@@ -19,6 +19,13 @@ CLICK_TOLERANCE = 0.15  # cm: a click lands within a few pixels, about 0.03 cm e
 
 
 @pytest.fixture(scope="module")
+def server(module_server):
+    """One server for the module (a start costs seconds of CPU): each test edits a project
+    of its own, and the sample project is only read."""
+    return module_server
+
+
+@pytest.fixture(scope="module")
 def face_file(tmp_path_factory):
     """An OBJ of a generated face (cm, symmetric about x = 0) and the face."""
     return write_face_file(tmp_path_factory.mktemp("meshes"), "edit_face.obj", _IDENTITY)
@@ -201,7 +208,8 @@ def drop_file(page, name: str, data: bytes) -> None:
 
 def test_drop_a_mesh_on_the_view_keeps_the_landmarked_project(server, page, face_file):
     path, face = face_file
-    (sample,) = server.api("GET", "/api/projects")
+    before = server.api("GET", "/api/projects")  # the sample, and the projects of earlier tests
+    sample = next(p for p in before if p["settings"].get("sample"))
     open_project(page, server, sample["id"])
 
     drop_file(page, "notes.docx", b"PK\x03\x04")
@@ -215,8 +223,8 @@ def test_drop_a_mesh_on_the_view_keeps_the_landmarked_project(server, page, face
                            ".mesh.geometry.attributes.position.count === 8430", arg=sample["id"], timeout=scaled_ms(30_000))
     page.evaluate("() => window.app.ready")
     projects = server.api("GET", "/api/projects")
-    assert [p["name"] for p in projects] == ["Sample face", path.stem]
-    assert projects[0] == sample
-    assert page.evaluate("() => location.hash") == f"#p={projects[1]['id']}"
-    assert page.input_value("#project-select") == projects[1]["id"]
+    assert [p["name"] for p in projects] == [p["name"] for p in before] + [path.stem]
+    assert projects[before.index(sample)] == sample
+    assert page.evaluate("() => location.hash") == f"#p={projects[-1]['id']}"
+    assert page.input_value("#project-select") == projects[-1]["id"]
     assert "new project" in page.inner_text("#landmarks-note")
