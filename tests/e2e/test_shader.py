@@ -14,12 +14,14 @@ pixels follow the pose, the heat map and the wireframe switch.
 from __future__ import annotations
 
 import base64
+import re
 
 import numpy as np
 import pytest
 
 from retarget.skin import SkinWeights, skin_displacements
-from tests.waits import wait_job
+from tests.e2e.conftest import ARTIFACTS, _expected_error
+from tests.waits import scaled_ms, wait_job
 
 TOLERANCE = 1e-4  # of the mesh's bounding-box diagonal
 
@@ -36,6 +38,17 @@ import { SkinnedFace } from '/static/js/scene/SkinnedFace.js';
 import { api } from '/static/js/net/api.js';
 
 const bytes = ( base64 ) => Uint8Array.from( atob( base64 ), ( c ) => c.charCodeAt( 0 ) ).buffer;
+
+// base64 of a typed array's bytes, by the browser's own encoder (a string built a byte at a
+// time took most of a second for the canvas's pixels on a loaded machine)
+function base64Of( array ) {
+	return new Promise( ( resolve, reject ) => {
+		const reader = new FileReader();
+		reader.onload = () => resolve( reader.result.slice( reader.result.indexOf( ',' ) + 1 ) );
+		reader.onerror = () => reject( reader.error );
+		reader.readAsDataURL( new Blob( [ array ] ) );
+	} );
+}
 
 async function fetchBinary( url ) {
 	const response = await fetch( url );
@@ -88,16 +101,16 @@ window.check = {
 		const gl = this.viewer.renderer.getContext();
 		const out = new Uint8Array( 4 * gl.drawingBufferWidth * gl.drawingBufferHeight );
 		gl.readPixels( 0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight, gl.RGBA, gl.UNSIGNED_BYTE, out );
-		return btoa( Array.from( out, ( c ) => String.fromCharCode( c ) ).join( '' ) );
+		return base64Of( out );
 	},
 	deformed( displacements ) {
 		this.face.setDisplacements( displacements === null ? null : new Float32Array( bytes( displacements ) ) );
 		this.viewer.render();
 		const positions = this.face.deformedPositions();
-		return btoa( String.fromCharCode( ...new Uint8Array( positions.buffer ) ) );
+		return base64Of( positions );
 	},
 	normals() {
-		return btoa( String.fromCharCode( ...new Uint8Array( this.face.deformedNormals().buffer ) ) );
+		return base64Of( this.face.deformedNormals() );
 	},
 };
 window.ready = true;
@@ -138,13 +151,42 @@ def server(module_server):
     return module_server
 
 
+@pytest.fixture(scope="module")
+def check_page(browser, server):
+    """The check page, loaded once for the module (a load parses three.js and the app's
+    modules, seconds on a loaded machine); `sample` shows the face afresh for each test.
+    Console errors collect in `page.console_errors` and fail the test during which they
+    appeared, as the conftest `page` fixture's do."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    context.set_default_timeout(scaled_ms(30_000))
+    page = context.new_page()
+    page.console_errors = []
+    page.on("console", lambda msg: page.console_errors.append(f"console.{msg.type}: {msg.text}")
+            if msg.type == "error" and not _expected_error(msg.text) else None)
+    page.on("pageerror", lambda exc: page.console_errors.append(f"page error: {exc}"))
+    page.route(server.url + "/skin-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
+    page.goto(server.url + "/skin-check")
+    page.wait_for_function("window.ready === true")
+    yield page
+    context.close()
+
+
+@pytest.fixture
+def page(check_page, request):
+    """The module's check page; a screenshot under test-artifacts/e2e/ after each test."""
+    yield check_page
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    check_page.screenshot(path=str(ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', request.node.name)}.png"))
+    errors, check_page.console_errors[:] = list(check_page.console_errors), []
+    assert not errors, "browser reported errors:\n" + "\n".join(errors)
+
+
 @pytest.fixture
 def sample(server, page):
     """The sample project shown in the check page: (page, project id, rest positions)."""
     project_id = next(p["id"] for p in server.api("GET", "/api/projects") if p["settings"].get("sample"))
-    page.route(server.url + "/skin-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
-    page.goto(server.url + "/skin-check")
-    page.wait_for_function("window.ready === true")
+    # the viewer outlives the face: undo what an earlier test set on it (a narrower view, wireframe)
+    page.evaluate("document.getElementById('viewport').style.width = ''; check.viewer?.setWireframe(false)")
     positions, _ = _mesh_arrays(server, project_id)
     assert page.evaluate("(id) => check.load(id)", project_id) == len(positions)
     return page, project_id, positions
