@@ -36,7 +36,10 @@ from retarget.arkit.solve import ArkitSolver
 from retarget.clips import ContractionClip, clip_at_rate
 from retarget.errors import RetargetError
 from retarget.gltf import write_arkit_gltf, write_gltf, write_muscles_gltf
+from retarget.gltf.glb import glb_document
 from retarget.gltf.influences import is_joint_based
+from retarget.gltf.keys import Keys
+from retarget.gltf.writer import FORMS
 from retarget.landmarks import SurfacePoints, load_landmarks
 from retarget.layouts import Layout, get_layout
 from retarget.mesh import Mesh, load_mesh
@@ -340,6 +343,8 @@ class ExportResult:
     source_units : the mesh's unit, as given or guessed ("m", "cm", "mm", "in").
     scale : what every length was multiplied by (0.01 for a centimetre mesh in metres, 1.0
         with units "keep").
+    fit : with form "skin", the fit's record (``extras.retarget.fit``: ``rms_relative``,
+        ``rms_mm``, ``worst_vertex_mm`` with a take), else None.
     """
 
     n_vertices: int
@@ -354,6 +359,7 @@ class ExportResult:
     arkit_weights: np.ndarray | None = None
     source_units: str = "m"
     scale: float = 1.0
+    fit: dict | None = None
 
     def summary(self) -> str:
         """The one-line report `export-gltf` prints."""
@@ -365,7 +371,13 @@ class ExportResult:
                 "arkit": "ARKit's 52 blendshapes as morph targets"}[self.deformation]
         units = (f"in metres (the mesh in {self.source_units}, x{self.scale:g})" if self.scale != 1.0
                  or self.source_units == "m" else f"in the mesh's {self.source_units}")
-        return (f"exported {self.n_vertices} vertices, {kind} "
+        fit = ""
+        if self.fit is not None and "rms_relative" in self.fit:
+            fit = (f" (four influences a vertex, fitted: {100 * self.fit['rms_relative']:.1f} % "
+                   f"RMS error, {self.fit['rms_mm']:.3f} mm; worst vertex {self.fit['worst_vertex_mm']:.2f} mm)")
+        elif self.fit is not None:
+            fit = " (four influences a vertex, fitted)"
+        return (f"exported {self.n_vertices} vertices, {kind}{fit} "
                 f"({self.method}){animation}, {units}: {self.n_bytes / 2**20:.1f} MiB in "
                 f"{self.seconds:.2f} s -> {self.out}")
 
@@ -388,6 +400,9 @@ def export_gltf_files(
     muscles=None,
     arkit=None,
     weights_out=None,
+    form: str = "exact",
+    rate: float | None = None,
+    key_tolerance: float = 0.0,
     units: str = "m",
     mesh_units: str = "guess",
     quiet: bool = False,
@@ -415,6 +430,11 @@ def export_gltf_files(
         generated from the landmarks (through `rig` when given, `deformer` is not used).
     weights_out : with drive "arkit" and a source, the (F, 52) weights written here as Live
         Link Face CSV at `fps`.
+    form : with drive "points", "exact" (the rig as it is) or "skin" (a four-influence skin
+        fitted to the take, `retarget.weights.skin_fit`; its error in the result).
+    rate : None (the take's own frames) or 24, 25, 30, 60 fps for the keys.
+    key_tolerance : millimetres; keys within it of the line between their neighbours are
+        dropped (`retarget.gltf.keys`); 0 keeps them all.
     units : "m" (lengths in metres, glTF's unit; the default) or "keep" (the mesh's own
         numbers); the scale is recorded in the file (`retarget.gltf.units`).
     mesh_units : the mesh's unit, "m", "cm", "mm", "in", or "guess" from its size
@@ -424,6 +444,11 @@ def export_gltf_files(
     """
     start = time.perf_counter()
     export_scale(units, "m")  # a bad choice is refused before any work
+    keys = Keys(rate, key_tolerance)
+    if form not in FORMS:
+        raise RetargetError(f"the export form must be one of {', '.join(FORMS)}; got {form!r}")
+    if form != "exact" and drive != "points":
+        raise RetargetError(f"--form {form} shapes the rig's export: it goes with --drive points")
     if mesh_units != "guess":
         unit_scale(mesh_units)
     _check_drive(drive, muscles, arkit, weights_out, rig)
@@ -444,7 +469,8 @@ def export_gltf_files(
         raise RetargetError(f"fps must be a positive number; got {fps!r}")
     mesh = read_mesh(mesh_path)
     source_units = unit_of(mesh_units, mesh.vertices)
-    scaling = {"units": units, "mesh_units": source_units}
+    scaling = {"units": units, "mesh_units": source_units, "rate": keys.rate,
+               "key_tolerance": keys.tolerance}
     points = read_landmarks(landmarks, mesh)
     the_layout = layout_for(layout, points)
     if the_layout is not None:
@@ -487,17 +513,21 @@ def export_gltf_files(
         save = partial(write_arkit_gltf, mesh=mesh, shapes=shapes, clips=clips, **scaling)
         deformation, method = "arkit", "arkit"
     else:
-        save = partial(write_gltf, mesh=mesh, points=points, weights=weights, clips=clips, **scaling)
-        deformation = "skin" if is_joint_based(weights) else "morph"
+        save = partial(write_gltf, mesh=mesh, points=points, weights=weights, clips=clips,
+                       form=form, **scaling)
+        deformation = "skin" if form == "skin" or is_joint_based(weights) else "morph"
         method = weights.method or ("rig" if rig is not None else deformer)
     written = []
     with progress_bar(100, "glTF", "%", quiet) as advance:
         write_file(out, lambda f: written.append(save(f, progress=advance)))
     if weights_out is not None:
         write_live_link(Path(weights_out), solved, fps)
-    return ExportResult(mesh.n_vertices, n, clips[0].n_frames if clips else 0, fps, deformation,
+    with open(out, "rb") as f:
+        record = glb_document(f)["scenes"][0]["extras"]["retarget"]
+    frames = keys.resampled(clips)[0].n_frames if clips else 0
+    return ExportResult(mesh.n_vertices, n, frames, keys.rate or fps, deformation,
                         method, time.perf_counter() - start, written[0], out, solved,
-                        source_units, export_scale(units, source_units))
+                        source_units, export_scale(units, source_units), record.get("fit"))
 
 
 # ---------------------------------------------------------------------------------------

@@ -12,6 +12,8 @@ from retarget.errors import RetargetError
 from retarget.files import (DRIVES, computed_weights, export_gltf_files, layout_for, read_landmarks,
                             read_mesh, require_parent, transfer_files, write_file, write_json,
                             write_npy)
+from retarget.gltf.keys import RATES
+from retarget.gltf.writer import FORMS
 from retarget.units import EXPORT_UNITS, UNITS
 from retarget.cli.parser import PROG, layout_option, non_negative_float, positive_float, positive_int
 from retarget.mesh import mesh_from_arrays, save_mesh
@@ -191,6 +193,15 @@ def add_export_gltf(commands, parents) -> None:
     p.add_argument("--mesh-units", choices=[*UNITS, "guess"], default="guess",
                    help="the unit the mesh is in (default: guess from its size: a face is about "
                    "0.2 m across, so ~0.2 is m, ~20 cm, ~200 mm; inches are never guessed)")
+    p.add_argument("--form", choices=list(FORMS), default="exact",
+                   help="exact: the rig as it is (a skin, or 3 morph targets a feature for rigs "
+                   "with negative weights: large); skin: any rig as a skin of four influences a "
+                   "vertex, fitted to the take, its error printed (small; what game engines play)")
+    p.add_argument("--rate", type=float, choices=list(RATES), default=None, metavar="FPS",
+                   help="animation keys at 24, 25, 30 or 60 fps (default: the take's own frames)")
+    p.add_argument("--key-tolerance", type=non_negative_float, default=0.0, metavar="MM",
+                   help="drop keys that the line between their neighbours reproduces within MM "
+                   "millimetres, each channel apart (default 0: every key)")
     p.set_defaults(run=_export_gltf)
 
 
@@ -213,6 +224,9 @@ def _export_gltf(args) -> int:
         muscles=args.muscles,
         arkit=args.arkit,
         weights_out=args.weights_out,
+        form=args.form,
+        rate=args.rate,
+        key_tolerance=args.key_tolerance,
         units=args.units,
         mesh_units=args.mesh_units,
         quiet=args.quiet,

@@ -185,3 +185,13 @@ def _bounds(array: np.ndarray) -> tuple[list, list]:
     values = np.asfortranarray(array.reshape(len(array), -1))
     cast = float if values.dtype.kind == "f" else int
     return ([cast(x) for x in values.min(0)], [cast(x) for x in values.max(0)])
+
+
+def glb_document(file) -> dict:
+    """The glTF document (JSON chunk) of a GLB this module wrote, read from a binary file
+    object at its start without reading the buffer (what an export records, afterwards)."""
+    magic, _, _ = struct.unpack("<4sII", file.read(12))
+    length, kind = struct.unpack("<II", file.read(8))
+    if magic != GLB_MAGIC or kind != JSON_CHUNK:
+        raise RetargetError("not a GLB with a JSON chunk first")
+    return json.loads(file.read(length))

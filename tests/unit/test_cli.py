@@ -326,6 +326,34 @@ def _export_args(files, out, *extra, source=True):
     return args
 
 
+def test_export_gltf_skin_form_rate_and_key_tolerance(files, tmp_path, capsys):
+    """--form skin makes the default (biharmonic, morph-target) rig a one-set skin, says its
+    fitted error; --rate puts the keys on a 24 fps grid; --key-tolerance drops keys."""
+    from retarget.gltf.document import GltfDocument
+    from tests.gltf_check import assert_valid_gltf
+
+    exact, small = tmp_path / "exact.glb", tmp_path / "small.glb"
+    assert main(_export_args(files, exact, "--fps", "30")) == 0
+    assert main(_export_args(files, small, "--fps", "30", "--form", "skin", "--rate", "24",
+                             "--key-tolerance", "0.05")) == 0
+    text = capsys.readouterr().out
+    assert "morph targets (biharmonic)" in text
+    assert "four influences a vertex, fitted: " in text and "% RMS error" in text
+    assert_valid_gltf(small)
+    assert small.stat().st_size < exact.stat().st_size / 4
+    gltf = GltfDocument(small.read_bytes(), "small", None)
+    record = gltf.doc.scenes[0].extras["retarget"]
+    assert record["rate"] == 24.0 and record["key_tolerance_mm"] == 0.05 and record["fit"]["from"] == "morph"
+    assert f"{100 * record['fit']['rms_relative']:.1f} % RMS error" in text
+    for sampler in gltf.doc.animations[0].samplers:
+        keys = gltf.accessor(sampler.input)[:, 0]
+        np.testing.assert_allclose(keys * 24, np.round(keys * 24), atol=1e-3)
+    assert main(_export_args(files, small, "--rate", "23")) == 2
+    assert "argument --rate: invalid choice: 23.0" in capsys.readouterr().err
+    assert main(_export_args(files, tmp_path / "m.glb", "--form", "skin", "--drive", "muscles")) == 2
+    assert "--form skin shapes the rig's export: it goes with --drive points" in capsys.readouterr().err
+
+
 def test_export_gltf_animates_what_transfer_computes(files, tmp_path, capsys):
     """The .glb's clip, skinned with its own weights, is the transfer's result."""
     from retarget.gltf import read_gltf
