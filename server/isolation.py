@@ -45,10 +45,12 @@ from retarget.errors import RetargetError
 
 __all__ = ["Isolation", "IsolationBusy", "IsolationLimits", "PRELOAD"]
 
-PRELOAD = ("ezc3d", "server.readers", "server.cli")
+PRELOAD = ("ezc3d", "pygltflib", "server.readers", "server.cli")
 """Modules the forkserver imports once, so each child starts with them loaded (the
-readers import the library, numpy, trimesh and OpenCV; `server.cli` is the main module of
-``retarget serve``, which multiprocessing re-runs in every child)."""
+readers import the library, numpy, trimesh and OpenCV; the glTF reader imports pygltflib
+only when it first reads a file, which cost every child reading a glTF ~50 ms of CPU;
+`server.cli` is the main module of ``retarget serve``, which multiprocessing re-runs in
+every child)."""
 
 _CRASH_SIGNALS = {signal.SIGSEGV, signal.SIGBUS, signal.SIGILL, signal.SIGFPE, signal.SIGABRT}
 

@@ -98,6 +98,10 @@ _RIG_CACHE_BYTES = 512 * 2**20
 """Memory for automatic rigs read lately (a dense rig of 100k vertices and 68 joints takes
 55 MB); the last one read stays whatever its size."""
 
+_MESH_CACHE_BYTES = 256 * 2**20
+"""Memory for meshes read lately (the 133k-vertex face takes about 12 MB); the last one read stays
+whatever its size."""
+
 TAKE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{16}")
 """What `secrets.token_urlsafe(12)` returns: a take id."""
 _TAKE_FILE = re.compile(r"take-[A-Za-z0-9_-]{16}\.npz")
@@ -196,6 +200,12 @@ def _unique_name(db, name: str, project_id: str | None = None) -> str:
     return f"{name} ({k})"
 
 
+def _mesh_bytes(mesh: Mesh) -> int:
+    texture = mesh.material.base_color_texture if mesh.material is not None else None
+    return len(texture or b"") + sum(array.nbytes for array in (
+        mesh.vertices, mesh.faces, mesh.uv, mesh.normals) if array is not None)
+
+
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
@@ -255,6 +265,7 @@ class ProjectStore:
         self.scratch_dir.mkdir()
         self._lock = threading.RLock()
         self._rig_cache: dict[Path, SkinWeights] = {}
+        self._mesh_cache: dict[Path, Mesh] = {}
         self._db = sqlite3.connect(
             self.data_dir / "index.sqlite", check_same_thread=False, isolation_level=None
         )
@@ -559,8 +570,23 @@ class ProjectStore:
             if found is None:
                 return None
             path, ext = found
-            data = path.read_bytes()
-        return load_mesh(data, ext)
+            mesh = self._mesh_cache.get(path)
+            data = None if mesh is not None else path.read_bytes()
+        if mesh is None:
+            mesh = load_mesh(data, ext)
+        self._remember_mesh(path, mesh)
+        return mesh
+
+    def _remember_mesh(self, path: Path, mesh: Mesh) -> None:
+        """Keep `mesh` for the next read of `path`: a mesh file is never rewritten under its
+        name and a `Mesh` is read-only, while parsing the stored file again cost every
+        request on a project's mesh tens of milliseconds of the server's CPU."""
+        with self._lock:
+            self._mesh_cache.pop(path, None)
+            self._mesh_cache[path] = mesh  # most recent last
+            while len(self._mesh_cache) > 1 and sum(
+                    _mesh_bytes(m) for m in self._mesh_cache.values()) > _MESH_CACHE_BYTES:
+                self._mesh_cache.pop(next(iter(self._mesh_cache)))
 
     # -- landmarks ----------------------------------------------------------------------
 

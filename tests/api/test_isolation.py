@@ -57,6 +57,10 @@ def nested() -> None:
     deeper(0)
 
 
+def modules() -> set[str]:
+    return set(sys.modules)
+
+
 def counted(n: int, progress) -> np.ndarray:
     for i in range(n):
         progress(i, n)
@@ -140,3 +144,8 @@ def test_the_serve_command_s_module_imports_no_web_stack_for_the_children_to_rep
     web = sorted({m.split(".")[0] for m in loaded} & {"fastapi", "starlette", "pydantic", "uvicorn", "anyio"})
     assert web == [], f"server.cli imports {web}"
     assert "server.cli" in PRELOAD
+
+
+def test_a_child_starts_with_the_preloaded_modules():
+    # the forkserver skips a preload that fails to import, and each child then pays the import
+    assert set(PRELOAD) <= Isolation().call(modules, what="x")
