@@ -2,6 +2,7 @@
 
     GET  /api/projects/{id}/export.glb[?takes=<id>,<id>|all][&settings=<JSON>][&regions=<a>,<b>]
                                        [&drive=points|muscles|arkit][&units=m|keep]
+                                       [&form=exact|skin][&rate=24|25|30|60][&key_tolerance=<mm>]
     POST /api/projects/import          multipart: file (.glb), name (optional)
 
 The export (`retarget.gltf.export_gltf`) holds the project's mesh, landmarks and the rig
@@ -25,7 +26,12 @@ settings (``mesh_units``, `server.routers.meshes`; guessed from the mesh's size 
 project has none), or the mesh's own numbers with ``units=keep``; the file records the scale
 (`retarget.gltf.units`). With "turn the head" on in ``settings`` (``apply_rotation``) each
 take's head rotations turn a ``head`` node as the app's viewer turns the face
-(`retarget.gltf.head`).
+(`retarget.gltf.head`). ``form=skin`` writes the rig as a skin of four influences a vertex
+fitted to the takes (`retarget.weights.skin_fit`; a 133k-vertex face with a dense rig and a
+30 s take: 296 MiB of morph targets as it is, 9 MiB so), its error in the file and in the
+``X-Retarget-Fit`` header (the record's JSON); ``rate`` puts the keys at that many frames a
+second, ``key_tolerance`` (millimetres, at most 10) drops the keys a line reproduces
+(`retarget.gltf.keys`).
 
 The import reads a .glb this app exported (`retarget.gltf.read_gltf`) into a new
 project: its mesh (stored as a mesh-only .glb, `retarget.gltf.export_mesh_gltf`), its
@@ -40,6 +46,7 @@ and no project is made.
 
 from __future__ import annotations
 
+import io
 import json
 import re
 from typing import Literal
@@ -50,6 +57,7 @@ from retarget.arkit.clip import ArkitClip
 from retarget.clips import ContractionClip
 from retarget.errors import RetargetError
 from retarget.gltf import export_arkit_gltf, export_gltf, export_muscles_gltf
+from retarget.gltf.glb import glb_document
 from retarget.landmarks import landmarks_from_json
 from retarget.muscles.drive import MuscleDrive
 from retarget.muscles.morphs import muscle_morphs
@@ -77,6 +85,12 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                        default="points", description="points: the rig; muscles: the muscles; arkit: ARKit's 52 shapes"),
                    units: Literal["m", "keep"] = Query(
                        default="m", description="m: lengths in metres (glTF's unit); keep: the mesh's own numbers"),
+                   form: Literal["exact", "skin"] = Query(
+                       default="exact", description="exact: the rig as it is; skin: four influences a vertex, fitted"),
+                   rate: Literal["24", "25", "30", "60", ""] = Query(
+                       default="", description="the animation's keys at this many frames a second (default: the takes' own)"),
+                   key_tolerance: float = Query(
+                       default=0.0, ge=0.0, le=10.0, description="millimetres: drop keys a line reproduces this closely"),
                    ) -> Response:
     """The project rigged and animated as a .glb download (see the module docstring)."""
     landmarks = store.landmarks(project["id"])
@@ -89,7 +103,11 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
     points = landmarks_from_json(landmarks, mesh.vertices, mesh.faces)
     target, layout = points.positions(mesh.vertices), landmarks.get("layout") or ""
     conditioning = _settings(settings)
-    scaling = {"units": units, "mesh_units": project["settings"].get(MESH_UNITS_KEY) or "guess"}
+    scaling = {"units": units, "mesh_units": project["settings"].get(MESH_UNITS_KEY) or "guess",
+               "rate": float(rate) if rate else None, "key_tolerance": key_tolerance}
+    if form != "exact" and drive != "points":
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY,
+                            f"form={form} shapes the rig's export: it goes with drive=points")
     moving = [r.strip() for r in regions.split(",") if r.strip()] or None
     clips, names = [], set()
     for info in _takes(store, project["id"], takes):
@@ -123,9 +141,12 @@ def export_project(project: ProjectDep, mesh: MeshDep, store: StoreDep,
                                           head_rotations=clip.head_rotations))
         data = export_muscles_gltf(mesh, muscle_morphs(model), solved, **scaling)
     else:
-        data = export_gltf(mesh, points, weights, clips, **scaling)
-    return Response(data, media_type=GLB_MEDIA_TYPE, headers={
-        "Content-Disposition": f'attachment; filename="{_file_name(project["name"])}.glb"'})
+        data = export_gltf(mesh, points, weights, clips, form=form, **scaling)
+    headers = {"Content-Disposition": f'attachment; filename="{_file_name(project["name"])}.glb"'}
+    fit = glb_document(io.BytesIO(data))["scenes"][0]["extras"]["retarget"].get("fit")
+    if fit is not None:
+        headers["X-Retarget-Fit"] = json.dumps(fit)
+    return Response(data, media_type=GLB_MEDIA_TYPE, headers=headers)
 
 
 @router.post("/api/projects/import", status_code=status.HTTP_201_CREATED,

@@ -6,6 +6,7 @@ gives a project with the same mesh, landmarks and weights; bad input is refused 
 reason and makes no project."""
 
 import io
+import json
 import struct
 
 import numpy as np
@@ -219,6 +220,43 @@ def test_conditioning_regions_and_takes_chosen(app, client, sample):
     clips = read_gltf(export(client, pid, takes=f"{second['id']},{take['id']}").content).clips
     assert [c.name for c in clips] == ["smile", "smile (2)"]
     client.delete(f"/api/projects/{pid}/takes/{second['id']}")
+
+
+def test_form_skin_rate_and_key_tolerance(app, client, sample, exported, tmp_path):
+    """form=skin: a one-set skin a viewer draws as the fitted weights say, its error in the
+    X-Retarget-Fit header and the file; rate and key_tolerance: keys on the grid, fewer of
+    them, within the tolerance of the take; bad values are refused with the allowed ones."""
+    pid, take = sample
+    r = export(client, pid, takes="all", form="skin", rate="24", key_tolerance="0.05")
+    assert r.status_code == 200, r.text
+    path = tmp_path / "skin.glb"
+    path.write_bytes(r.content)
+    assert_valid_gltf(path)
+    fit = json.loads(r.headers["x-retarget-fit"])
+    gltf = GltfDocument(r.content, "skin", None)
+    assert fit == gltf.doc.scenes[0].extras["retarget"]["fit"]
+    d, times = played(app, pid, take["id"])
+    grid = times[0] + np.arange(int((times[-1] - times[0]) * 24 + 1e-6) + 1) / 24
+    assert fit["from"] == "morph" and 0 < fit["rms_relative"] < 0.1 and fit["frames"] == len(grid) == 48
+    assert len(r.content) < len(exported[0].content) / 4
+    attributes = vars(gltf.doc.meshes[0].primitives[0].attributes)
+    assert attributes["JOINTS_0"] is not None and attributes.get("JOINTS_1") is None
+    face = read_gltf(path)
+    assert face.deformation == "skin"
+    (clip,) = face.clips
+    # the keys sit on the 24 fps grid; each joint within 0.05 mm (metres in the file, cm back)
+    # of the take resampled there
+    assert set(np.round(clip.times * 24, 3)) <= set(np.round(grid * 24, 3))
+    resampled = np.stack([[np.interp(grid, times, d[:, i, a]) for a in range(3)] for i in range(68)], -1)
+    joints = np.stack([[np.interp(grid, clip.times, clip.displacements[:, i, a]) for a in range(3)]
+                       for i in range(68)], -1)
+    assert np.abs(joints - resampled).max() <= 0.005 + 1e-5
+    assert "X-Retarget-Fit" not in exported[0].headers
+    for params, reason in [({"rate": "23"}, "24"), ({"key_tolerance": "-1"}, "greater than or equal to 0"),
+                           ({"key_tolerance": "11"}, "less than or equal to 10"), ({"form": "joints"}, "skin"),
+                           ({"form": "skin", "drive": "muscles"}, "form=skin shapes the rig's export")]:
+        r = export(client, pid, **params)
+        assert r.status_code == 422 and reason in str(r.json()["detail"]), (params, r.text)
 
 
 def test_export_refusals(client, sample):

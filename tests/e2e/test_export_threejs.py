@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import struct
 import urllib.parse
 
@@ -33,7 +34,7 @@ from retarget.arkit.reference import ARKIT_NAMES
 from retarget.arkit.shapes import arkit_shapes
 from retarget.gltf import export_arkit_gltf, read_gltf
 from retarget.gltf.arkit import arkit_tolerance
-from retarget.gltf.animation import (animated_weights, animation_channels, mesh_instances,
+from retarget.gltf.animation import (animated_weights, animation_channels, drawn_vertices, mesh_instances,
                                        node_transforms, posed_vertices)
 from retarget.gltf.document import GltfDocument
 from retarget.landmarks import from_vertex_indices
@@ -406,3 +407,45 @@ def test_export_panel_downloads_and_imports(server, page, sample, tmp_path):
     page.click("#export-gltf")
     page.wait_for_function("() => document.getElementById('export-note').textContent.includes('has no mesh yet')")
     assert "has no mesh yet" in page.inner_text("#error")
+
+
+def test_the_four_joint_skin_export_from_the_panel_plays_in_three_js(server, page, sample, tmp_path):
+    """Rig as four-joint skin, keys at 24 fps reduced to 0.05 mm: the panel downloads what the
+    server exports with those options and says the fit's error; stock three.js plays the file
+    (one skinIndex/skinWeight set) as glTF defines it, at a key and between keys."""
+    pid, take = sample
+    open_project(page, server, pid)
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
+    page.locator(f"#export-takes input[data-take='{take['id']}']").check()
+    page.select_option("#export-form", "skin")
+    page.select_option("#export-rate", "24")
+    page.fill("#export-key-tolerance", "0.05")
+    with page.expect_download() as download:
+        page.click("#export-gltf")
+    path = tmp_path / "skin.glb"
+    download.value.save_as(path)
+    page.wait_for_function("() => document.getElementById('export-note').textContent.startsWith('Saved')")
+    settings = page.evaluate("() => JSON.stringify(window.app.sources.settings())")
+    params = {"takes": take["id"], "settings": settings, "form": "skin", "rate": "24", "key_tolerance": "0.05"}
+    r = httpx.get(f"{server.url}/api/projects/{pid}/export.glb", timeout=60, params=params)
+    assert path.read_bytes() == r.content
+    fit = json.loads(r.headers["x-retarget-fit"])
+    assert (f"four-joint skin: {100 * fit['rms_relative']:.1f} % RMS error ({fit['rms_mm']:.2f} mm), "
+            f"worst vertex {fit['worst_vertex_mm']:.2f} mm") in page.inner_text("#export-note")
+
+    page.route(server.url + "/three-check", lambda route: route.fulfill(body=PAGE, content_type="text/html"))
+    page.goto(server.url + "/three-check")
+    page.wait_for_function("window.ready === true")
+    url = f"/api/projects/{pid}/export.glb?{urllib.parse.urlencode(params)}"
+    loaded = page.evaluate("(url) => check.load(url)", url)
+    assert loaded["skinned"] and loaded["morphs"] == 0 and loaded["skinAttributes"] == ["skinIndex", "skinWeight"]
+    gltf = GltfDocument(r.content, "skin", None)
+    rest = mesh_instances(gltf)[0]["positions"].astype(np.float64)
+    size = float(np.linalg.norm(rest.max(0) - rest.min(0)))
+    clip = read_gltf(r.content).clips[0]
+    key = min(int(np.abs(clip.displacements).max(axis=(1, 2)).argmax()), clip.n_frames - 2)
+    for t in (clip.times[key], 0.5 * (clip.times[key] + clip.times[key + 1])):
+        expected = drawn_vertices(gltf, [t])[0]
+        three = _decoded(page.evaluate("(t) => check.posed(t)", float(t)))
+        assert np.abs(expected - rest).max() / size > 0.01
+        assert np.abs(three - expected).max() / size < TOLERANCE

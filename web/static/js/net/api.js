@@ -368,20 +368,26 @@ export const api = {
 
 	/**
 	 * The project as a glTF binary (server/routers/exports.py), its takes as animations.
-	 * @param {{takes?: string, settings?: object|null, regions?: string[]|null, drive?: string}} [options] -
+	 * @param {{takes?: string, settings?: object|null, regions?: string[]|null, drive?: string,
+	 *   units?: string, form?: string, rate?: string, keyTolerance?: number}} [options] -
 	 *   takes: ids joined by commas, or 'all'; settings: ConditionSettings JSON; regions: the
-	 *   regions that move (null: all); drive: 'points' (the rig) or 'muscles' (a morph
-	 *   target per muscle and a jaw joint).
-	 * @returns {Promise<{blob: Blob, filename: string}>} the file and the server's name for it
+	 *   regions that move (null: all); drive: 'points' (the rig), 'muscles' (a morph target
+	 *   per muscle and a jaw joint) or 'arkit'; units: 'm' or 'keep'; form: 'exact' or 'skin'
+	 *   (four influences a vertex, fitted); rate: '' (the takes' frames) or '24', '25', '30',
+	 *   '60'; keyTolerance: millimetres (0 keeps every key).
+	 * @returns {Promise<{blob: Blob, filename: string, fit: object|null}>} the file, the
+	 *   server's name for it and, for the skin form, its fit's error (X-Retarget-Fit)
 	 */
-	async exportGltf( id, { takes = '', settings = null, regions = null, drive = 'points', units = 'm' } = {} ) {
+	async exportGltf( id, { takes = '', settings = null, regions = null, drive = 'points', units = 'm', form = 'exact', rate = '', keyTolerance = 0 } = {} ) {
 
-		const query = new URLSearchParams( { takes, drive, units } );
+		const query = new URLSearchParams( { takes, drive, units, form, rate, key_tolerance: keyTolerance } );
 		if ( settings ) query.set( 'settings', JSON.stringify( settings ) );
 		if ( regions ) query.set( 'regions', regions.join( ',' ) );
 		const response = await request( 'GET', `/api/projects/${ id }/export.glb?${ query }`, { raw: true } );
 		const disposition = response.headers.get( 'Content-Disposition' ) ?? '';
-		return { blob: await response.blob(), filename: /filename="([^"]+)"/.exec( disposition )?.[ 1 ] ?? 'project.glb' };
+		const fit = response.headers.get( 'X-Retarget-Fit' );
+		return { blob: await response.blob(), filename: /filename="([^"]+)"/.exec( disposition )?.[ 1 ] ?? 'project.glb',
+			fit: fit ? JSON.parse( fit ) : null };
 
 	},
 

@@ -12,7 +12,9 @@ import { MeshUnits } from './MeshUnits.js';
  * manifest* downloads the project and all its takes with the conditioning settings as a
  * zip for `retarget batch` (GET /api/projects/{id}/manifest.zip). *Units*: metres (the
  * default, the mesh scaled from its unit, which `MeshUnits` shows and changes beside the
- * mesh info) or the mesh's own numbers (`units=keep`).
+ * mesh info) or the mesh's own numbers (`units=keep`). *Rig as*: exact, or a four-joint skin
+ * fitted to the takes (`form=skin`; its error, from the X-Retarget-Fit header, is shown
+ * after the download); *Keys at* a rate and *reduce to* a key tolerance in millimetres.
  *
  * The panel holds no maths: the server retargets and writes the file. Refusals show the
  * server's reason in the panel's note and the page's error banner.
@@ -85,9 +87,9 @@ export class ExportPanel {
 		this._note( count ? `Retargeting ${ count } take${ count > 1 ? 's' : '' } and writing the glTF…` : 'Writing the glTF…' );
 		try {
 
-			const { blob, filename } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions(), drive: this.app.sources.drive, units: $( 'export-units' ).value } );
+			const { blob, filename, fit } = await api.exportGltf( id, { takes, settings: this.app.conditioning.toJSON(), regions: this.app.regions.movingRegions(), drive: this.app.sources.drive, units: $( 'export-units' ).value, ...this._keys() } );
 			this._save( blob, filename );
-			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB${ count ? `, ${ count } animation${ count > 1 ? 's' : '' }` : '' }).` );
+			this._note( `Saved ${ filename } (${ ( blob.size / 2 ** 20 ).toFixed( 1 ) } MiB${ count ? `, ${ count } animation${ count > 1 ? 's' : '' }` : '' }).${ fitNote( fit ) }` );
 			return { filename, size: blob.size };
 
 		} catch ( error ) {
@@ -100,6 +102,15 @@ export class ExportPanel {
 			button.disabled = false;
 
 		}
+
+	}
+
+	/** The panel's choice of rig form, key rate and key tolerance, as `api.exportGltf` takes them. */
+	_keys() {
+
+		const tolerance = Number( $( 'export-key-tolerance' ).value );
+		return { form: $( 'export-form' ).value, rate: $( 'export-rate' ).value,
+			keyTolerance: Number.isFinite( tolerance ) && tolerance > 0 ? tolerance : 0 };
 
 	}
 
@@ -245,5 +256,17 @@ export class ExportPanel {
 		this.app.errors.show( error );
 
 	}
+
+}
+
+/**
+ * What the export note says of a skin fit (`extras.retarget.fit`), or ''.
+ * @param {object|null} fit
+ */
+function fitNote( fit ) {
+
+	if ( ! fit ) return '';
+	if ( fit.rms_relative === undefined ) return ' The rig is a four-joint skin (no take to measure its error on).';
+	return ` The rig is a four-joint skin: ${ ( 100 * fit.rms_relative ).toFixed( 1 ) } % RMS error (${ fit.rms_mm.toFixed( 2 ) } mm), worst vertex ${ fit.worst_vertex_mm.toFixed( 2 ) } mm.`;
 
 }
