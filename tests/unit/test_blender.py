@@ -240,3 +240,35 @@ def test_blender_turns_the_head_as_the_app_does(face, tmp_path_factory):
     assert worst < 1e-4
     turned = app_vertices(mesh, weights, clip, 16) - (mesh.vertices + skin_displacements(weights, clip.displacements[16]))
     assert np.abs(turned).max() > 0.1 * face["size"]                   # the head does turn
+
+
+def test_blender_plays_the_four_joint_skin_form_with_reduced_keys_as_gltf_defines_it(face, tmp_path_factory):
+    """A biharmonic rig (negative weights) exported as a four-joint skin (form="skin") with
+    keys at 24 fps reduced to 0.05 mm: an armature without shape keys, and Blender's positions
+    at keys and between them are what glTF defines (`retarget.gltf.animation`), so Blender and
+    three.js (tests/e2e/test_export_threejs.py) play the file alike."""
+    mesh, points = face["mesh"], face["points"]
+    weights = compute_weights("biharmonic", mesh.vertices, mesh.faces, points, get_layout("ibug68"))
+    d = tmp_path_factory.mktemp("blender_skin_form")
+    data = export_gltf(mesh, points, weights, [face["clip"]], form="skin", rate=24, key_tolerance=0.05)
+    (d / "face.glb").write_bytes(data)
+    frames = (0.0, 5.5, 12.0, 20.25)
+    result = subprocess.run([str(blender_python()), str(EVALUATE), str(d / "face.glb"), str(d / "out.npz"),
+                             "24", *map(str, frames)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    with np.load(d / "out.npz") as z:
+        blender, info = z["positions"], json.loads(str(z["info"]))
+    assert len(info["armatures"]) == 1 and info["shape_keys"] == []
+    gltf = GltfDocument(data, "face.glb", None)
+    (instance,) = mesh_instances(gltf)
+    channels = animation_channels(gltf, gltf.doc.animations[0])
+    assert max(len(c[2]) for c in channels) < 24  # fewer keys than the 24 of a second at 24 fps
+    times = np.array(frames) / 24.0
+    expected = gltf_vertices(gltf, instance, np.arange(len(instance["positions"])),
+                             node_transforms(gltf, gltf.doc.nodes, channels, times),
+                             animated_weights(gltf, channels, times), times)
+    size = _file_scale(data) * face["size"]
+    worst = np.abs(blender - expected).max() / size
+    print(f"four-joint skin form: |Blender - glTF| = {worst:.1e} of the mesh size")
+    assert worst < 1e-4
+    assert np.abs(expected - instance["positions"]).max() / size > 0.01  # the face does move
