@@ -77,15 +77,16 @@ def server(tmp_path_factory, sample_data_dir):
     srv.stop()
 
 
-@pytest.fixture
-def camera(request, tmp_path) -> Path:
-    """The fake camera's Y4M file; `request.param` says what it shows."""
+@pytest.fixture(scope="module")
+def camera(request, tmp_path_factory) -> Path:
+    """The fake camera's Y4M file; `request.param` says what it shows. Module-scoped, so
+    pytest runs the tests of one camera together, on one browser (a launch costs seconds)."""
     frames = (video_frames(VIDEO, 5 * CAMERA_FPS, CAMERA_SIZE) if request.param == "performer"
               else [checkerboard(CAMERA_SIZE)] * CAMERA_FPS)
-    return write_y4m(tmp_path / "camera.y4m", frames, CAMERA_FPS)
+    return write_y4m(tmp_path_factory.mktemp("camera") / "camera.y4m", frames, CAMERA_FPS)
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def browser(camera):
     """Chromium whose only camera is the `camera` file, granted without asking; the
     conftest `page` fixture (console errors fail the test, screenshots) runs on it."""
