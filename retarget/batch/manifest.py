@@ -2,6 +2,9 @@
 
     version: 1
     outputs: [gltf, arkit_csv, npy]      # what each pair makes (default: [gltf])
+    gltf: {form: skin, rate: 24, key_tolerance: 0.05}   # the .glb's rig form, key rate and
+                                         # key reduction in mm (`retarget.gltf.write_gltf`;
+                                         # default: exact, the take's frames, every key)
     characters:
       - name: alice                      # a folder name: letters, digits, . _ -
         mesh: alice.obj                  # a mesh and its landmarks JSON ...
@@ -128,6 +131,7 @@ class Manifest:
     takes: tuple[TakeEntry, ...]
     outputs: tuple[str, ...]
     pairs: tuple[tuple[str, str], ...]
+    gltf: dict = field(default_factory=dict)
 
     def character(self, name: str) -> Character:
         return next(c for c in self.characters if c.name == name)
@@ -170,7 +174,7 @@ def manifest_from_dict(data, folder, *, path=None) -> Manifest:
     where = f"manifest {str(path)!r}" if path is not None else "manifest"
     if not isinstance(data, dict):
         raise RetargetError(f"{where} must be a mapping with 'characters' and 'takes'")
-    _known(data, {"version", "outputs", "characters", "takes", "pairs"}, where)
+    _known(data, {"version", "outputs", "gltf", "characters", "takes", "pairs"}, where)
     if data.get("version", 1) != 1:
         raise RetargetError(f"{where}: version {data.get('version')!r} is not supported (only 1)")
     outputs = data.get("outputs", ["gltf"])
@@ -189,7 +193,25 @@ def manifest_from_dict(data, folder, *, path=None) -> Manifest:
             seen.add(entry.name)
     pairs = _pairs(data.get("pairs", "all"), characters, takes)
     return Manifest(Path(path) if path is not None else folder, characters, takes,
-                    tuple(dict.fromkeys(outputs)), pairs)
+                    tuple(dict.fromkeys(outputs)), pairs, _gltf_options(data.get("gltf", {}), where))
+
+
+def _gltf_options(options, where: str) -> dict:
+    """The checked ``gltf`` options: `retarget.gltf.write_gltf`'s form, rate, key_tolerance."""
+    from retarget.gltf.keys import Keys
+    from retarget.gltf.writer import FORMS
+
+    if not isinstance(options, dict):
+        raise RetargetError(f"{where}: gltf must be a mapping of form, rate and key_tolerance")
+    _known(options, {"form", "rate", "key_tolerance"}, f"{where}: gltf")
+    form = options.get("form", "exact")
+    if form not in FORMS:
+        raise RetargetError(f"{where}: gltf: form must be one of {', '.join(FORMS)}; got {form!r}")
+    try:
+        keys = Keys(options.get("rate"), options.get("key_tolerance", 0.0))
+    except (RetargetError, TypeError) as exc:
+        raise RetargetError(f"{where}: gltf: {exc}") from None
+    return {"form": form, "rate": keys.rate, "key_tolerance": keys.tolerance}
 
 
 def _entries(data: dict, key: str, limit: int, where: str) -> list:

@@ -93,7 +93,7 @@ def plan_batch(manifest: Manifest, out, *, force: bool = False, retry_failed: bo
         take = manifest.take(take_name)
         digest = _digest({"format": INDEX_FORMAT, "version": __version__, "character": characters[character],
                           "take": file_digest(take.file), "take_settings": take.to_dict(),
-                          "outputs": list(manifest.outputs)})
+                          "outputs": list(manifest.outputs), "gltf": manifest.gltf})
         key = f"{character}/{take_name}"
         folder = out / character / take_name
         entry = index.get(key)
@@ -107,7 +107,7 @@ def plan_batch(manifest: Manifest, out, *, force: bool = False, retry_failed: bo
                 and entry.get("status") == "failed" and entry.get("lasting")):
             failed_before[key] = str(entry.get("reason", ""))
             continue
-        jobs.append(PairJob(character, take, manifest.outputs, str(folder.resolve()), digest))
+        jobs.append(PairJob(character, take, manifest.outputs, str(folder.resolve()), digest, manifest.gltf))
         if "arkit_csv" in manifest.outputs:
             arkit.add(character)
     return Plan(manifest, out, jobs, skipped, failed_before, arkit, index)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 import uuid
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -71,13 +71,15 @@ class CharacterFailure:
 @dataclass(frozen=True)
 class PairJob:
     """One pair to make: the take, the outputs (kinds of `OUTPUTS`), the folder
-    ``OUT/<character>/<take>`` they go to (absolute) and the pair's content hash."""
+    ``OUT/<character>/<take>`` they go to (absolute), the pair's content hash and the
+    .glb's options (`Manifest.gltf`)."""
 
     character: str
     take: TakeEntry
     outputs: tuple[str, ...]
     folder: str
     digest: str
+    gltf: dict = field(default_factory=dict)
 
     @property
     def key(self) -> str:
@@ -169,7 +171,7 @@ def pair_outputs(state: CharacterState | CharacterFailure, job: PairJob) -> Pair
         folder.mkdir(parents=True, exist_ok=True)
         for kind in job.outputs:
             path = folder / OUTPUTS[kind]
-            write_atomic(path, partial(_write_output, kind, state, clip, take.fps))
+            write_atomic(path, partial(_write_output, kind, state, clip, take.fps, job.gltf))
             files.append(path.name)
         return PairResult(job.key, job.digest, True, files=tuple(files), seconds=time.perf_counter() - start)
     except (RetargetError, OSError) as exc:
@@ -177,13 +179,13 @@ def pair_outputs(state: CharacterState | CharacterFailure, job: PairJob) -> Pair
                           seconds=time.perf_counter() - start, lasting=isinstance(exc, RetargetError))
 
 
-def _write_output(kind: str, state: CharacterState, clip, fps: float, f) -> None:
+def _write_output(kind: str, state: CharacterState, clip, fps: float, gltf: dict, f) -> None:
     """Write one output of the retargeted `clip` ((F, N, 3) feature displacements, mesh
-    units) to the binary file `f`."""
+    units) to the binary file `f`; `gltf` the .glb's options."""
     if kind == "gltf":
         from retarget.gltf import export_gltf
 
-        f.write(export_gltf(state.mesh, state.points, state.weights, [clip]))
+        f.write(export_gltf(state.mesh, state.points, state.weights, [clip], **gltf))
     elif kind == "npy":
         # streamed in chunks of frames: a long take on a dense face is (F, V, 3) float32 of
         # gigabytes, never held at once; the bytes are np.save's

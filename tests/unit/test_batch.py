@@ -83,6 +83,11 @@ def _minimal(**changes) -> dict:
     (_minimal(take={"fps": -3}), "takes[0] ('t'): fps must be a positive number"),
     (_minimal(takes=[{"name": "t", "file": "a.csv"}, {"name": "t", "file": "b.csv"}]), "'t' is used twice"),
     (_minimal(pairs=[{"character": "a", "take": "nope"}]), "pairs[0]: no take named 'nope'"),
+    (_minimal(gltf={"form": "joints"}), "gltf: form must be one of exact, skin"),
+    (_minimal(gltf={"rate": 29.97}), "gltf: the animation rate must be one of 24, 25, 30, 60"),
+    (_minimal(gltf={"key_tolerance": -1}), "gltf: the key tolerance must be a number of millimetres"),
+    (_minimal(gltf={"scale": 2}), "gltf: unknown key(s) 'scale'"),
+    (_minimal(gltf=[1]), "gltf must be a mapping"),
 ])
 def test_manifest_errors_name_the_entry(data, message, tmp_path):
     with pytest.raises(RetargetError) as error:
@@ -145,6 +150,28 @@ def test_changed_take_setting_redoes_only_its_pairs(manifest_path, reference, tm
     changed.write_text(yaml.safe_dump(data))
     plan = plan_batch(read_manifest(changed), reference)
     assert {job.key for job in plan.jobs} == {f"{c}/take1" for c in ("wide", "narrow", "lips")}
+
+
+def test_gltf_options_shape_the_glb_and_redo_the_pairs_they_change(manifest_path, reference, tmp_path):
+    """``gltf: {form: skin, rate: 24, key_tolerance: 0.05}``: every pair's .glb becomes a
+    four-joint skin keyed at 24 fps (what the exporter records), and the changed option
+    redoes every pair that writes a .glb, only those options' digests differing."""
+    from retarget.gltf.document import GltfDocument
+
+    data = yaml.safe_load(manifest_path.read_text())
+    data["gltf"] = {"form": "skin", "rate": 24, "key_tolerance": 0.05}
+    data["pairs"] = [{"character": "wide", "take": "take1"}]
+    changed = manifest_path.parent / "small-gltf.yaml"
+    changed.write_text(yaml.safe_dump(data))
+    plan = plan_batch(read_manifest(changed), reference)
+    assert [job.key for job in plan.jobs] == ["wide/take1"]   # done before, with other options
+    report = run_batch(plan_batch(read_manifest(changed), tmp_path), workers=0)
+    assert report.succeeded == ["wide/take1"]
+    record = GltfDocument((tmp_path / "wide/take1/animation.glb").read_bytes(), "glb", None) \
+        .doc.scenes[0].extras["retarget"]
+    assert record["rate"] == 24.0 and record["key_tolerance_mm"] == 0.05 and "rms_relative" in record["fit"]
+    assert len((tmp_path / "wide/take1/animation.glb").read_bytes()) < \
+        len((reference / "wide/take1/animation.glb").read_bytes())
 
 
 def test_cli_runs_a_batch(manifest_path, tmp_path, capsys):
