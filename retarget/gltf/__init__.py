@@ -18,7 +18,8 @@ as named morph targets animated by their weights (`retarget.arkit.ArkitClip`). `
 the binary container, `influences` the weights as JOINTS_n / WEIGHTS_n, `morph` the
 weights as morph targets, `sparse` morph targets that keep only the vertices they move,
 `units` the export's scale to metres (recorded, undone by `read_gltf`), `head` the ``head``
-node that turns the face by a take's head rotations.
+node that turns the face by a take's head rotations, `keys` the animation's key rate
+and key reduction.
 """
 
 import importlib

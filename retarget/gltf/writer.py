@@ -23,8 +23,17 @@ only with uv), the feature points as joints, the deformation and one animation p
   slider range from the first key only and clamps the animation to it, so widen the
   ranges to [-1, 1] after import (tests/blender/evaluate_glb.py does).
 
+- ``form="skin"`` makes any rig a skin of one JOINTS_0 / WEIGHTS_0 set (four influences
+  a vertex, the root among them): the weights are first fitted to the clips' motion by
+  `retarget.weights.skin_fit` (exact for rows that already fit), and the fit's error is
+  recorded in ``extras.retarget.fit``. Large dense rigs become a few MiB instead of
+  hundreds, approximately.
+
+Animation keys: `retarget.gltf.keys` resamples the clips at a ``rate`` and drops the keys a
+line reproduces within ``key_tolerance`` millimetres, each channel keyed apart.
+
 Either way a glTF viewer draws ``v0 + W d_f``, what `retarget.skin.skin_displacements`
-computes, to float32 rounding; normals are not animated (translation-only joints keep
+computes, to float32 rounding (W the fitted weights for the skin form); normals are not animated (translation-only joints keep
 them; morph targets carry no NORMAL offsets).
 
 `export_muscles_gltf` and `write_muscles_gltf` write a face driven by its muscles
