@@ -183,6 +183,17 @@ def test_new_mesh_replaces_the_old_file_and_drops_landmarks(client, tmp_path):
     assert client.get(f"/api/projects/{pid}/landmarks").status_code == 404
 
 
+def test_the_store_parses_a_mesh_once_and_a_new_one_anew(client, tmp_path):
+    store = client.app.state.store
+    pid = new_project(client)
+    upload(client, pid, "a.obj", face_obj(tmp_path))
+    assert store.mesh(pid) is store.mesh(pid)
+    v, f = octahedron()
+    upload(client, pid, "b.ply", _saved(tmp_path, "o.ply", v, f))
+    vertices, _ = decode_arrays(client.get(f"/api/projects/{pid}/mesh/arrays").content)
+    np.testing.assert_allclose(vertices, v.astype(np.float32))
+
+
 def test_mesh_routes_without_a_mesh(client):
     pid = new_project(client)
     r = client.get(f"/api/projects/{pid}/mesh")
