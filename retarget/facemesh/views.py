@@ -5,9 +5,9 @@ A face found in a picture is only useful if each of its points can be carried ba
 the mesh exactly, so the views are orthographic: a pixel's ray is the viewing direction
 through it, and the z-buffer (`retarget.raster`) already holds the triangle and the
 barycentric weights it hits. Shading is what a face detector trained on photographs
-needs to see a face: Lambert under a light at the viewer (its texture when the mesh has
-one), with back faces dark, so that eye and mouth openings read as dark holes as they do
-in a photograph.
+needs to see a face: Lambert under a light at the viewer or beside it (`relit`; its
+texture when the mesh has one), with back faces dark, so that eye and mouth openings read
+as dark holes as they do in a photograph.
 """
 
 from __future__ import annotations
@@ -21,12 +21,14 @@ from scipy.ndimage import distance_transform_edt
 from retarget.mesh import Mesh
 from retarget.raster import Raster, rasterise
 
-__all__ = ["View", "Picture", "look_from", "picture", "texture_rgb", "vertex_normals", "surface_hits"]
+__all__ = ["AT_VIEWER", "View", "Picture", "look_from", "picture", "relit", "texture_rgb", "vertex_normals",
+           "surface_hits"]
 
 _BACKGROUND = 0
 _BACK_FACE = 20
 _AMBIENT = 0.25
 _ALBEDO = 200.0
+AT_VIEWER = np.array([0.0, 0.0, -1.0])   # a light at the viewer, in a view's axes
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,20 +85,36 @@ class Picture:
 
 def picture(mesh: Mesh, view: View, normals: np.ndarray, texture: np.ndarray | None = None) -> Picture:
     """The mesh seen through `view`: Lambert-shaded grey, or its texture (rgb (h, w, 3)
-    uint8 sampled with the mesh's uv) times the shading; back faces dark.
+    uint8 sampled with the mesh's uv) times the shading, lit from the viewer; back faces
+    dark.
 
     normals : (V, 3) unit vertex normals (`vertex_normals`), computed once per mesh.
     """
     image_points = view.to_image(mesh.vertices)
     raster = rasterise(image_points[:, :2], image_points[:, 2], mesh.faces, (view.size, view.size),
                        perspective=False, cull_back=False)
+    return Picture(view, _shaded(view, raster, mesh, normals, texture, AT_VIEWER[None])[0], raster)
+
+
+def relit(pic: Picture, mesh: Mesh, normals: np.ndarray, texture: np.ndarray | None,
+          lights: np.ndarray) -> list[Picture]:
+    """`pic` shaded again under each light of `lights` (L, 3), directions toward the light
+    in the view's axes (x right, y down, z into the picture; `AT_VIEWER` is (0, 0, -1)).
+    The raster, the pixels' normals and albedo are shared: a light costs one shading pass
+    over the seen pixels, not a rasterisation."""
+    return [Picture(pic.view, rgb, pic.raster)
+            for rgb in _shaded(pic.view, pic.raster, mesh, normals, texture, lights)]
+
+
+def _shaded(view: View, raster: Raster, mesh: Mesh, normals: np.ndarray, texture: np.ndarray | None,
+            lights: np.ndarray) -> list[np.ndarray]:
+    """(size, size, 3) uint8 rgb of the raster under each light of `lights` (L, 3) (as
+    `relit`)."""
     seen = raster.triangle >= 0
-    tri = raster.triangle[seen]
     bary = raster.barycentric[seen]
-    corners = mesh.faces[tri]
+    corners = mesh.faces[raster.triangle[seen]]
     n = np.einsum("pk,pkc->pc", bary, normals[corners])
-    facing = np.clip(-(n @ view.rotation[2]) / np.maximum(np.linalg.norm(n, axis=1), 1e-12), 0.0, 1.0)
-    light = _AMBIENT + (1.0 - _AMBIENT) * facing
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
     if texture is not None and mesh.uv is not None:
         uv = np.einsum("pk,pkc->pc", bary, mesh.uv[corners])
         h, w = texture.shape[:2]
@@ -105,12 +123,17 @@ def picture(mesh: Mesh, view: View, normals: np.ndarray, texture: np.ndarray | N
         albedo = cv2.remap(texture, x[:, None], y[:, None], cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_WRAP)[:, 0].astype(np.float64)
     else:
-        albedo = np.full((len(tri), 3), _ALBEDO)
-    color = albedo * light[:, None]
-    color[~raster.front[seen]] = _BACK_FACE
-    rgb = np.full((view.size, view.size, 3), _BACKGROUND, dtype=np.uint8)
-    rgb[seen] = np.clip(np.rint(color), 0, 255).astype(np.uint8)
-    return Picture(view, rgb, raster)
+        albedo = np.full((len(n), 3), _ALBEDO)
+    back = ~raster.front[seen]
+    facing = np.clip(n @ (np.asarray(lights, dtype=np.float64) @ view.rotation).T, 0.0, 1.0)   # (P, L)
+    out = []
+    for shade in (_AMBIENT + (1.0 - _AMBIENT) * facing).T:
+        color = albedo * shade[:, None]
+        color[back] = _BACK_FACE
+        rgb = np.full((view.size, view.size, 3), _BACKGROUND, dtype=np.uint8)
+        rgb[seen] = np.clip(np.rint(color), 0, 255).astype(np.uint8)
+        out.append(rgb)
+    return out
 
 
 def texture_rgb(mesh: Mesh) -> np.ndarray | None:
