@@ -8,6 +8,7 @@ import pytest
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
 from retarget.sample_face import sample_face
+from retarget.sources.ring_tracks import RingTracks
 from retarget.sources.markers import (
     MarkerTracker,
     assign_markers,
@@ -317,3 +318,37 @@ def test_the_dutreve_layout_on_webcam_footage_is_named_from_the_tracks(tmp_path)
     clear = truth.visible[:, 0] & (truth.facing[:, 0] > 0.5)
     assert np.median(err[clear]) < 0.5 and (np.nan_to_num(err[clear], nan=np.inf) < 3).mean() > 0.95
     assert np.nanmax(err) < 3                              # every point is its own marker
+
+
+def _ringed_frame(markers, rng, h=120, w=160) -> np.ndarray:
+    """(h, w) uint8: skin at 150 with ring markers (x, y, dot grey level) of 3 px radius
+    (a dot of 1.5 px), drawn at 4x4 supersampling, with sensor noise."""
+    ss = 4
+    yy, xx = (np.mgrid[0:h * ss, 0:w * ss] + 0.5) / ss
+    img = np.full((h * ss, w * ss), 150.0)
+    for x, y, dot in markers:
+        r = np.hypot(xx - x, yy - y)
+        img = np.where(r < 3.0, 40.0, img)
+        img = np.where(r < 1.5, dot, img)
+    img = img.reshape(h, ss, w, ss).mean((1, 3)) + rng.normal(0, 3, (h, w))
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def test_a_marker_facing_the_camera_again_takes_back_its_track_from_the_skin():
+    """Twelve ring markers; one turns edge-on for 30 frames (its dot no brighter than its
+    ring: a faint peak, like a skin feature) and what is left of it slides 0.4 px a frame
+    along the skin, then it faces the camera again where it was while the faint spot stays
+    where it slid to. The track that followed the faint peaks must come back to the marker
+    (held by the skin, it stayed 12 px away and the marker became a thirteenth track)."""
+    rng = np.random.default_rng(0)
+    grid = np.array([(30 + 33 * i, 30 + 30 * j) for j in range(3) for i in range(4)], float)
+    frames = []
+    for t in range(60):
+        slid = (grid[5, 0] + 0.4 * (min(t, 39) - 9), grid[5, 1], 48.0)
+        markers = [(x, y, 220.0) for k, (x, y) in enumerate(grid) if k != 5 or not 10 <= t < 40]
+        frames.append(_ringed_frame(markers + ([slid] if t >= 10 else []), rng))
+    p = RingTracks().fit(frames).points_.astype(np.float64)
+    d = np.linalg.norm(p[:, :, None] - grid[None, None], axis=3)          # (F, M, 12)
+    owner = np.nanargmin(np.nanmean(d[40:], axis=0), axis=1)
+    assert p.shape[1] == 12 and sorted(owner) == list(range(12))         # one track per marker
+    assert np.nanmax(d[40:, np.arange(12), owner]) < 1.0                  # each on its marker again
