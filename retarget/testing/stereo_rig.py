@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -32,6 +33,8 @@ __all__ = [
     "FACE_CENTRE",
     "MM_PER_CM",
     "stereo_cameras",
+    "webcam_cameras",
+    "webcam_look",
     "rig_calibration",
     "checkerboard_views",
     "render_stereo_video",
@@ -67,6 +70,54 @@ def stereo_cameras(
     return left, right
 
 
+def webcam_cameras(
+    distance: float = 1000.0,
+    baseline: float = 80.0,
+    focal: float = 768.0,
+    size: tuple[int, int] = (640, 480),
+) -> tuple[Camera, Camera]:
+    """(upper, lower) webcams one above the other, `baseline` mm apart and centred on a
+    point `distance` mm in front of `FACE_CENTRE`, both looking towards it along parallel
+    axes; `focal` px, square pixels, principal point at the image centre.
+
+    The rig of a tester's report (issue 17): two 640 x 480 webcams stacked 8 cm apart at
+    1 m. The upper one plays the "left" camera (camera 0) of `retarget.sources.stereo`.
+    """
+    if not distance > 0 or not baseline > 0 or not focal > 0:
+        raise RetargetError(f"distance, baseline and focal must be > 0; got {distance!r}, "
+                            f"{baseline!r}, {focal!r}")
+    fov = 2 * np.degrees(np.arctan(0.5 * size[1] / focal))
+    forward = np.array([0.0, 0.0, -float(distance)])
+    half = np.array([0.0, 0.5 * baseline, 0.0])
+    eyes = (FACE_CENTRE - forward + half, FACE_CENTRE - forward - half)
+    return tuple(look_at(eye, eye + forward, (0.0, 1.0, 0.0), fov, size) for eye in eyes)
+
+
+def webcam_look(image: np.ndarray, rng: np.random.Generator, poor: bool = False) -> np.ndarray:
+    """(H, W, 3) uint8 BGR: a clean grey render (H, W, 3) uint8 (its first channel is
+    used) as a cheap webcam delivers it.
+
+    In order: lens blur (Gaussian, sigma 0.6-1 px), uneven light (exposure 0.6-1, a
+    linear fall-off of up to 15 % either way from the centre to the edges, vignetting
+    of 15 % at the corners, a black level up to 20), sensor noise (1.5-3.5 grey levels)
+    and JPEG at quality 50-80 (what a webcam's MJPEG stream or a compressed clip
+    leaves). `poor`: the view of a board moved too fast or badly lit: blur 1.8 times,
+    light fall-off 1.6 times, noise 1.5 times, JPEG quality 35.
+    """
+    gray = cv2.GaussianBlur(image[..., 0].astype(np.float64), (0, 0),
+                            rng.uniform(0.6, 1.0) * (1.8 if poor else 1.0))
+    h, w = gray.shape
+    y, x = np.mgrid[0:h, 0:w] / np.array([h, w], dtype=np.float64)[:, None, None] - 0.5
+    a, b = rng.uniform(-0.3, 0.3, 2) * (1.6 if poor else 1.0)
+    gain = rng.uniform(0.6, 1.0) * (1 + a * x + b * y) * (1 - 0.3 * (x**2 + y**2))
+    gray = gray * gain + rng.uniform(0, 20)
+    gray += rng.normal(0.0, rng.uniform(1.5, 3.5) * (1.5 if poor else 1.0), gray.shape)
+    gray = np.clip(np.rint(gray), 0, 255).astype(np.uint8)
+    quality = 35 if poor else int(rng.uniform(50, 80))
+    _, jpeg = cv2.imencode(".jpg", gray, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    return cv2.cvtColor(cv2.imdecode(jpeg, cv2.IMREAD_GRAYSCALE), cv2.COLOR_GRAY2BGR)
+
+
 def rig_calibration(left: Camera, right: Camera) -> StereoCalibration:
     """The exact `StereoCalibration` of two cameras (what a perfect calibration finds).
 
@@ -96,6 +147,7 @@ def checkerboard_views(
     cols: int = 9,
     square: float = 25.0,
     max_tilt: float = 40.0,
+    poor: float | None = None,
     seed: int = 0,
 ) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
     """Rendered view pairs of a checkerboard held in front of the rig, for calibration.
@@ -106,6 +158,8 @@ def checkerboard_views(
     corner lies 10 px inside both images. Returns the left images, the right images
     (each (H, W, 3) uint8 BGR) and the corners' true world positions (V, rows * cols, 3)
     float64, mm.
+    poor : None for clean renders; else each pair as webcams film it (`webcam_look`),
+        this share of the pairs poor ones.
     """
     rng = np.random.default_rng(seed)
     centre = 0.5 * (left.center + right.center)
@@ -132,8 +186,10 @@ def checkerboard_views(
         pts = _board_points(rows, cols, square) @ facing.T + t
         if not all(_inside(cam.project(pts), cam.size, 10.0) for cam in (left, right)):
             continue
+        bad = poor is not None and rng.uniform() < poor
         for cam, out in ((left, lefts), (right, rights)):
-            out.append(render_checkerboard(cam, (facing, t), rows, cols, square).image)
+            image = render_checkerboard(cam, (facing, t), rows, cols, square).image
+            out.append(image if poor is None else webcam_look(image, rng, bad))
         corners.append(pts)
     if len(lefts) < n_views:
         raise RetargetError(
