@@ -30,13 +30,14 @@ _OVERLAY = """() => {
 }"""
 
 
-@pytest.fixture
-def camera(request, tmp_path):
-    """The fake camera's Y4M file: 'still' (the neutral frame held) or 'moving'."""
+@pytest.fixture(scope="module")
+def camera(request, tmp_path_factory):
+    """The fake camera's Y4M file: 'still' (the neutral frame held) or 'moving'. Module-scoped
+    as test_webcam's `browser`, which plays it, is."""
     frames = video_frames(VIDEO, 106, CAMERA_SIZE)
     still, grimace = frames[0], frames[105]
     shown = [still] * CAMERA_FPS if request.param == "still" else [still] * 2 * CAMERA_FPS + [grimace] * 2 * CAMERA_FPS
-    return write_y4m(tmp_path / "camera.y4m", shown, CAMERA_FPS)
+    return write_y4m(tmp_path_factory.mktemp("camera") / "camera.y4m", shown, CAMERA_FPS)
 
 
 @needs_shared
