@@ -201,6 +201,9 @@ def test_off_loopback_the_printed_address_is_the_way_in(tmp_path, sample_data_di
         assert projects[0]["name"] == "Sample face"
         assert page.evaluate("() => document.cookie") == ""  # HttpOnly: scripts cannot read it
     finally:
+        # leave the app first: its stream, open on the rigged sample, would otherwise
+        # reconnect into the stopping server and log a reset handshake
+        page.goto("about:blank")
         srv.stop()
 
 
