@@ -68,9 +68,15 @@ class SkinWeights:
         return np.asfortranarray(m.toarray()) if k == self.n_joints else m
 
     def dense(self) -> np.ndarray:
-        """(V, N) float64 weight matrix."""
-        m = self.matrix()
-        return np.asarray(m.toarray() if sp.issparse(m) else m, dtype=np.float64)
+        """(V, N) float64 weight matrix, summed per joint (an unused slot may repeat one);
+        built directly, not through `matrix` (a 133k x 68 rig took 1.5 s as a sparse
+        matrix)."""
+        v, n = self.n_vertices, self.n_joints
+        if self.n_influences == n and (self.indices == np.arange(n)).all():
+            return self.weights.astype(np.float64)  # a dense rig, joints in order
+        flat = np.arange(v)[:, None] * n + self.indices.astype(np.int64)
+        return np.bincount(flat.ravel(), weights=self.weights.ravel().astype(np.float64),
+                           minlength=v * n).reshape(v, n)
 
     def top_k(self, k: int) -> "SkinWeights":
         """At most k influences per vertex, largest first, rescaled to keep each row's sum."""

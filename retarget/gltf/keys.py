@@ -141,8 +141,6 @@ class KeyWriter:
     reduced to `tolerance` file units (0: every frame, one shared times accessor)."""
 
     def __init__(self, out: GlbBuilder, times: np.ndarray, tolerance: float = 0.0):
-        if not (tolerance >= 0 and np.isfinite(tolerance)):
-            raise RetargetError(f"the key tolerance must be a length >= 0; got {tolerance!r}")
         self.out = out
         self.times = np.asarray(times, dtype=np.float64)
         self.tolerance = float(tolerance)

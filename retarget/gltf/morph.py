@@ -43,12 +43,7 @@ def morph_scale(clips) -> float:
 def feature_columns(weights: SkinWeights) -> np.ndarray:
     """(N, V) float32 W transposed: row i holds feature i's weight at every vertex, the
     offsets of its three morph targets (built directly from the (V, K) influences)."""
-    v = weights.n_vertices
-    # summed, not assigned: an unused slot (weight 0) may name a joint the row also uses
-    flat = weights.indices.astype(np.int64) * v + np.arange(v)[:, None]
-    total = np.bincount(flat.ravel(), weights=weights.weights.ravel(),
-                        minlength=weights.n_joints * v)
-    return total.astype(np.float32).reshape(weights.n_joints, v)
+    return np.ascontiguousarray(weights.dense().T, dtype=np.float32)
 
 
 def target_bounds(values: np.ndarray, count: int, axis: int) -> tuple[list, list]:

@@ -82,8 +82,6 @@ from retarget.material import Material
 from retarget.mesh import Mesh
 from retarget.muscles.morphs import MuscleMorphs
 from retarget.skin import SkinWeights
-from retarget.units import mesh_units as unit_of
-from retarget.units import unit_scale
 from retarget.weights.skin_fit import SLOTS, four_influence_skin, skin_fit_error
 
 FORMAT = "retarget-gltf-1"
@@ -215,10 +213,12 @@ def _built(mesh, points, weights, clips, progress, units, mesh_units, form, keys
     if form not in FORMS:
         raise RetargetError(f"the export form must be one of {', '.join(FORMS)}; got {form!r}")
     clips = keys.resampled(clips)
+    unscaled_mesh, unscaled_clips = mesh, clips
+    mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
     fit = None
     if form == "skin":
-        weights, fit = _fitted_skin(mesh, points, weights, clips, mesh_units)
-    mesh, clips, scaling = _scaled(mesh, clips, units, mesh_units)
+        weights, fit = _fitted_skin(unscaled_mesh, points, weights, unscaled_clips,
+                                    1000.0 * scaling["scale_to_metres"])
     names = joint_names(points)
     neutral = points.positions(mesh.vertices).astype(np.float32)  # (N, 3)
     skinned = is_joint_based(weights)
@@ -259,16 +259,16 @@ def _built(mesh, points, weights, clips, progress, units, mesh_units, form, keys
     return out
 
 
-def _fitted_skin(mesh, points, weights, clips, mesh_units) -> tuple[SkinWeights, dict]:
+def _fitted_skin(mesh, points, weights, clips, mm: float) -> tuple[SkinWeights, dict]:
     """The four-influence skin of `weights` fitted to the clips' motion, and the
-    ``extras.retarget.fit`` record of its error (millimetres; None without clips)."""
+    ``extras.retarget.fit`` record of its error (millimetres, `mm` to a mesh unit; no
+    error without clips)."""
     neutral = points.positions(mesh.vertices)
     motion = np.concatenate([c.displacements for c in clips]) if clips else None
     fitted = four_influence_skin(weights, neutral, motion)
     record = {"from": "skin" if is_joint_based(weights) else "morph", "influences": SLOTS}
     if motion is not None:
         error = skin_fit_error(weights, fitted, motion)
-        mm = 1000.0 * unit_scale(unit_of(mesh_units, mesh.vertices))
         record.update(rms_relative=error.rms_relative, rms_mm=error.rms * mm,
                       worst_vertex_mm=error.worst_vertex * mm, frames=error.frames)
     return fitted, record
@@ -322,10 +322,12 @@ def _built_muscles(mesh, morphs, clips, progress, units, mesh_units, keys) -> Gl
     writers = [KeyWriter(out, clip.times, keys.file_tolerance(scaling)) for clip in clips]
     jawed = mesh.vertices[morphs.jaw_weights > 0]
     jaw_reach = float(np.linalg.norm(jawed - pivot, axis=1).max(initial=0.0))
+    # the most a unit of any morph weight (muscle or corrective) moves a vertex
+    reach = float(np.linalg.norm(np.concatenate([morphs.targets, morphs.correctives]), axis=2).max(initial=0.0))
     if clips:
         doc["animations"] = []
         for clip, writer in zip(clips, writers):
-            doc["animations"].append(_muscle_animation(writer, clip, morphs, jaw_reach))
+            doc["animations"].append(_muscle_animation(writer, clip, morphs, jaw_reach, reach))
             step()
     _head(out, clips, mesh, [ROOT_NODE], writers)
     return out
@@ -509,18 +511,15 @@ def _add_morph_targets(out: GlbBuilder, gltf_mesh: dict, weights: SkinWeights, n
 
 
 def _muscle_animation(keys: KeyWriter, clip: ContractionClip, morphs: MuscleMorphs,
-                      jaw_reach: float) -> dict:
+                      jaw_reach: float, reach: float) -> dict:
     """One animation: the jaw joint's rotation by each frame's jaw angle about the hinge
     axis, and the mesh's morph weights (muscles, then correctives), LINEAR. Key reduction
-    measures a weight by the most its target moves a vertex, a quaternion component
+    measures a weight by `reach`, the most a target moves a vertex, a quaternion component
     (half the angle) by twice `jaw_reach`, how far from the hinge the jaw's vertices lie."""
     weights, angle = morphs.weights(clip.contractions)                   # (F, M), (F,)
     keyed = np.hstack([weights, morphs.corrective_weights(clip.contractions)])
     half = 0.5 * angle
     rotation = np.column_stack([np.sin(half)[:, None] * morphs.jaw_axis, np.cos(half)])  # (F, 4) xyzw
-    reach = float(np.linalg.norm(morphs.targets, axis=2).max(initial=0.0))
-    for corrective in morphs.correctives:
-        reach = max(reach, float(np.linalg.norm(corrective, axis=1).max(initial=0.0)))
     samplers = [keys.sampler(rotation, scale=2.0 * max(jaw_reach, 1e-12)),
                 keys.sampler(keyed, scale=max(reach, 1e-12), weights=True)]
     channels = [{"sampler": 0, "target": {"node": FIRST_FEATURE_NODE, "path": "rotation"}},

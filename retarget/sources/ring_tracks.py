@@ -229,28 +229,17 @@ class RingTracks:
             gate = np.where(bright[t][None] | live[:, None], gate, self.snap)
             take = _matched(d, gate, first=np.isfinite(pts[:t, :, 0]).sum(0) >= self.min_frames)
             # a strong peak near a track lost for a while: the marker back, not a new one
-            free = np.ones(len(cand), bool)
-            free[take[take >= 0]] = False
             lost = np.flatnonzero(take < 0)
-            back = np.flatnonzero(free & strong[t])
-            if lost.size and back.size:
-                again = _matched(np.linalg.norm(pos[lost][:, None] - cand[back][None], axis=2),
-                                 np.full((lost.size, 1), 2.5 * self.reacquire))
-                take[lost[again >= 0]] = back[again[again >= 0]]
+            _hand_back(take, lost, pos[lost], cand, strong[t], np.full(lost.size, 2.5 * self.reacquire))
             # a track held by faint peaks (its marker edge-on) may have crept onto the skin
             # with them, a few tenths of a pixel a frame: a strong free peak near where its
             # neighbours carry its last bright sighting, and twice as near as the faint peak,
             # is its marker facing the camera again (not a skin feature beside a marker that
             # only dimmed for a frame)
             faint = np.flatnonzero((take >= 0) & ~bright[t][np.maximum(take, 0)])
-            free = np.ones(len(cand), bool)
-            free[take[take >= 0]] = False
-            back = np.flatnonzero(free & strong[t])
-            if faint.size and back.size:
-                crept = np.linalg.norm(cand[take[faint]] - anchor[faint], axis=1)
-                again = _matched(np.linalg.norm(anchor[faint][:, None] - cand[back][None], axis=2),
-                                 np.minimum(2.5 * self.reacquire, 0.5 * crept)[:, None])
-                take[faint[again >= 0]] = back[again[again >= 0]]
+            crept = np.linalg.norm(cand[take[faint]] - anchor[faint], axis=1)
+            _hand_back(take, faint, anchor[faint], cand, strong[t],
+                       np.minimum(2.5 * self.reacquire, 0.5 * crept))
             take = _apart(take, cand, d, _APART)
             hit = take >= 0
             pts[t, hit] = cand[take[hit]]
@@ -407,6 +396,18 @@ def _joined(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, gate: float, k: int
         keep = np.arange(pts.shape[1]) != b
         pts, sc, ct = pts[:, keep], sc[:, keep], ct[:, keep]
     return pts, sc, ct
+
+
+def _hand_back(take: np.ndarray, tracks: np.ndarray, where: np.ndarray, cand: np.ndarray,
+               strong: np.ndarray, gate: np.ndarray) -> None:
+    """Give `tracks` (T,) the strong candidates no track took (in place in take (M,)), each
+    the nearest to its `where` (T, 2) within its `gate` (T,) px, one to one."""
+    free = np.ones(len(cand), bool)
+    free[take[take >= 0]] = False
+    back = np.flatnonzero(free & strong)
+    if tracks.size and back.size:
+        again = _matched(np.linalg.norm(where[:, None] - cand[back][None], axis=2), gate[:, None])
+        take[tracks[again >= 0]] = back[again[again >= 0]]
 
 
 def _apart(take: np.ndarray, cand: np.ndarray, cost: np.ndarray, apart: float) -> np.ndarray:

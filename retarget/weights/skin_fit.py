@@ -79,7 +79,7 @@ def four_influence_skin(weights: SkinWeights, points, motion=None) -> SkinWeight
         raise RetargetError(f"{weights.n_joints} features need ({weights.n_joints}, 3) points; "
                             f"got {points.shape}")
     c = motion_moment(points, motion)
-    dense = _dense(weights)
+    dense = weights.dense()
     k = min(SLOTS, weights.n_joints)
     indices = np.empty((len(dense), k), np.int32)
     values = np.empty((len(dense), k), np.float32)
@@ -147,8 +147,8 @@ def skin_fit_error(weights: SkinWeights, fitted: SkinWeights, motion) -> SkinFit
     exactly, from the motion's second moment: a vertex's squared errors summed over the
     frames are eᵀ M e with M = Σ_f d_f d_fᵀ (no (V, F) product is formed)."""
     d = np.asarray(motion, dtype=np.float64)
-    w = _dense(weights)
-    e = w - _dense(fitted)
+    w = weights.dense()
+    e = w - fitted.dense()
     moment = np.einsum("fna,fma->nm", d, d)                      # (N, N) M
     summed = np.maximum(((e @ moment) * e).sum(axis=1), 0.0)      # (V,) per vertex
     moved = float(((w @ moment) * w).sum())
@@ -158,12 +158,3 @@ def skin_fit_error(weights: SkinWeights, fitted: SkinWeights, motion) -> SkinFit
                         worst_vertex=float(np.sqrt(summed.max(initial=0.0) / frames)),
                         frames=len(d))
 
-
-def _dense(weights: SkinWeights) -> np.ndarray:
-    """(V, N) float64 weights, summed per joint (an unused slot may repeat a joint)."""
-    v, n = weights.n_vertices, weights.n_joints
-    if weights.n_influences == n and (weights.indices == np.arange(n)).all():
-        return weights.weights.astype(np.float64)  # a dense rig, joints in order
-    flat = np.arange(v)[:, None] * n + weights.indices.astype(np.int64)
-    return np.bincount(flat.ravel(), weights=weights.weights.ravel().astype(np.float64),
-                       minlength=v * n).reshape(v, n)
