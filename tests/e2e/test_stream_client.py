@@ -70,7 +70,9 @@ def test_frames_and_stats(server, client_page):
     stats = page.evaluate("client.stats")
     assert stats["frames"] >= 45
     median, p99 = stats["latencyMs"]["median"], stats["latencyMs"]["p99"]
-    assert 0 <= median <= p99 < 2000, stats  # same machine: the clocks agree
+    # same machine: the clocks agree; the page's Date.now() counts whole milliseconds, so a
+    # frame applied within the millisecond it was sent can read up to 1 ms below zero
+    assert -1 < median <= p99 < 2000, stats
 
     page.evaluate("client.close()")
     assert page.evaluate("client.state") == "closed"

@@ -55,6 +55,41 @@ function checkedHeader( who, buffer, magic, headerBytes, versions = [ 1 ] ) {
 
 }
 
+const STREAM_HEADER_BYTES = 32;
+const FLAG_HEAD_ROTATION = 4;
+
+/**
+ * The header every stream frame shares (RTDF, RTMC, RTAW: magic, uint16 version, uint16
+ * flags, uint32 frame index, 4 bytes of the frame's own counts, float64 source and send
+ * times) after checking the frame holds it, its magic and its version.
+ * @param {string} who - the codec, for the message.
+ * @param {ArrayBuffer} buffer
+ * @param {number} magic - `magicNumber` of the frame's magic.
+ * @param {number} expectedVersion - the version the codec reads.
+ * @param {string} what - the frame's kind, for the message.
+ * @returns {{view: DataView, version: number, flags: number, rotated: boolean,
+ *   frameIndex: number, sourceTime: number, sendTime: number}} rotated: flag bit 2, the
+ *   head rotation follows the body.
+ */
+function streamHeader( who, buffer, magic, expectedVersion, what ) {
+
+	if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( `${ who }: expected an ArrayBuffer.` );
+	if ( buffer.byteLength < STREAM_HEADER_BYTES ) throw new Error( `${ who }: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
+	const view = new DataView( buffer );
+	if ( view.getUint32( 0, true ) !== magic ) throw new Error( `${ who }: not ${ what } (bad magic).` );
+	const version = view.getUint16( 4, true );
+	if ( version !== expectedVersion ) throw new Error( `${ who }: unsupported frame version ${ version }.` );
+	const flags = view.getUint16( 6, true );
+	return {
+		view, version, flags,
+		rotated: ( flags & FLAG_HEAD_ROTATION ) !== 0,
+		frameIndex: view.getUint32( 8, true ),
+		sourceTime: view.getFloat64( 16, true ),
+		sendTime: view.getFloat64( 24, true ),
+	};
+
+}
+
 /** Bytes of `n` uint16 values rounded up to a multiple of 4 (the formats' padding). */
 function paddedUint16Bytes( n ) {
 
@@ -75,7 +110,7 @@ export class StreamDecoder {
 	static HEADER_BYTES = 32;
 	static FLAG_NEUTRAL = 1;
 	static FLAG_LOST_POINTS = 2;
-	static FLAG_HEAD_ROTATION = 4;
+	static FLAG_HEAD_ROTATION = FLAG_HEAD_ROTATION;
 	static FLAG_LAST = 8;
 
 	/**
@@ -88,20 +123,8 @@ export class StreamDecoder {
 	 */
 	decode( buffer ) {
 
-		if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( 'StreamDecoder: expected an ArrayBuffer.' );
-		if ( buffer.byteLength < StreamDecoder.HEADER_BYTES ) {
-
-			throw new Error( `StreamDecoder: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
-
-		}
-
-		const view = new DataView( buffer );
-		if ( view.getUint32( 0, true ) !== StreamDecoder.MAGIC ) throw new Error( 'StreamDecoder: not a displacement frame (bad magic).' );
-		const version = view.getUint16( 4, true );
-		if ( version !== StreamDecoder.VERSION ) throw new Error( `StreamDecoder: unsupported frame version ${ version }.` );
+		const { view, version, flags, rotated, frameIndex, sourceTime, sendTime } = streamHeader( 'StreamDecoder', buffer, StreamDecoder.MAGIC, StreamDecoder.VERSION, 'a displacement frame' );
 		const count = view.getUint32( 12, true );
-		const flags = view.getUint16( 6, true );
-		const rotated = ( flags & StreamDecoder.FLAG_HEAD_ROTATION ) !== 0;
 		const expected = StreamDecoder.HEADER_BYTES + 12 * count + ( rotated ? 16 : 0 );
 		if ( buffer.byteLength !== expected ) {
 
@@ -112,10 +135,10 @@ export class StreamDecoder {
 		return {
 			version,
 			flags,
-			frameIndex: view.getUint32( 8, true ),
+			frameIndex,
 			count,
-			sourceTime: view.getFloat64( 16, true ),
-			sendTime: view.getFloat64( 24, true ),
+			sourceTime,
+			sendTime,
 			displacements: new Float32Array( buffer, StreamDecoder.HEADER_BYTES, 3 * count ),
 			headRotation: rotated ? new Float32Array( buffer, StreamDecoder.HEADER_BYTES + 12 * count, 4 ) : null,
 		};
@@ -147,20 +170,8 @@ export class ContractionDecoder {
 	 */
 	decode( buffer ) {
 
-		if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( 'ContractionDecoder: expected an ArrayBuffer.' );
-		if ( buffer.byteLength < ContractionDecoder.HEADER_BYTES ) {
-
-			throw new Error( `ContractionDecoder: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
-
-		}
-
-		const view = new DataView( buffer );
-		if ( view.getUint32( 0, true ) !== ContractionDecoder.MAGIC ) throw new Error( 'ContractionDecoder: not a contraction frame (bad magic).' );
-		const version = view.getUint16( 4, true );
-		if ( version !== ContractionDecoder.VERSION ) throw new Error( `ContractionDecoder: unsupported frame version ${ version }.` );
-		const flags = view.getUint16( 6, true );
+		const { view, version, flags, rotated, frameIndex, sourceTime, sendTime } = streamHeader( 'ContractionDecoder', buffer, ContractionDecoder.MAGIC, ContractionDecoder.VERSION, 'a contraction frame' );
 		const d = view.getUint16( 12, true ), e = view.getUint16( 14, true );
-		const rotated = ( flags & StreamDecoder.FLAG_HEAD_ROTATION ) !== 0;
 		const body = ContractionDecoder.HEADER_BYTES + 4 * ( d + e + 2 );
 		const expected = body + ( rotated ? 16 : 0 );
 		if ( buffer.byteLength !== expected ) {
@@ -173,9 +184,9 @@ export class ContractionDecoder {
 		return {
 			version,
 			flags,
-			frameIndex: view.getUint32( 8, true ),
-			sourceTime: view.getFloat64( 16, true ),
-			sendTime: view.getFloat64( 24, true ),
+			frameIndex,
+			sourceTime,
+			sendTime,
 			contractions: new Float32Array( buffer, at, d ),
 			distances: new Float32Array( buffer, at + 4 * d, e ),
 			confidence: view.getFloat32( at + 4 * ( d + e ), true ),
@@ -461,23 +472,17 @@ export class ArkitWeightsDecoder {
 	 */
 	decode( buffer ) {
 
-		if ( ! ( buffer instanceof ArrayBuffer ) ) throw new TypeError( 'ArkitWeightsDecoder: expected an ArrayBuffer.' );
-		if ( buffer.byteLength < ArkitWeightsDecoder.HEADER_BYTES ) throw new Error( `ArkitWeightsDecoder: frame is ${ buffer.byteLength } bytes, shorter than its header.` );
-		const view = new DataView( buffer );
-		if ( view.getUint32( 0, true ) !== ArkitWeightsDecoder.MAGIC ) throw new Error( 'ArkitWeightsDecoder: not an ARKit weight frame (bad magic).' );
-		const version = view.getUint16( 4, true );
-		if ( version !== ArkitWeightsDecoder.VERSION ) throw new Error( `ArkitWeightsDecoder: unsupported frame version ${ version }.` );
-		const flags = view.getUint16( 6, true ), k = view.getUint16( 12, true );
-		const rotated = ( flags & StreamDecoder.FLAG_HEAD_ROTATION ) !== 0;
+		const { view, version, flags, rotated, frameIndex, sourceTime, sendTime } = streamHeader( 'ArkitWeightsDecoder', buffer, ArkitWeightsDecoder.MAGIC, ArkitWeightsDecoder.VERSION, 'an ARKit weight frame' );
+		const k = view.getUint16( 12, true );
 		const body = ArkitWeightsDecoder.HEADER_BYTES + 4 * k;
 		const expected = body + ( rotated ? 16 : 0 );
 		if ( buffer.byteLength !== expected ) throw new Error( `ArkitWeightsDecoder: frame of ${ k } weights must be ${ expected } bytes, got ${ buffer.byteLength }.` );
 		return {
 			version,
 			flags,
-			frameIndex: view.getUint32( 8, true ),
-			sourceTime: view.getFloat64( 16, true ),
-			sendTime: view.getFloat64( 24, true ),
+			frameIndex,
+			sourceTime,
+			sendTime,
 			weights: new Float32Array( buffer, ArkitWeightsDecoder.HEADER_BYTES, k ),
 			headRotation: rotated ? new Float32Array( buffer, body, 4 ) : null,
 		};
