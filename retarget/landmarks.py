@@ -10,6 +10,8 @@ JSON form (what the CLI and the server read and write): ``{"vertex_indices": [..
 ``{"positions": [[x, y, z], ...]}`` (snapped to the closest surface point), or
 ``{"triangles": [[a, b, c], ...], "barycentric": [[u, v, w], ...]}``; an optional
 ``"layout"`` (a string, or null for none) names the landmark layout the points follow.
+A custom layout's (``custom-<hash>``, `retarget.custom_layouts`) comes with its spec as
+``"layout_spec"``, so the file is self-contained: reading it registers the layout.
 
 Every constructor refuses more than `MAX_LANDMARKS` points before any work that grows with
 their number, and finds repeated points in O(K log K).
@@ -25,7 +27,9 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from retarget.custom_layouts import layout_from_spec
 from retarget.errors import RetargetError
+from retarget.layouts import CUSTOM_NAME, get_layout
 
 MAX_LANDMARKS = 2048
 """Most landmarks a set may hold. The largest layout is MediaPipe's face mesh (468
@@ -46,9 +50,18 @@ class SurfacePoints:
     barycentric: np.ndarray
     layout: str = ""
 
+    def __reduce__(self):
+        # a custom layout's spec travels along, so a child process resolves its name too
+        return _points_with_layout, (self.vertex_indices, self.barycentric, self.layout,
+                                     self.layout_spec())
+
     @property
     def n_points(self) -> int:
         return len(self.vertex_indices)
+
+    def layout_spec(self) -> dict | None:
+        """The spec of the custom layout the points follow (`Layout.spec`), else None."""
+        return get_layout(self.layout).spec() if CUSTOM_NAME.fullmatch(self.layout) else None
 
     def positions(self, vertices: np.ndarray) -> np.ndarray:
         """(K, 3) points on a mesh with (V, 3) vertices (or (..., V, 3) -> (..., K, 3))."""
@@ -66,7 +79,16 @@ class SurfacePoints:
             out = {"triangles": self.vertex_indices.tolist(), "barycentric": self.barycentric.tolist()}
         if self.layout:
             out["layout"] = self.layout
+        spec = self.layout_spec()
+        if spec is not None:
+            out["layout_spec"] = spec
         return out
+
+
+def _points_with_layout(vertex_indices, barycentric, layout: str, spec: dict | None) -> SurfacePoints:
+    if spec is not None:
+        layout_from_spec(spec)
+    return SurfacePoints(vertex_indices, barycentric, layout)
 
 
 def from_vertex_indices(indices, n_vertices: int, layout: str = "") -> SurfacePoints:
@@ -130,6 +152,8 @@ def landmarks_from_json(data: dict, vertices: np.ndarray, faces: np.ndarray) -> 
         layout = ""
     elif not isinstance(layout, str):
         raise RetargetError(f"landmarks JSON 'layout' must be a string or null, got {_shown(layout)}")
+    if data.get("layout_spec") is not None:
+        layout = _custom_layout(data["layout_spec"], layout)
     if "vertex_indices" in data:
         return from_vertex_indices(data["vertex_indices"], len(vertices), layout)
     if "positions" in data:
@@ -138,6 +162,18 @@ def landmarks_from_json(data: dict, vertices: np.ndarray, faces: np.ndarray) -> 
         return from_barycentric(data["triangles"], data.get("barycentric"), len(vertices), layout)
     raise RetargetError(
         f"landmarks JSON needs 'vertex_indices', 'positions' or 'triangles'; got keys {sorted(data)}")
+
+
+def _custom_layout(spec, named: str) -> str:
+    """The name of the custom layout `spec` (registered), which 'layout' must name if given."""
+    try:
+        custom = layout_from_spec(spec)
+    except RetargetError as exc:
+        raise RetargetError(f"landmarks JSON 'layout_spec': {exc}") from None
+    if named and named != custom.name:
+        raise RetargetError(f"landmarks JSON 'layout' {_shown(named)} is not the layout its "
+                            f"'layout_spec' describes ({custom.name!r})")
+    return custom.name
 
 
 def load_landmarks(path, vertices: np.ndarray, faces: np.ndarray) -> SurfacePoints:

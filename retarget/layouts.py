@@ -95,13 +95,27 @@ checked three ways (see ``tests/unit/test_layouts.py``):
 
 Every layout's ``mediapipe468`` is this table read at its ``ibug68`` indices, so the table
 is the one source of truth.
+
+Custom layouts
+--------------
+A user's own markers make a layout too (`retarget.custom_layouts.layout_from_spec`, from a
+JSON spec: each point's name, region, side, mirror partner, and optionally head-anchor
+flag, iBUG point, face-mesh vertex and reference position). Its name is
+``custom-<16 hex digits>``, a hash of the spec, registered in a bounded per-process
+registry so that `get_layout` resolves it like a built-in name; files that name one carry
+its spec (`Layout.spec`), and loading them registers it. A custom point that stands for
+no iBUG point / face-mesh vertex has -1 there: a 68-point or face-mesh source cannot drive
+it (`from_ibug68`, `from_mediapipe468` say so), and without reference positions
+`Layout.reference_points` says the layout has none.
 """
 
 from __future__ import annotations
 
 import difflib
+import re
+from collections import OrderedDict
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import lru_cache
 
 import numpy as np
@@ -120,6 +134,8 @@ __all__ = [
     "Layout",
     "LAYOUTS",
     "get_layout",
+    "register_layout",
+    "CUSTOM_NAME",
     "from_ibug68",
     "from_mediapipe468",
 ]
@@ -148,6 +164,16 @@ GROUPS: dict[str, tuple[str, ...]] = {
 
 SIDES: tuple[str, ...] = ("right", "center", "left")
 """Subject's right (x < 0), midline, subject's left (x > 0)."""
+
+CUSTOM_NAME = re.compile(r"custom-[0-9a-f]{16}")
+"""The name of a custom layout: ``custom-`` and 16 hex digits of its spec's hash."""
+
+SPEC_FORMAT = "retarget-layout/1"
+"""The ``"format"`` of a layout spec (`Layout.spec`)."""
+
+MAX_REGISTERED = 256
+"""Most custom layouts one process keeps registered (least recently used go first): a
+server holds every project's, each one re-registered when its files are read again."""
 
 _MEDIAPIPE_MESH_SIZES = (468, 478)  # face mesh; face mesh + 10 iris points ("refined")
 
@@ -248,7 +274,12 @@ class Layout:
     mirror : (N,) index of each point's left/right partner; its own index on the midline.
     ibug68 : (N,) index of each point in the 68-point iBUG / Multi-PIE order, -1 for a
         point that has none (the dense layout's cheeks, forehead, ...; `has_ibug68`).
-    mediapipe468 : (N,) index of the matching vertex of MediaPipe's 468-vertex face mesh.
+    mediapipe468 : (N,) index of the matching vertex of MediaPipe's 468-vertex face mesh,
+        -1 for a custom point that has none (`has_mediapipe468`).
+    anchors : indices of the points that move with the head only (head-pose anchors) as
+        the user marked them; empty: chosen by name (`retarget.sources.headpose`).
+    reference : (N, 3) the points' positions on a reference face (cm, the sample face's
+        axes) as the user gave them, or None: then found from ibug68 / mediapipe468.
 
     Construction checks the structure (lengths, vocabularies, index ranges, that
     `mirror` is an involution) and raises `RetargetError` naming the offending field.
@@ -262,6 +293,8 @@ class Layout:
     mirror: tuple[int, ...]
     ibug68: tuple[int, ...]
     mediapipe468: tuple[int, ...]
+    anchors: tuple[int, ...] = ()
+    reference: tuple[tuple[float, float, float], ...] | None = None
 
     def __post_init__(self) -> None:
         for field in ("point_names", "regions", "sides", "mirror", "ibug68", "mediapipe468"):
@@ -295,7 +328,7 @@ class Layout:
                     raise RetargetError(
                         f"Layout {self.name!r}: {field} value {value!r} is not one of {vocabulary}"
                     )
-        for field, low, size in (("mirror", 0, n), ("ibug68", -1, 68), ("mediapipe468", 0, 468)):
+        for field, low, size in (("mirror", 0, n), ("ibug68", -1, 68), ("mediapipe468", -1, 468)):
             for value in getattr(self, field):
                 if not low <= value < size:
                     raise RetargetError(
@@ -307,6 +340,51 @@ class Layout:
                     f"Layout {self.name!r}: mirror is not an involution: "
                     f"{i} -> {j} -> {self.mirror[j]}"
                 )
+        self._check_extras(n)
+
+    def _check_extras(self, n: int) -> None:
+        """Normalise and check the optional `anchors` and `reference`."""
+        anchors = tuple(int(i) for i in self.anchors)
+        if any(not 0 <= i < n for i in anchors) or len(set(anchors)) != len(anchors):
+            raise RetargetError(f"Layout {self.name!r}: anchors must be distinct indices in [0, {n})")
+        object.__setattr__(self, "anchors", anchors)
+        if self.reference is not None:
+            ref = _as_float_array(self.reference, "reference")
+            if ref.shape != (n, 3) or not np.isfinite(ref).all():
+                raise RetargetError(f"Layout {self.name!r}: reference must be {n} finite [x, y, z] "
+                                    f"rows, got shape {ref.shape}")
+            object.__setattr__(self, "reference", tuple(tuple(float(v) for v in row) for row in ref))
+
+    def __reduce__(self):
+        # a custom layout travels as its spec, so a child process (the server's forkserver)
+        # that unpickles it registers it and resolves its name like a built-in one
+        if self.is_custom:
+            return _registered_from_spec, (self.spec(),)
+        return Layout, tuple(getattr(self, f.name) for f in fields(self))
+
+    @property
+    def is_custom(self) -> bool:
+        """Made from a user's spec (`retarget.custom_layouts`), named ``custom-<hash>``."""
+        return CUSTOM_NAME.fullmatch(self.name) is not None
+
+    def spec(self) -> dict:
+        """The JSON form `retarget.custom_layouts.layout_from_spec` reads back into this
+        layout's points (optional keys only where they say something)."""
+        points = []
+        for i, point in enumerate(self.point_names):
+            row = {"name": point, "region": self.regions[i], "side": self.sides[i]}
+            if self.mirror[i] != i:
+                row["mirror"] = self.point_names[self.mirror[i]]
+            if i in self.anchors:
+                row["anchor"] = True
+            if self.ibug68[i] >= 0:
+                row["ibug68"] = self.ibug68[i]
+            if self.mediapipe468[i] >= 0:
+                row["mediapipe468"] = self.mediapipe468[i]
+            if self.reference is not None:
+                row["reference"] = list(self.reference[i])
+            points.append(row)
+        return {"format": SPEC_FORMAT, "description": self.description, "points": points}
 
     @property
     def n_points(self) -> int:
@@ -358,6 +436,11 @@ class Layout:
         """Every point is one of the 68 iBUG points (a 68-point source can drive it)."""
         return min(self.ibug68) >= 0
 
+    @property
+    def has_mediapipe468(self) -> bool:
+        """Every point is a face-mesh vertex (a face-mesh source can drive it)."""
+        return min(self.mediapipe468) >= 0
+
     def reference_points(self) -> np.ndarray:
         """(N, 3) float64, read-only: this layout's points on the built-in sample face
         (`retarget.sample_face.sample_face`, resolution 1, the default identity), cm, with
@@ -365,8 +448,21 @@ class Layout:
 
         The face a user places points by (the landmark picker shows it) and the shape a
         marker tracker identifies its markers against. The face is built once per process
-        (about a second), then this is a cached lookup.
+        (about a second), then this is a cached lookup. A custom layout's are the ones its
+        spec gives; without them, every point needs an iBUG point or face-mesh vertex, else
+        `RetargetError` says so.
         """
+        if self.reference is not None:
+            out = np.array(self.reference, dtype=np.float64)
+            out.flags.writeable = False
+            return out
+        lost = [p for p, i, m in zip(self.point_names, self.ibug68, self.mediapipe468) if i < 0 and m < 0]
+        if lost:
+            raise RetargetError(
+                f"layout {self.name!r} ({self.description}) has no reference positions: "
+                f"{len(lost)} of its points ({', '.join(lost[:4])}{', ...' if len(lost) > 4 else ''}) "
+                "stand for no iBUG point or face-mesh vertex; give each point a 'reference' "
+                "[x, y, z] in its spec")
         return _reference_points(self.ibug68, self.mediapipe468)
 
     def mirrored(self, points: np.ndarray) -> np.ndarray:
@@ -441,6 +537,8 @@ class Layout:
             mirror=mirror,
             ibug68=tuple(self.ibug68[i] for i in rows),
             mediapipe468=tuple(self.mediapipe468[i] for i in rows),
+            anchors=tuple(new_index[a] for a in self.anchors if a in new_index),
+            reference=None if self.reference is None else tuple(self.reference[i] for i in rows),
         )
 
 
@@ -644,20 +742,46 @@ LAYOUTS: dict[str, Layout] = {
 """The built-in layouts by name."""
 
 
-def get_layout(name: str) -> Layout:
-    """The built-in layout called `name` (a key of `LAYOUTS`)."""
-    try:
+_REGISTERED: OrderedDict[str, Layout] = OrderedDict()
+
+
+def register_layout(layout: Layout) -> Layout:
+    """Make a custom layout resolvable by `get_layout` in this process; answers it."""
+    if not isinstance(layout, Layout) or not layout.is_custom:
+        raise RetargetError(f"only custom layouts are registered, got {layout!r:.80}")
+    _REGISTERED[layout.name] = layout
+    _REGISTERED.move_to_end(layout.name)
+    while len(_REGISTERED) > MAX_REGISTERED:
+        _REGISTERED.popitem(last=False)
+    return layout
+
+
+def get_layout(name: str | Layout) -> Layout:
+    """The built-in layout called `name` (a key of `LAYOUTS`), or a registered custom one
+    (`register_layout`); a `Layout` is answered as it is (a custom one registered)."""
+    if isinstance(name, Layout):
+        return register_layout(name) if name.is_custom else name
+    if isinstance(name, str) and name in LAYOUTS:
         return LAYOUTS[name]
-    except (KeyError, TypeError):
+    if isinstance(name, str) and name in _REGISTERED:
+        _REGISTERED.move_to_end(name)
+        return _REGISTERED[name]
+    if isinstance(name, str) and CUSTOM_NAME.fullmatch(name):
         raise RetargetError(
-            f"unknown layout {name!r}; available: {', '.join(sorted(LAYOUTS))}"
-        ) from None
+            f"custom layout {name!r} is not loaded: read the landmarks JSON or layout file "
+            "that carries its spec first")
+    raise RetargetError(
+        f"unknown layout {name!r:.80}; available: {', '.join(sorted(LAYOUTS))}, or a custom "
+        "layout's file") from None
+
+
+def _registered_from_spec(spec: dict) -> Layout:
+    from retarget.custom_layouts import layout_from_spec  # it builds on this module
+    return layout_from_spec(spec)
 
 
 def _resolve(layout: Layout | str) -> Layout:
-    if isinstance(layout, Layout):
-        return layout
-    if isinstance(layout, str):
+    if isinstance(layout, (Layout, str)):
         return get_layout(layout)
     raise RetargetError(f"layout must be a Layout or a layout name, got {layout!r}")
 
@@ -688,6 +812,9 @@ def from_mediapipe468(points468: np.ndarray, layout: Layout | str) -> np.ndarray
     Returns (..., N, D), a copy (integer input becomes float64).
     """
     layout = _resolve(layout)
+    if not layout.has_mediapipe468:
+        raise RetargetError(f"layout {layout.name!r} has points that are no face-mesh vertex; a "
+                            "468-point face mesh cannot drive it")
     p = _as_float_array(points468, "points468")
     if p.ndim < 2 or p.shape[-2] not in _MEDIAPIPE_MESH_SIZES:
         raise RetargetError(f"points468 must have shape (..., 468 or 478, D), got {p.shape}")

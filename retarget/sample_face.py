@@ -445,6 +445,9 @@ def demo_points(layout, fps: float = 30.0, n_frames: int | None = None) -> tuple
         neutral, frames = demo_performance(fps, n_frames)
         rows = list(layout.ibug68)
         return neutral[rows], frames[:, rows]
+    if not layout.has_mediapipe468:
+        raise RetargetError(f"the demo performer has no points for layout {layout.name!r} (points "
+                            "that are no iBUG point or face-mesh vertex): play a take of it")
     if not np.isfinite(fps) or fps <= 0:
         raise RetargetError(f"fps must be a positive number, got {fps!r}")
     points, expressions = _demo_performer468()

@@ -143,8 +143,11 @@ def arkit_reference(layout: Layout | str) -> ArkitReference:
     table = _table()
     if layout.has_ibug68 and not layout.name.startswith("mediapipe"):
         rows, key = list(layout.ibug68), "ibug68"
-    else:  # face-mesh points (mediapipe68 reads the 68 iBUG points off the face mesh)
+    elif layout.has_mediapipe468:  # face-mesh points (mediapipe68 reads the 68 iBUG points off the face mesh)
         rows, key = list(layout.mediapipe468), "mediapipe468"
+    else:
+        raise RetargetError(f"layout {layout.name!r} has points that are no iBUG point or face-mesh "
+                            "vertex: the ARKit reference motion has none of them")
     neutral = table[f"{key}_neutral"][rows]
     motion = table[f"{key}_motion"][:, rows]
     return ArkitReference(layout.name, neutral, motion)
