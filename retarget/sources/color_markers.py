@@ -48,6 +48,7 @@ __all__ = [
     "color_blobs",
     "MarkerTemplate",
     "layout_marker_colors",
+    "sticker_color",
 ]
 
 
@@ -81,6 +82,40 @@ MARKER_COLORS: dict[str, MarkerColor] = {
     )
 }
 """The built-in colours by name; Woodward's stickers are blue."""
+
+
+def sticker_color(spec) -> MarkerColor:
+    """A colour predicate for small stickers filmed by webcams, from a user's choice.
+
+    spec : a `MarkerColor` (used as is); a built-in colour name; (B, G, R) 0-255 (a
+    sticker's colour picked from an image); or ``"hsv:H,S,V"`` (OpenCV's 8-bit HSV).
+    Names and picked colours get a wide hue window (22, i.e. 44 degrees) and low floors
+    (saturation 70, value 35): a 5 px sticker through a webcam's blur and JPEG chroma
+    subsampling keeps only part of its colour (blue at saturation 230 arrives at
+    80-150), while skin stays at hue 0-25 and grey background below saturation 40.
+    """
+    if isinstance(spec, MarkerColor):
+        return spec
+    if isinstance(spec, str) and spec in MARKER_COLORS:
+        return MarkerColor(spec, MARKER_COLORS[spec].hue, hue_tol=22.0, min_saturation=70.0,
+                           min_value=35.0)
+    if isinstance(spec, str) and spec.startswith("hsv:"):
+        try:
+            hsv = [float(v) for v in spec[4:].split(",")]
+        except ValueError:
+            hsv = []
+        if len(hsv) != 3:
+            raise RetargetError(f"colour {spec!r}: give hsv:H,S,V (OpenCV's 8-bit HSV)")
+        h = hsv[0]
+    else:
+        try:
+            bgr = np.asarray(spec, dtype=np.float64).reshape(3)
+        except (TypeError, ValueError):
+            raise RetargetError(
+                f"unknown sticker colour {spec!r}: a name ({', '.join(MARKER_COLORS)}), "
+                "B,G,R or hsv:H,S,V") from None
+        h = float(cv2.cvtColor(np.clip(bgr, 0, 255).astype(np.uint8)[None, None], cv2.COLOR_BGR2HSV)[0, 0, 0])
+    return MarkerColor(f"hue{h:g}", h, hue_tol=22.0, min_saturation=70.0, min_value=35.0)
 
 
 def _colors(colors) -> tuple[MarkerColor, ...]:
@@ -154,7 +189,9 @@ def _predicate(hsv: np.ndarray, color: MarkerColor) -> np.ndarray:
         ranges.append((0.0, hi - 180.0))
     mask = None
     for h0, h1 in ranges:
-        part = cv2.inRange(hsv, np.array([np.ceil(h0), *floor]), np.array([np.floor(h1), 255, 255]))
+        # float64 bounds on both sides: inRange refuses mixed types (an integer hue).
+        part = cv2.inRange(hsv, np.array([np.ceil(h0), *floor], dtype=np.float64),
+                           np.array([np.floor(h1), 255, 255], dtype=np.float64))
         mask = part if mask is None else cv2.bitwise_or(mask, part)
     return mask
 

@@ -136,6 +136,7 @@ class Footage:
     occluder : (marker index, frames): a skin-coloured finger tip (an ellipse of
         `occluder_radius` px) covers that marker from the first frame and slides off by
         the given frame; the truth marks the marker hidden while any of it is covered.
+    blur : lens blur, the sigma (px) of a Gaussian applied with the motion blur (0: none).
     """
 
     gradient: float = 0.25
@@ -144,6 +145,7 @@ class Footage:
     jpeg_quality: int | None = 30
     occluder: tuple[int, int] | None = None
     occluder_radius: float = 9.0
+    blur: float = 0.0
 
     def apply(self, image: np.ndarray, motion: np.ndarray, rng: np.random.Generator,
               frame: int, points2d: np.ndarray, radius_px: np.ndarray, direction: np.ndarray):
@@ -176,6 +178,8 @@ class Footage:
         if length > 0.5:
             kernel = _line_kernel(length, np.arctan2(motion[1], motion[0]))
             img = cv2.filter2D(img, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+        if self.blur > 0:
+            img = cv2.GaussianBlur(img, (0, 0), self.blur)
         if self.noise > 0:
             img += rng.normal(0.0, self.noise, img.shape).astype(np.float32)
         out = np.clip(np.rint(img), 0, 255).astype(np.uint8)

@@ -22,11 +22,17 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from retarget.errors import RetargetError
-from retarget.sample_face import sample_face
+from retarget.sample_face import SampleFace, sample_face
 from retarget.sources.color_markers import layout_marker_colors
 from retarget.sources.calibration import StereoCalibration
 from retarget.testing.camera import Camera, look_at
-from retarget.testing.marker_video import GroundTruth, marker_vertices, render_marker_video
+from retarget.testing.marker_video import (
+    Footage,
+    GroundTruth,
+    head_motion as demo_head_motion,
+    marker_vertices,
+    render_marker_video,
+)
 from retarget.testing.render import MARKER_COLORS, render_checkerboard, render_face
 
 __all__ = [
@@ -39,6 +45,12 @@ __all__ = [
     "checkerboard_views",
     "render_stereo_video",
     "still_frames",
+    "STICKER_NAMES",
+    "STICKER_ANCHORS",
+    "sticker_vertices",
+    "sticker_head_motion",
+    "render_sticker_video",
+    "sticker_truth",
 ]
 
 MM_PER_CM = 10.0
@@ -271,3 +283,108 @@ def still_frames(
     frames = [tuple(np.clip(np.rint(img + rng.normal(0.0, noise, img.shape)), 0, 255).astype(np.uint8)
                     for img in clean) for _ in range(n_frames)]
     return frames, world[verts]
+
+
+STICKER_NAMES: tuple[str, ...] = (
+    "temple_right", "temple_left", "forehead", "nose_bridge",
+    "brow_right", "brow_left", "cheek_right", "cheek_left",
+    "mouth_right", "mouth_left", "lip_upper", "lip_lower", "chin",
+)
+"""The 13 stickers of Woodward et al.'s set-up (§5, one colour), in truth order; the
+first `STICKER_ANCHORS` are the head anchors of §5.1 (both temples, forehead, nose bridge).
+"Right" is the subject's right (the face's -x)."""
+
+STICKER_ANCHORS = 4
+
+
+def sticker_vertices(face: SampleFace) -> np.ndarray:
+    """(13,) int64 vertices of `face` carrying the `STICKER_NAMES` stickers.
+
+    Temples 1 cm outward, 0.5 cm up and 2 cm back from the outer brow ends (on the side of
+    the head: seen from the front at a grazing angle, and hidden when the head turns);
+    forehead 4.5 cm above the nose root; nose bridge at iBUG 28; mid brows, cheeks (half way
+    from the jaw line to the nose ala), mouth corners, chin; the lip stickers sit half way
+    between the outer lip centres and the lip line, about 12 mm apart with the mouth shut
+    (9 px at 1 m with a 768 px focal length: with blur they touch, one blob).
+    """
+    lm = face.vertices[face.landmarks68]
+    spots = np.stack([
+        lm[17] + [-1.0, 0.5, -2.0], lm[26] + [1.0, 0.5, -2.0],
+        lm[27] + [0.0, 4.5, -1.0], lm[28],
+        lm[19], lm[24], 0.5 * (lm[2] + lm[31]), 0.5 * (lm[14] + lm[35]),
+        lm[48], lm[54], 0.5 * (lm[51] + lm[62]), 0.5 * (lm[57] + lm[66]),
+        0.5 * (lm[57] + lm[8]),
+    ])
+    return np.linalg.norm(face.vertices[None] - spots[:, None], axis=2).argmin(1).astype(np.int64)
+
+
+def sticker_head_motion(n_frames: int, fps: float = 30.0, seed: int = 0, yaw: float = 30.0,
+                        period: float = 4.0):
+    """(R (F, 3, 3), t (F, 3) cm) head motion of the sticker material: `head_motion`'s
+    (amplitude 1.5: pitch up to about 8 degrees, roll 5, translation 2 cm) with a yaw sweep
+    of `yaw` degrees either way every `period` s on top, so that each temple turns out of
+    view in turn (no frame need see all four anchors)."""
+    R, t = demo_head_motion(n_frames, fps, seed, amplitude=1.5)
+    phase = np.random.default_rng(seed + 101).uniform(0, 2 * np.pi)
+    a = np.radians(yaw) * np.sin(2 * np.pi * np.arange(n_frames) / (period * fps) + phase)
+    c, s = np.cos(a), np.sin(a)
+    turn = np.zeros((n_frames, 3, 3))
+    turn[:, 0, 0], turn[:, 0, 2], turn[:, 1, 1], turn[:, 2, 0], turn[:, 2, 2] = c, s, 1, -s, c
+    pivot = np.array([0.0, -6.0, 2.0])   # the neck, as `head_motion` turns about
+    return turn @ R, np.einsum("fij,fj->fi", turn, t - pivot) + pivot
+
+
+def render_sticker_video(
+    path: str | Path,
+    *,
+    n_frames: int = 60,
+    seed: int = 0,
+    cameras: tuple[Camera, Camera] | None = None,
+    marker_radius: float = 0.4,
+    color: str = "blue",
+    yaw: float = 30.0,
+    pace: float = 2.0,
+    start: float = 1.2,
+    footage: Footage | None = None,
+    face: SampleFace | None = None,
+) -> GroundTruth:
+    """Issue 17's hard stereo material: 13 single-colour stickers (`sticker_vertices`,
+    radius `marker_radius` cm) filmed by a vertical pair of webcams (`webcam_cameras`,
+    default) through webcam-like footage, with its truth.
+
+    path : ``.mp4`` (MPEG-4 Part 2, lossy) or ``.mkv``; videos ``<stem>_left``/``_right``.
+    The demo expressions play at `pace` from `start` s (talking, a pucker, blinks,
+    surprise, smiles); the head moves as `sticker_head_motion(yaw=yaw)`.
+    footage : default lens blur 0.8 px, a light gradient, shutter blur, noise 3 grey levels
+        and JPEG quality 75 (blocking and chroma subsampling), then MPEG-4 for ``.mp4``.
+    face : the performer (default the built-in face; an ICT identity as a `SampleFace`).
+    Truth in world mm; `sticker_truth` gives it in the left camera's frame.
+    """
+    face = sample_face(1) if face is None else face
+    cams = cameras if cameras is not None else webcam_cameras()
+    if footage is None:
+        footage = Footage(gradient=0.15, shutter=0.5, noise=3.0, jpeg_quality=75, blur=0.7)
+    fps = 30.0
+    motion = sticker_head_motion(n_frames, fps / pace, seed, yaw)
+    verts = sticker_vertices(face)
+    colors = np.tile(np.asarray(MARKER_COLORS[color], dtype=np.float64), (len(verts), 1))
+    return render_marker_video(
+        path, n_frames=n_frames, fps=fps, cameras={"left": cams[0], "right": cams[1]},
+        style="color", head_motion=motion, seed=seed, start=start, scale=MM_PER_CM,
+        marker_radius=marker_radius, colors=colors, vertices=verts, pace=pace,
+        footage=footage, face=face)
+
+
+def sticker_truth(truth: GroundTruth) -> tuple[np.ndarray, np.ndarray]:
+    """(points (F, N, 3), stabilised (F, N, 3)) float64 mm in the left camera's frame.
+
+    points : the stickers as filmed; stabilised : the same with the head held at its
+    first frame's pose (the expression alone: what `head_motion="remove"` aims at, up to
+    the rigid choice of head frame).
+    """
+    left = truth.cameras[0]
+    rot, trans = truth.head_rotation, truth.head_translation
+    posed = np.einsum("fnj,fjk->fnk", truth.points3d - trans[:, None], rot)   # R^T (p - t)
+    still = posed @ rot[0].T + trans[0]
+    return left.to_camera(truth.points3d.reshape(-1, 3)).reshape(truth.points3d.shape), \
+        left.to_camera(still.reshape(-1, 3)).reshape(still.shape)

@@ -1,0 +1,349 @@
+"""Unnamed stickers of one colour followed in 3D through a stereo take (Woodward §5).
+
+Woodward et al. film 13 blue stickers of one colour with two webcams. With one colour the
+epipolar check alone cannot tell markers apart: with a vertical pair (one webcam above the
+other) the upper and lower lip stickers lie on one epipolar line, and pairing the upper
+one in one image with the lower one in the other passes the check 130-160 mm off in depth.
+Identity here comes from time instead (the "marker template" of §5, Algorithm 1, in 3D):
+
+1. every sticker candidate in both images (`color_blobs`);
+2. each track's position is predicted: constant velocity while it is seen; a lost one
+   follows the head (the rigid motion of the markers seen both when it was last seen and
+   now, applied to its last position: the rigid-plus-expression prior);
+3. a blob that holds two predicted tracks and is big enough for two (two touching lip
+   stickers) is split by 2-means of its pixels, started at the predictions;
+4. every left/right candidate pair within `max_epipolar` of each other's epipolar line is
+   a 3D hypothesis; tracks take hypotheses by the Hungarian method on the distance of the
+   hypothesis from the prediction in both images (px) and in 3D (mm), each candidate
+   serving one track: the hypothesis that continues a track wins, not the epipolar
+   distance;
+5. pairs of candidates left over are matched as at the start (`stereo_matches`: epipolar
+   and depth) and start tentative tracks, confirmed after `confirm` frames in a row (a
+   sticker hidden at the start gets its own column when it appears).
+
+Columns are in a stable order, as the one-camera tracker's (`retarget.sources.ring_tracks`):
+by the frame each sticker is first seen, then top to bottom, then left to right (in the
+left image). 3D points are in the left camera's frame, in the calibration's units.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from retarget.errors import RetargetError
+from retarget.sources.calibration import StereoCalibration
+from retarget.sources.color_markers import Blobs, MarkerColor, color_blobs, color_mask, sticker_color
+from retarget.sources.headpose import rigid_transform
+
+__all__ = ["StickerTracks", "split_blobs"]
+
+_BIG = 1e6   # cost of a forbidden pairing in the assignments
+
+
+def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
+                typical_area: float, *, reach: float = 4.0) -> Blobs:
+    """`blobs` with each blob that holds two or more predicted markers split among them.
+
+    image : (H, W, 3) uint8 BGR; color : the stickers' colour (as `color_mask` takes it).
+    predicted : (T, 2) float px, where the tracks are expected (NaN rows ignored).
+    typical_area : px, one sticker's blob area; a blob is split only when its area is at
+        least 1.4 times that for two (a sticker whose neighbour is hidden keeps its blob).
+    reach : px beyond a blob's equivalent radius within which a prediction counts as in it.
+    Each split blob's mask pixels (in a window round it) are clustered by k-means started
+    at the predictions; the parts' centroids replace the blob, each with its part's area.
+    """
+    if len(blobs) == 0 or len(predicted) < 2:
+        return blobs
+    ok = np.isfinite(predicted).all(axis=1)
+    radius = np.sqrt(blobs.areas / np.pi)
+    d = np.linalg.norm(predicted[:, None] - blobs.centroids[None], axis=2)
+    d[~ok] = np.inf
+    nearest = d.argmin(axis=1)
+    inside = d[np.arange(len(d)), nearest] <= radius[nearest] + reach
+    counts = np.bincount(nearest[inside], minlength=len(blobs))
+    split = np.flatnonzero((counts >= 2) & (blobs.areas >= 1.4 * typical_area * np.maximum(counts, 2) / 2))
+    if split.size == 0:
+        return blobs
+    mask = color_mask(image, color)
+    h, w = mask.shape
+    keep = np.ones(len(blobs), dtype=bool)
+    cents, areas = [blobs.centroids], [blobs.areas]
+    for b in split:
+        seeds = predicted[inside & (nearest == b)].astype(np.float64)
+        r = int(np.ceil(2.0 * radius[b] + reach))
+        cx, cy = np.rint(blobs.centroids[b]).astype(int)
+        x0, y0, x1, y1 = max(cx - r, 0), max(cy - r, 0), min(cx + r + 1, w), min(cy + r + 1, h)
+        ys, xs = np.nonzero(mask[y0:y1, x0:x1])
+        if xs.size < 2 * len(seeds):
+            continue
+        pix = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
+        centres = seeds
+        for _ in range(8):
+            label = np.linalg.norm(pix[:, None] - centres[None], axis=2).argmin(axis=1)
+            new = np.array([pix[label == k].mean(axis=0) if (label == k).any() else centres[k]
+                            for k in range(len(centres))])
+            if np.allclose(new, centres, atol=1e-3):
+                break
+            centres = new
+        label = np.linalg.norm(pix[:, None] - centres[None], axis=2).argmin(axis=1)
+        keep[b] = False
+        cents.append(centres.astype(np.float32))
+        areas.append(np.bincount(label, minlength=len(centres)).astype(np.int32))
+    c = np.concatenate(cents)
+    a = np.concatenate(areas)
+    keep = np.concatenate([keep, np.ones(len(c) - len(blobs), dtype=bool)])
+    return Blobs(c[keep], np.zeros(int(keep.sum()), np.int64), a[keep], blobs.names)
+
+
+class StickerTracks:
+    """Stickers of one colour followed in 3D through a stereo take (see the module doc).
+
+    calibration : the pair's `StereoCalibration`.
+    color : the stickers' colour, as `sticker_color` takes it (a name, B,G,R, ...).
+    max_epipolar : px, a candidate pair further than this from its epipolar line is none.
+    gate : px, furthest a tracked sticker's candidate may lie from its prediction in
+        either image (twice that for a lost sticker, whose prediction is rougher).
+    gate_3d : mm (calibration units), the same in 3D.
+    confirm : frames in a row a new track must be seen to count.
+    depth_range : (near, far) z of a sticker in the left camera (default: any in front).
+
+    Call with each frame pair (left, right) (H, W, 3) uint8 BGR; `points()` then gives
+    (F, M, 3) float64, NaN where a sticker was not seen, and `left_px()` (F, M, 2) its
+    left-image positions, columns in the stable order.
+    """
+
+    def __init__(self, calibration: StereoCalibration, color: str | MarkerColor = "blue", *,
+                 max_epipolar: float = 3.0, gate: float = 10.0, gate_3d: float = 25.0,
+                 confirm: int = 3, depth_range: tuple[float, float] | None = None):
+        self.calibration = calibration
+        self.color = sticker_color(color)
+        self.max_epipolar = float(max_epipolar)
+        self.gate = float(gate)
+        self.gate_3d = float(gate_3d)
+        self.confirm = int(confirm)
+        self.depth_range = depth_range
+        self._xyz: list[np.ndarray] = []      # per frame (T, 3), T growing
+        self._px: list[np.ndarray] = []       # per frame (T, 2) left px
+        self._vel = np.zeros((0, 3))
+        self._streak = np.zeros(0, np.int64)  # frames in a row each track was seen
+        self._confirmed = np.zeros(0, bool)
+        self._area = np.zeros(0)              # each track's typical blob area, px
+        self._born = np.zeros(0, np.int64)
+
+    # -- per frame -----------------------------------------------------------------------
+
+    def __call__(self, left: np.ndarray, right: np.ndarray) -> None:
+        frame = len(self._xyz)
+        n = len(self._born)
+        pred = self._predicted(frame)
+        pred_px = [self._projected(pred, 0), self._projected(pred, 1)]
+        typical = float(np.median(self._area[self._confirmed])) if self._confirmed.any() else np.inf
+        blobs = []
+        for cam, img in enumerate((left, right)):
+            b = color_blobs(img, self.color)
+            blobs.append(split_blobs(img, b, self.color, pred_px[cam], typical))
+        bl, br = blobs
+        xyz = np.full((n, 3), np.nan)
+        px = np.full((n, 2), np.nan)
+        used_l = np.zeros(len(bl), bool)
+        used_r = np.zeros(len(br), bool)
+        ii, jj, hyp = self._hypotheses(bl.centroids, br.centroids)
+        if n and len(ii):
+            track, h = self._assigned(pred, pred_px, bl.centroids[ii], br.centroids[jj], ii, jj, hyp)
+            xyz[track] = hyp[h]
+            px[track] = bl.centroids[ii[h]]
+            used_l[ii[h]] = used_r[jj[h]] = True
+            area = np.minimum(bl.areas[ii[h]], br.areas[jj[h]]).astype(np.float64)
+            fresh = ~np.isfinite(self._area[track])
+            self._area[track] = np.where(fresh, area, 0.9 * np.nan_to_num(self._area[track]) + 0.1 * area)
+        seen = np.isfinite(xyz[:, 0])
+        if frame > 0:
+            prev = self._xyz[-1]
+            had = np.isfinite(prev[:, 0]) & seen
+            self._vel = np.where(had[:, None], xyz - np.where(had[:, None], prev, 0.0), 0.0)
+        self._streak = np.where(seen, self._streak + 1, 0)
+        # A tentative track missed once is dropped: a false pairing rarely persists.
+        drop = ~self._confirmed & ~seen
+        self._confirmed |= self._streak >= self.confirm
+        self._xyz.append(xyz)
+        self._px.append(px)
+        self._drop(drop)
+        self._spawn(frame, bl, br, used_l, used_r)
+
+    def _hypotheses(self, left: np.ndarray, right: np.ndarray):
+        """(ii, jj, xyz): candidate pairs within the epipolar tolerance, in depth range."""
+        if len(left) == 0 or len(right) == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+        cal = self.calibration
+        epi = cal.epipolar_distances(left[:, None].astype(np.float64), right[None].astype(np.float64))
+        ii, jj = np.nonzero(epi <= self.max_epipolar)
+        xyz = cal.triangulate(left[ii].astype(np.float64), right[jj].astype(np.float64))
+        lo, hi = self.depth_range if self.depth_range is not None else (0.0, np.inf)
+        right_z = (xyz @ cal.R.T + cal.T)[:, 2]
+        ok = (xyz[:, 2] > lo) & (xyz[:, 2] < hi) & (right_z > 0)
+        return ii[ok], jj[ok], xyz[ok]
+
+    def _assigned(self, pred, pred_px, lpx, rpx, li, ri, hyp):
+        """(tracks, hypotheses) index pairs: one hypothesis per track, one track per
+        candidate in each image; the Hungarian method on 2D + 3D distance from the
+        predictions, a candidate claimed twice going to the cheaper claim."""
+        lost = ~np.isfinite(self._xyz[-1][:, 0]) if self._xyz else np.ones(len(pred), bool)
+        gate = np.where(lost, 2.0, 1.0) * self.gate
+        dl = np.linalg.norm(pred_px[0][:, None] - lpx[None], axis=2)
+        dr = np.linalg.norm(pred_px[1][:, None] - rpx[None], axis=2)
+        d3 = np.linalg.norm(pred[:, None] - hyp[None], axis=2)
+        # 2D distances in both images are the reprojection error of the 3D hypothesis;
+        # 3D adds a weak pull (its depth is 10-20 times noisier than its image positions).
+        cost = (dl + dr) / 2.0 + d3 / 10.0
+        # Tentative tracks yield to confirmed ones over a contested candidate.
+        cost = cost + np.where(self._confirmed, 0.0, 2.0)[:, None]
+        ok = (dl <= gate[:, None]) & (dr <= gate[:, None]) & (d3 <= np.where(lost, 2.0, 1.0)[:, None] * self.gate_3d)
+        ok &= np.isfinite(cost)
+        for _ in range(len(pred) + 1):
+            if not ok.any():
+                return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            rows, cols = linear_sum_assignment(np.where(ok, cost, _BIG))
+            good = ok[rows, cols]
+            rows, cols = rows[good], cols[good]
+            clash = False
+            for side in (li, ri):
+                owner = {}
+                for k in np.argsort(cost[rows, cols]):
+                    c = side[cols[k]]
+                    if c in owner:
+                        # The candidate is someone else's: this track may not use it.
+                        ok[rows[k], side == c] = False
+                        clash = True
+                    else:
+                        owner[c] = k
+            if not clash:
+                return rows, cols
+        return rows, cols
+
+    def _predicted(self, frame: int) -> np.ndarray:
+        """(T, 3) each track's expected position this frame (NaN before its first)."""
+        n = len(self._born)
+        if frame == 0 or n == 0:
+            return np.zeros((n, 3))
+        last = self._xyz[-1]
+        pred = last + self._vel
+        lost = ~np.isfinite(last[:, 0])
+        if lost.any():
+            pred[lost] = self._head_carried(lost)
+        return pred
+
+    def _head_carried(self, lost: np.ndarray) -> np.ndarray:
+        """(L, 3) lost tracks' last positions carried by the head's motion since then
+        (rigid fit of the tracks seen both then and in the last frame)."""
+        hist = np.stack(self._xyz)            # (F, T, 3)
+        seen = np.isfinite(hist[..., 0])
+        out = np.full((int(lost.sum()), 3), np.nan)
+        now = hist[-1]
+        for k, t in enumerate(np.flatnonzero(lost)):
+            frames = np.flatnonzero(seen[:, t])
+            if frames.size == 0:
+                continue
+            f = frames[-1]
+            common = seen[f] & seen[-1]
+            common[t] = False
+            p = hist[f, t]
+            if common.sum() >= 3:
+                try:
+                    rot, trans = rigid_transform(hist[f, common], now[common])
+                    p = rot @ p + trans
+                except RetargetError:
+                    pass
+            out[k] = p
+        return out
+
+    def _projected(self, points: np.ndarray, camera: int) -> np.ndarray:
+        if len(points) == 0:
+            return np.zeros((0, 2))
+        cal = self.calibration
+        good = np.isfinite(points).all(axis=1)
+        out = np.full((len(points), 2), np.nan)
+        if camera == 0:
+            rvec, tvec, K, d = np.zeros(3), np.zeros(3), cal.K1, cal.d1
+        else:
+            rvec, tvec, K, d = cv2.Rodrigues(cal.R)[0], cal.T, cal.K2, cal.d2
+        if good.any():
+            p, _ = cv2.projectPoints(points[good].reshape(-1, 1, 3), rvec, tvec, K, d)
+            out[good] = p.reshape(-1, 2)
+        return out
+
+    def _spawn(self, frame, bl: Blobs, br: Blobs, used_l, used_r) -> None:
+        """New tentative tracks from candidate pairs no track took (at frame 0 every pair,
+        confirmed at once: nothing is yet tracked to mistake them for)."""
+        from retarget.sources.stereo import stereo_matches
+
+        fl, fr = np.flatnonzero(~used_l), np.flatnonzero(~used_r)
+        if fl.size == 0 or fr.size == 0:
+            return
+        # Near the tracked face's depth: a wrong pairing on one epipolar line is 10-20 cm off.
+        known = self._xyz[-1][:, 2] if self._xyz else np.zeros(0)
+        known = known[np.isfinite(known)]
+        depth = self.depth_range
+        if depth is None and known.size:
+            z = float(np.median(known))
+            depth = (0.85 * z, 1.15 * z)
+        pairs = stereo_matches(self.calibration, bl.centroids[fl], br.centroids[fr],
+                               max_epipolar=self.max_epipolar, depth_range=depth)
+        if len(pairs) == 0:
+            return
+        l, r = bl.centroids[fl[pairs[:, 0]]], br.centroids[fr[pairs[:, 1]]]
+        xyz = self.calibration.triangulate(l.astype(np.float64), r.astype(np.float64))
+        area = np.minimum(bl.areas[fl[pairs[:, 0]]], br.areas[fr[pairs[:, 1]]]).astype(np.float64)
+        # Not a sticker already tracked (a lost one reappearing is re-taken by its track).
+        if len(self._born):
+            pred = self._predicted(frame + 1)
+            near = np.zeros(len(xyz), bool)
+            for cam, at in ((0, l), (1, r)):
+                d = np.linalg.norm(at[:, None] - self._projected(pred, cam)[None], axis=2)
+                near |= (np.nan_to_num(d, nan=np.inf) < self.gate).any(axis=1)
+            fresh = ~near
+            xyz, l, area = xyz[fresh], l[fresh], area[fresh]
+        k = len(xyz)
+        if k == 0:
+            return
+        for i in range(len(self._xyz)):
+            pad = np.full((k, 3), np.nan)
+            pad2 = np.full((k, 2), np.nan)
+            if i == len(self._xyz) - 1:
+                pad, pad2 = xyz, l.astype(np.float64)
+            self._xyz[i] = np.concatenate([self._xyz[i], pad])
+            self._px[i] = np.concatenate([self._px[i], pad2])
+        self._vel = np.concatenate([self._vel, np.zeros((k, 3))])
+        self._streak = np.concatenate([self._streak, np.ones(k, np.int64)])
+        self._confirmed = np.concatenate([self._confirmed, np.full(k, frame == 0)])
+        self._area = np.concatenate([self._area, area])
+        self._born = np.concatenate([self._born, np.full(k, frame)])
+
+    def _drop(self, drop: np.ndarray) -> None:
+        if not drop.any():
+            return
+        keep = ~drop
+        self._xyz = [x[keep] for x in self._xyz]
+        self._px = [x[keep] for x in self._px]
+        self._vel, self._streak = self._vel[keep], self._streak[keep]
+        self._confirmed, self._area, self._born = self._confirmed[keep], self._area[keep], self._born[keep]
+
+    # -- results -------------------------------------------------------------------------
+
+    def _order(self) -> np.ndarray:
+        px = np.stack(self._px)[:, self._confirmed]
+        seen = np.isfinite(px[..., 0])
+        first = np.where(seen.any(0), seen.argmax(0), len(px))
+        at = px[np.minimum(first, len(px) - 1), np.arange(px.shape[1])]
+        return np.flatnonzero(self._confirmed)[np.lexsort((at[:, 0], at[:, 1], first))]
+
+    def points(self) -> np.ndarray:
+        """(F, M, 3) float64 confirmed stickers in the left camera's frame, NaN where unseen."""
+        if not self._xyz:
+            raise RetargetError("StickerTracks: no frames tracked")
+        return np.stack(self._xyz)[:, self._order()]
+
+    def left_px(self) -> np.ndarray:
+        """(F, M, 2) float64 the same stickers' left-image positions, px."""
+        return np.stack(self._px)[:, self._order()]
