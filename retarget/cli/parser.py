@@ -8,9 +8,11 @@ import argparse
 
 import numpy as np
 
+from retarget.custom_layouts import load_layout_file
+from retarget.errors import RetargetError
 from retarget.layouts import LAYOUTS
 
-__all__ = ["PROG", "Parser", "UsageError", "layout_option", "non_negative_float", "positive_float",
+__all__ = ["PROG", "Parser", "UsageError", "layout_name", "layout_option", "non_negative_float", "positive_float",
            "positive_int", "quiet_option"]
 
 PROG = "retarget"
@@ -46,10 +48,25 @@ def quiet_option() -> Parser:
 
 
 def layout_option(parser, what: str = "landmark layout") -> None:
-    """``--layout NAME``, for the commands that read a landmarks JSON: which layout its points
-    follow when the JSON does not say."""
-    parser.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                        help=f"{what}; default: the landmarks JSON's \"layout\" (`{PROG} layouts` lists them)")
+    """``--layout NAME|L.json``, for the commands that read a landmarks JSON: which layout its
+    points follow when the JSON does not say: a built-in one, or a custom layout file."""
+    parser.add_argument("--layout", type=layout_name, metavar="NAME|L.json",
+                        help=f"{what}: a built-in layout ({', '.join(LAYOUTS)}) or a custom layout "
+                        f"file ('{PROG} layouts new'); default: the landmarks JSON's \"layout\"")
+
+
+def layout_name(text: str) -> str:
+    """An argparse type: a built-in layout's name, or the (registered) name of the custom
+    layout in a layout file."""
+    if text in LAYOUTS:
+        return text
+    if not text.endswith(".json"):
+        raise argparse.ArgumentTypeError(
+            f"invalid choice: {text!r} (choose from {', '.join(LAYOUTS)}, or a custom layout .json)")
+    try:
+        return load_layout_file(text).name
+    except RetargetError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _number(cast, *, minimum: float, strict: bool, what: str):
