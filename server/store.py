@@ -51,6 +51,10 @@ those) rig change makes them stale, and they are made again on request. The user
 settings (`put_arkit_settings`) belong to the project and outlive those changes (painted
 fixes are per vertex: the router drops them for a mesh they do not fit).
 
+Custom layouts (a user's markers, `put_layout`) are saved in the index itself, as the
+validated spec JSON keyed by the project and a name matched against `LAYOUT_NAME`, so no
+name of theirs reaches the filesystem; a project holds at most `MAX_PROJECT_LAYOUTS`.
+
 Project ids come from `secrets.token_urlsafe(16)` and every id is matched against
 `ID_PATTERN` before it is joined to a path; uploaded file names never reach the
 filesystem (only an allow-listed extension does). The store holds no maths: it takes and
@@ -77,8 +81,8 @@ from retarget.sources.take import Take
 from retarget.weights.painting import WeightEdit, painted_rig
 from server.wire import quantised_weights
 
-__all__ = ["ID_PATTERN", "MESH_EXTENSIONS", "ProjectNotFound", "ProjectStore", "StaleRig",
-           "TAKE_ID_PATTERN", "TakeNotFound"]
+__all__ = ["ID_PATTERN", "LAYOUT_NAME", "MAX_PROJECT_LAYOUTS", "MESH_EXTENSIONS", "LayoutNotFound",
+           "ProjectNotFound", "ProjectStore", "StaleRig", "TAKE_ID_PATTERN", "TakeNotFound"]
 
 ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{22}")
 """What `secrets.token_urlsafe(16)` returns: 22 URL-safe base64 characters."""
@@ -105,6 +109,12 @@ whatever its size."""
 TAKE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{16}")
 """What `secrets.token_urlsafe(12)` returns: a take id."""
 _TAKE_FILE = re.compile(r"take-[A-Za-z0-9_-]{16}\.npz")
+
+LAYOUT_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
+"""The name a project's custom layout is saved under (a URL path segment)."""
+
+MAX_PROJECT_LAYOUTS = 32
+"""Most custom layouts one project saves."""
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS projects (
@@ -155,6 +165,16 @@ CREATE TABLE IF NOT EXISTS takes (
     upload_key TEXT                 -- the uploader's Idempotency-Key, NULL = none
 );
 CREATE INDEX IF NOT EXISTS takes_project ON takes(project_id);
+CREATE TABLE IF NOT EXISTS layouts (
+    project_id TEXT NOT NULL,
+    name       TEXT NOT NULL,       -- the user's name for it, LAYOUT_NAME
+    layout     TEXT NOT NULL,       -- the library's name, custom-<hash of the spec>
+    n_points   INTEGER NOT NULL,
+    spec       TEXT NOT NULL,       -- the validated spec JSON (retarget.custom_layouts)
+    created    TEXT NOT NULL,
+    updated    TEXT NOT NULL,
+    PRIMARY KEY (project_id, name)
+);
 """
 _INDEXES = """
 CREATE UNIQUE INDEX IF NOT EXISTS takes_upload_key ON takes(project_id, upload_key);
@@ -175,6 +195,14 @@ class TakeNotFound(LookupError):
     def __init__(self, take_id: str):
         super().__init__(f"no take with id {take_id!r} in this project")
         self.take_id = take_id
+
+
+class LayoutNotFound(LookupError):
+    """No custom layout of this name in the project (or the name is malformed)."""
+
+    def __init__(self, name: str):
+        super().__init__(f"no custom layout named {name!r:.80} in this project")
+        self.name = name
 
 
 class StaleRig(RuntimeError):
@@ -472,6 +500,7 @@ class ProjectStore:
         with self._transaction() as db:
             self._row(project_id)
             db.execute("DELETE FROM takes WHERE project_id = ?", (project_id,))
+            db.execute("DELETE FROM layouts WHERE project_id = ?", (project_id,))
             db.execute("DELETE FROM projects WHERE id = ?", (project_id,))
         # after the commit: a crash here leaves an orphan folder, never a dangling row
         shutil.rmtree(folder, ignore_errors=True)
@@ -915,3 +944,66 @@ class ProjectStore:
             row = self._take_row(project_id, take_id)
             db.execute("DELETE FROM takes WHERE id = ?", (take_id,))
         (self.folder(project_id) / row["file"]).unlink(missing_ok=True)  # after the commit
+
+    # -- custom layouts -----------------------------------------------------------------
+
+    @staticmethod
+    def _layout_info(row: sqlite3.Row) -> dict:
+        return {"name": row["name"], "layout": row["layout"], "n_points": row["n_points"],
+                "created": row["created"], "updated": row["updated"]}
+
+    def put_layout(self, project_id: str, name: str, spec: dict, *, layout: str,
+                   n_points: int) -> tuple[dict, bool]:
+        """Save an (already validated) custom layout spec as `name`, replacing one of that
+        name; answers its info and whether it is new. Raises `LayoutNotFound` for a
+        malformed name and `ValueError` when the project has `MAX_PROJECT_LAYOUTS`."""
+        if not isinstance(name, str) or not LAYOUT_NAME.fullmatch(name):
+            raise LayoutNotFound(name)
+        now = _now()
+        with self._transaction() as db:
+            self._row(project_id)
+            old = db.execute("SELECT created FROM layouts WHERE project_id = ? AND name = ?",
+                             (project_id, name)).fetchone()
+            if old is None:
+                count = db.execute("SELECT COUNT(*) FROM layouts WHERE project_id = ?",
+                                   (project_id,)).fetchone()[0]
+                if count >= MAX_PROJECT_LAYOUTS:
+                    raise ValueError(f"the project has {count} custom layouts, the most it may "
+                                     "save: delete one first")
+            db.execute(
+                "INSERT OR REPLACE INTO layouts (project_id, name, layout, n_points, spec, created, "
+                "updated) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (project_id, name, layout, n_points, json.dumps(spec),
+                 now if old is None else old["created"], now))
+        return self.layout(project_id, name)[0], old is None
+
+    def layouts(self, project_id: str) -> list[dict]:
+        """The project's custom layouts' infos, by name."""
+        with self._lock:
+            self._row(project_id)
+            rows = self._db.execute("SELECT * FROM layouts WHERE project_id = ? ORDER BY name",
+                                    (project_id,)).fetchall()
+        return [self._layout_info(r) for r in rows]
+
+    def layout(self, project_id: str, name: str) -> tuple[dict, dict]:
+        """(info, spec) of the project's custom layout saved as `name` or whose library
+        name (``custom-<hash>``) is `name`; raises `LayoutNotFound`."""
+        if not isinstance(name, str) or not LAYOUT_NAME.fullmatch(name):
+            raise LayoutNotFound(name)
+        with self._lock:
+            self._row(project_id)
+            row = self._db.execute(
+                "SELECT * FROM layouts WHERE project_id = ? AND (name = ? OR layout = ?) "
+                "ORDER BY name = ? DESC LIMIT 1", (project_id, name, name, name)).fetchone()
+        if row is None:
+            raise LayoutNotFound(name)
+        return self._layout_info(row), json.loads(row["spec"])
+
+    def delete_layout(self, project_id: str, name: str) -> None:
+        if not isinstance(name, str) or not LAYOUT_NAME.fullmatch(name):
+            raise LayoutNotFound(name)
+        with self._transaction() as db:
+            self._row(project_id)
+            if db.execute("DELETE FROM layouts WHERE project_id = ? AND name = ?",
+                          (project_id, name)).rowcount == 0:
+                raise LayoutNotFound(name)

@@ -4,9 +4,13 @@
 
     {"vertex_indices": [...]}  |  {"positions": [[x, y, z], ...]}
     |  {"triangles": [[a, b, c], ...], "barycentric": [[u, v, w], ...]}
-    plus an optional "layout": a name of `retarget.layouts.LAYOUTS`
+    plus an optional "layout": a name of `retarget.layouts.LAYOUTS`, or of a custom
+    layout the project saved (``PUT .../layouts/{name}``: its saved name or custom-<hash>),
+    or with "layout_spec" a custom layout's spec inline (a landmarks file of the CLI's)
 
-checked against the stored mesh; with a layout the point count must be the layout's.
+checked against the stored mesh; with a layout the point count must be the layout's. A
+custom layout's landmarks are stored with its spec (``layout`` is its custom-<hash>), so
+they stay readable whatever happens to the saved layout.
 What is stored and answered by ``GET`` is `SurfacePoints.to_json` (positions are
 snapped to the surface, so they come back as triangles and barycentric weights).
 Setting landmarks drops the rig, which was made for the previous ones.
@@ -33,6 +37,7 @@ from retarget.layouts import LAYOUTS, get_layout
 from server.deps import IsolationDep, JobsDep, MeshDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.jobs import JobBusy
+from server.project_layouts import resolve_layout
 from server.readers import found_landmarks
 
 router = APIRouter(prefix="/api/projects/{project_id}/landmarks", tags=["landmarks"],
@@ -51,20 +56,22 @@ def put_landmarks(project: ProjectDep, mesh: MeshDep, store: StoreDep,
     layout_name = "" if layout_name is None else layout_name
     if not isinstance(layout_name, str):
         raise RetargetError(f"landmarks 'layout' must be a layout name, got {layout_name!r}")
-    layout = get_layout(layout_name) if layout_name else None
+    if layout_name and body.get("layout_spec") is None:  # the library's name for the project's
+        body = {**body, "layout": resolve_layout(store, project["id"], layout_name).name}
     try:
         points = landmarks_from_json(body, mesh.vertices, mesh.faces)
     except RetargetError:
         raise
     except (TypeError, ValueError) as exc:  # numpy refusing a malformed value
         raise RetargetError(f"landmarks JSON is malformed: {exc}") from exc
+    layout = get_layout(points.layout) if points.layout else None
     if layout is not None and points.n_points != layout.n_points:
         raise RetargetError(
             f"layout {layout_name!r} has {layout.n_points} points but {points.n_points} "
             "landmarks were given"
         )
     stored = points.to_json()
-    store.put_landmarks(project["id"], stored, n_points=points.n_points, layout=layout_name,
+    store.put_landmarks(project["id"], stored, n_points=points.n_points, layout=points.layout,
                         revision=project["revision"])
     return stored
 
@@ -97,7 +104,11 @@ def find_landmarks(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: Jo
     landmarks placed by hand (unless ``replace``) or is already finding points. It runs
     beside a rig or tracking job of the project."""
     current = project["landmarks"]
-    layout = get_layout(body.layout or (current["layout"] if current and current["layout"] else FIND_LAYOUT))
+    layout = resolve_layout(store, project["id"], body.layout or (
+        current["layout"] if current and current["layout"] else FIND_LAYOUT))
+    if not layout.has_mediapipe468:
+        raise RetargetError(f"layout {layout.name!r} ({layout.description}) has points that are no "
+                            "face-mesh vertex: they cannot be found with no clicks; place them by hand")
     if current is not None and not body.replace and "confidence" not in store.landmarks(project["id"]):
         raise HTTPException(status.HTTP_409_CONFLICT,
                             f"project {project['id']!r} has landmarks placed by hand: find "
@@ -105,7 +116,8 @@ def find_landmarks(project: ProjectDep, mesh: MeshDep, store: StoreDep, jobs: Jo
     revision = project["revision"]
 
     def work(job) -> tuple[str, dict]:
-        found = isolation.call(found_landmarks, mesh, layout.name, job=True, progress=job.report,
+        # the Layout itself, so a custom one reaches the child process with its spec
+        found = isolation.call(found_landmarks, mesh, layout, job=True, progress=job.report,
                                what="finding the landmarks")
         why_not = store.put_found_landmarks(project["id"], found.landmarks, n_points=found.n_points,
                                             layout=layout.name, revision=revision,

@@ -46,13 +46,13 @@ from fastapi import APIRouter, File, Form, HTTPException, Response, UploadFile, 
 from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
-from retarget.layouts import get_layout
 from retarget.sources.calibration import StereoCalibration, pattern_points
 from retarget.sources.take import Take
 from server.deps import IsolationDep, JobsDep, LimitsDep, Number, ProjectDep, StoreDep, UploadKeyDep
 from server.errors import responses
 from server.jobs import JobBusy
 from server.limits import body_limit
+from server.project_layouts import resolve_layout
 from server.readers import (face_mesh_take, marker_take, stereo_calibration, stereo_take,
                             take_from_upload, video_opens)
 from server.routers.meshes import read_capped, upload_extension
@@ -119,7 +119,9 @@ def upload_take(project: ProjectDep, store: StoreDep, limits: LimitsDep, isolati
         raise RetargetError(f"the uploaded file {file.filename!r} is empty")
     options = {"layout": layout or None, "fps": fps}
     forms = {"mapping": mapping, "labelled_vertices": labelled_vertices}  # JSON, parsed there
-    project_layout = (project["landmarks"]["layout"] or "ibug68") if project["landmarks"] else None
+    # the Layout itself, so a custom one reaches the child process with its spec
+    project_layout = (resolve_layout(store, project["id"], project["landmarks"]["layout"] or "ibug68")
+                      if project["landmarks"] else None)
     take = isolation.call(
         take_from_upload, data, f"{_default_name(file.filename, 'take')}.{ext}", file.filename,
         options, forms, project_layout,
@@ -181,7 +183,10 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
     if layout is None:
         saved = project["landmarks"] and project["landmarks"]["layout"]
         layout = (saved or "ibug68") if method == "markerless" else "dutreve21"
-    get_layout(layout)
+    chosen = resolve_layout(store, project["id"], layout)  # 422 for an unknown name
+    if method == "markerless" and not chosen.has_mediapipe468:
+        raise RetargetError(f"layout {layout!r} has points that are no face-mesh vertex: markerless "
+                            "tracking cannot follow them; track markers, or upload a take of them")
     scratch = _Scratch(store, limits.max_upload_bytes)
     try:
         if method == "stereo":
