@@ -10,6 +10,8 @@ A project also saves custom layouts, its user's own markers (`retarget.custom_la
     GET    /api/projects/{id}/layouts          the built-in layouts and the project's
     GET    /api/projects/{id}/layouts/{name}   one, by its name or its custom-<hash>
     DELETE /api/projects/{id}/layouts/{name}
+    GET    /api/projects/{id}/layouts/from-take/{take_id}   the take's marker names, which
+                                               a layout made from them takes as its points
 
 A custom layout's JSON is a built-in one's plus ``custom: true``, ``saved_as`` (its name in
 the project) and ``spec``; its ``name`` (``custom-<hash of the spec>``) is what landmarks
@@ -81,6 +83,14 @@ def list_project_layouts(project: ProjectDep, store: StoreDep) -> list[dict]:
     custom = [_custom_json(*store.layout(project["id"], info["name"]))
               for info in store.layouts(project["id"])]
     return list_layouts() + custom
+
+
+@router.get("/api/projects/{project_id}/layouts/from-take/{take_id}", responses=responses(404))
+def get_take_markers(project: ProjectDep, store: StoreDep, take_id: str) -> dict:
+    """The names of a take's points (its markers, in its order), for making a custom layout
+    of them: ``{take, names}``; 404 for no such take."""
+    take = store.take(project["id"], take_id, trimmed=False)
+    return {"take": take_id, "names": list(take.names)}
 
 
 @router.get("/api/projects/{project_id}/layouts/{name}", responses=responses(404))

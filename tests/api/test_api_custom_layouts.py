@@ -173,6 +173,10 @@ def test_a_take_named_by_the_markers_exports_with_partial_retargeting_and_condit
     assert r.status_code == 201, r.text
     take = r.json()
     assert take["n_points"] == len(NAMES)
+    r = client.get(f"/api/projects/{project}/layouts/from-take/{take['id']}")
+    assert r.json() == {"take": take["id"], "names": NAMES}  # what the page makes a layout of
+    assert client.get(f"/api/projects/{project}/layouts/from-take/AAAAAAAAAAAAAAAA").status_code == 404
+    assert client.get(f"/api/projects/{project}/layouts/from-take/..%2F..").status_code == 404
     settings = json.dumps({"head_pose": "remove", "filter": "none",
                            "neutral": {"mode": "frame", "frame": 0}})
     whole = client.get(f"/api/projects/{project}/export.glb",
