@@ -39,11 +39,19 @@ def add_track(commands, parents) -> None:
                    help="markerless: MediaPipe's face mesh (run natively, no browser); markers: white dots with a black ring, one camera; stereo: "
                    "coloured markers seen by a calibrated pair")
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="points to produce (default: ibug68 for markerless, dutreve21 for stereo; for "
+                   help="points to produce (default: ibug68 for markerless; for stereo dutreve21 when "
+                   "the first frames show its coloured markers, else every sticker of one --color in "
+                   "view, named m01..mM; for "
                    "markers, dutreve21 when the first frame shows its 21 markers, else every marker "
                    "in view, named m01..mM by when it is first seen, then top to bottom)")
     p.add_argument("--right", metavar="VIDEO", help="stereo: the right camera's video")
     p.add_argument("--calibration", metavar="CALIB.npz", help="stereo: from 'retarget calibrate'")
+    p.add_argument("--color", default="blue", metavar="COLOUR",
+                   help="stereo without --layout: the stickers' one colour, a name (blue, green, "
+                   "cyan, magenta, yellow), B,G,R picked from the video, or hsv:H,S,V (default blue)")
+    p.add_argument("--anchors", metavar="m01,m03,...",
+                   help="stereo without --layout: the stickers that fix the head (3 or more; "
+                   "default the 4 most mutually rigid)")
     p.add_argument("--max-frames", type=positive_int, metavar="F",
                    help="markerless: track only the first F frames")
     p.add_argument("--threads", type=positive_int, default=min(os.cpu_count() or 1, 4), metavar="T",
@@ -61,14 +69,19 @@ def _track(args) -> int:
     take_out = Path(args.take) if args.take else None
     if take_out is not None:
         require_parent(take_out)
-    layout = args.layout or {"markerless": "ibug68", "markers": "auto", "stereo": "dutreve21"}[args.method]
+    # Stereo without --layout: dutreve21's coloured set if the first frames show it, else
+    # every sticker of one colour in view, m01..mM.
+    layout = args.layout or {"markerless": "ibug68", "markers": "auto", "stereo": None}[args.method]
     if args.method == "stereo":
         if not (args.right and args.calibration):
             raise RetargetError("--method stereo needs --right RIGHT_VIDEO and --calibration CALIB.npz")
         require_file(args.right, "right video")
         require_file(args.calibration, "stereo calibration")
-    elif args.right or args.calibration:
-        raise RetargetError(f"--right and --calibration are for --method stereo, not {args.method}")
+        if layout is not None and (args.anchors or args.color != "blue"):
+            raise RetargetError("--color and --anchors are for stereo stickers without --layout")
+    elif args.right or args.calibration or args.anchors or args.color != "blue":
+        raise RetargetError(f"--right, --calibration, --color and --anchors are for --method "
+                            f"stereo, not {args.method}")
     start = time.perf_counter()
     with progress_bar(100, f"tracking ({args.method})", "%", args.quiet) as advance:
         def progress(done: int, total: int) -> None:  # the trackers count frames
@@ -84,9 +97,16 @@ def _track(args) -> int:
                                         max_frames=args.max_frames, threads=args.threads)
         else:
             from retarget.sources.calibration import StereoCalibration
-            from retarget.sources.stereo import track_stereo_videos
-            take = track_stereo_videos(args.video, args.right, StereoCalibration.load(args.calibration),
-                                       layout=layout, progress=progress)
+            from retarget.sources.stereo import stereo_layout, track_stereo_videos
+            calibration = StereoCalibration.load(args.calibration)
+            if layout is None and args.color == "blue" and not args.anchors:
+                # The coloured dutreve21 set when the first frames show it (as before).
+                layout = stereo_layout(args.video, args.right, calibration)
+            sticker = {} if layout is not None else {
+                "color": _color_option(args.color),
+                "anchors": args.anchors.split(",") if args.anchors else None}
+            take = track_stereo_videos(args.video, args.right, calibration,
+                                       layout=layout, progress=progress, **sticker)
     seconds = time.perf_counter() - start
     points = take.points
     if take.dims == 2:  # image points: z = 0 (Dutreve §4)
@@ -100,6 +120,17 @@ def _track(args) -> int:
           f"all points found in {100 * found.all(axis=1).mean():.1f} % of frames, "
           f"none in {100 * (~found.any(axis=1)).mean():.1f} % -> {out}")
     return 0
+
+
+def _color_option(text: str):
+    """--color: a name or hsv:H,S,V as given, B,G,R as three numbers."""
+    parts = text.split(",")
+    if len(parts) == 3 and not text.startswith("hsv:"):
+        try:
+            return tuple(float(v) for v in parts)
+        except ValueError:
+            raise RetargetError(f"--color {text!r}: B,G,R must be three numbers 0-255") from None
+    return text
 
 
 # ---------------------------------------------------------------------------------------

@@ -27,6 +27,8 @@ NaN everywhere in `retarget.sources`.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from retarget.errors import RetargetError
@@ -41,6 +43,8 @@ __all__ = [
     "remove_head_motion",
     "head_neutral",
     "HeadMotionRemover",
+    "rigid_anchors",
+    "anchored_poses",
 ]
 
 STABLE_POINT_NAMES: tuple[str, ...] = (
@@ -275,3 +279,112 @@ class HeadMotionRemover:
         if ok[0]:
             self.rotation_, self.translation_ = rot[0], trans[0]
         return (p @ self.rotation_.T + self.translation_).astype(np.float32)
+
+
+def rigid_anchors(points, count: int = 4) -> np.ndarray:
+    """(count,) int64 indices of the most mutually rigid markers of a take, ascending.
+
+    points : (F, M, 3) float, NaN where a marker is unseen. Rigidity is the spread
+    (standard deviation over the frames both are seen in, at least 5) of each pair's
+    distance; the stiffest pair starts the set and markers are added greedily by their
+    mean spread to those already chosen (on a face: nose, forehead, temples, Woodward
+    §5.1's anchors, which expressions barely move). `RetargetError` if fewer than
+    `count` markers are ever seen. Only markers seen in at least half as many frames as
+    the best seen one are candidates.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    m = p.shape[1]
+    if m < count or count < 3:
+        raise RetargetError(f"rigid_anchors: {m} markers, {count} anchors asked (at least 3)")
+    d = np.linalg.norm(p[:, :, None] - p[:, None], axis=3)          # (F, M, M)
+    both = np.isfinite(d)
+    with warnings.catch_warnings():   # pairs never seen together: NaN, then inf below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        spread = np.nanstd(d, axis=0)
+    # Markers seen in under half the frames (of the best seen) are no anchors: a short
+    # track's few distances say little about its rigidity.
+    seen_share = np.isfinite(p).all(axis=2).mean(axis=0)
+    often = seen_share >= 0.5 * seen_share.max()
+    spread[(both.sum(axis=0) < 5) | ~np.isfinite(spread) | ~often[:, None] | ~often[None]] = np.inf
+    np.fill_diagonal(spread, np.inf)
+    i, j = np.unravel_index(np.argmin(spread), spread.shape)
+    chosen = [int(i), int(j)]
+    while len(chosen) < count:
+        score = spread[:, chosen].mean(axis=1)
+        score[chosen] = np.inf
+        chosen.append(int(np.argmin(score)))
+    return np.sort(np.array(chosen, dtype=np.int64))
+
+
+def anchored_poses(points, anchors, iterations: int = 2):
+    """Per-frame head poses from whichever anchors each frame sees (Woodward §5.1).
+
+    points : (F, M, 3) float, NaN where unseen; anchors : (K,) int indices, K >= 3.
+    The head frame is that of the first frame seeing 3 anchors. Every anchor gets a
+    position in the head frame (its registered positions' median over the take), so a
+    frame is fitted to the head-frame positions of **all** anchors it sees: when the set
+    of visible anchors changes (a temple turning away) the pose does not jump, as it
+    would fitted to the first frame's subset. A frame seeing fewer than 3 anchors is
+    fitted to every marker it sees, each weighted by the inverse square of its spread in
+    the head frame (the stable ones count); a frame with no pose at all holds the last.
+    Returns R (F, 3, 3), t (F, 3) float64 (``stabilised = p @ R.T + t``) and the
+    head-frame reference (M, 3) float64 (NaN for a marker never seen with a pose).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    k = _check_stable(anchors, p.shape[1])
+    seen = np.isfinite(p).all(axis=2)
+    count = seen[:, k].sum(axis=1)
+    if not (count >= 3).any():
+        raise RetargetError("anchored_poses: no frame sees 3 anchors")
+    start = int(np.argmax(count >= 3))
+    is_anchor = np.isin(np.arange(p.shape[1]), k)
+    # First pass, frames in order from the start outwards: each marker's head-frame
+    # position is the mean of its registrations so far; a frame is registered on the
+    # anchors it sees that have one, helped by the other markers (weight 0.1) when that
+    # is fewer than 3 (a temple hidden at the start gets its place from a frame where the
+    # other temple is hidden too).
+    total = np.where(seen[start, :, None], p[start], 0.0)
+    hits = seen[start].astype(np.float64)
+    for f in list(range(start + 1, len(p))) + list(range(start - 1, -1, -1)):
+        use = seen[f] & (hits > 0)
+        if (use & is_anchor).sum() < 3:
+            if (use & is_anchor).sum() < 2 or use.sum() < 3:
+                continue
+            weight = np.where(is_anchor, 1.0, 0.1)[use]
+        else:
+            use &= is_anchor
+            weight = None
+        try:
+            rot, trans = rigid_transform(p[f, use], total[use] / hits[use, None], weight)
+        except RetargetError:
+            continue
+        total[seen[f]] += p[f, seen[f]] @ rot.T + trans
+        hits[seen[f]] += 1
+    ref = np.full(p.shape[1:], np.nan)
+    ref[k] = np.where(hits[k, None] > 0, total[k] / np.maximum(hits[k], 1)[:, None], np.nan)
+    for _ in range(max(1, iterations)):
+        rot, trans, ok = _rigid_transforms(
+            np.nan_to_num(p[:, k]), np.broadcast_to(np.nan_to_num(ref[k]), (len(p), len(k), 3)),
+            (seen[:, k] & np.isfinite(ref[k]).all(axis=1)).astype(np.float64))
+        # Frames short of anchors: every marker, weighted by its steadiness.
+        registered = np.einsum("fnj,fij->fni", p, rot) + trans[:, None]
+        with warnings.catch_warnings():   # a marker no posed frame sees stays NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ref_all = np.nanmedian(registered, axis=0)
+            spread = np.sqrt(np.nanmean(((registered - ref_all) ** 2).sum(axis=2), axis=0))
+        w_all = np.where(np.isfinite(spread), 1.0 / np.maximum(np.nan_to_num(spread), 0.5) ** 2, 0.0)
+        short = ~ok
+        if short.any():
+            w = np.where(seen[short] & np.isfinite(ref_all).all(axis=1), w_all, 0.0)
+            r2, t2, ok2 = _rigid_transforms(np.nan_to_num(p[short]),
+                                            np.broadcast_to(np.nan_to_num(ref_all), p[short].shape), w)
+            rot[short], trans[short] = r2, t2
+            ok[short] = ok2
+        ref[k] = np.where(np.isfinite(ref_all[k]), ref_all[k], ref[k])
+    rot, trans = _held(rot, trans, ok)
+    # The head frame is the start frame's camera frame: the references' median frame
+    # differs from it by a little rigid motion, composed away here.
+    r0, t0 = rot[start].copy(), trans[start].copy()
+    rot = np.einsum("ji,fjk->fik", r0, rot)
+    trans = (trans - t0) @ r0
+    return rot, trans, (ref_all - t0) @ r0

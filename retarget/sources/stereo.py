@@ -25,7 +25,15 @@ from retarget.layouts import LAYOUTS, Layout, get_layout
 from retarget.sources.calibration import StereoCalibration, calibrate_stereo_videos, video_pair_size
 from retarget.sources.color_markers import Blobs, MarkerTemplate, color_blobs, layout_marker_colors
 from retarget.sources.filters import temporal_mean
-from retarget.sources.headpose import head_neutral, remove_head_motion, rigid_transform, stable_indices
+from retarget.sources.headpose import (
+    anchored_poses,
+    head_neutral,
+    remove_head_motion,
+    rigid_anchors,
+    rigid_transform,
+    stable_indices,
+)
+from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
 
@@ -35,6 +43,7 @@ __all__ = [
     "track_stereo_frames",
     "track_stereo_videos",
     "stereo_pair_calibration",
+    "stereo_layout",
 ]
 
 def stereo_matches(calibration: StereoCalibration, left, right, left_labels=None,
@@ -181,8 +190,9 @@ def track_stereo_frames(
     frames: Iterable[tuple[np.ndarray, np.ndarray]],
     calibration: StereoCalibration,
     *,
-    layout: Layout | str,
+    layout: Layout | str | None,
     fps: float = 30.0,
+    color="blue",
     colors: Sequence[str] | None = None,
     assignment: tuple[np.ndarray, np.ndarray] | None = None,
     anchors: Sequence[str | int] | None = None,
@@ -200,7 +210,13 @@ def track_stereo_frames(
     calibration : the pair's `StereoCalibration`; points come out in its left camera's
         frame, in its pattern's units.
     layout : the points carrying stickers; colors : (N,) sticker colour per point
-        (default `layout_marker_colors(layout)`).
+        (default `layout_marker_colors(layout)`). None: stickers of one colour `color`
+        (Woodward's 13 blue ones; a name, B,G,R or hsv:H,S,V, see `sticker_color`), every
+        one in view followed in 3D (`StickerTracks`) into columns m01..mM, by when each is
+        first seen, then top to bottom; `anchors` then name columns (default: the 4 most
+        mutually rigid, `rigid_anchors`) and each frame's head pose comes from the anchors
+        it sees (`anchored_poses`). `assignment`, `colors`, `hold` and `max_jump` are for
+        layouts only.
     assignment : optional (left (N, 2), right (N, 2)) first-frame pixel positions of
         the markers; default: identified automatically (`identified_markers`).
     anchors : points that define the head frame (names or indices; default
@@ -215,14 +231,18 @@ def track_stereo_frames(
     progress : called as ``progress(frames_done, n_frames)`` (n_frames 0 if unknown).
     A marker is NaN in a frame where either camera lost it for longer than `hold`.
     """
+    if head_motion not in ("remove", "keep"):
+        raise RetargetError(f"head_motion must be 'remove' or 'keep'; got {head_motion!r}")
+    if layout is None:
+        return _track_stickers(frames, calibration, fps=fps, color=color, anchors=anchors,
+                               head_motion=head_motion, temporal_window=temporal_window,
+                               max_epipolar=max_epipolar, progress=progress, n_frames=n_frames)
     layout = layout if isinstance(layout, Layout) else get_layout(layout)
     colors = tuple(colors) if colors is not None else layout_marker_colors(layout)
     if len(colors) != layout.n_points:
         raise RetargetError(
             f"colors must give {layout.n_points} colours for layout {layout.name!r}; got {len(colors)}"
         )
-    if head_motion not in ("remove", "keep"):
-        raise RetargetError(f"head_motion must be 'remove' or 'keep'; got {head_motion!r}")
     anchor_idx = _anchor_indices(anchors, layout)
     palette = tuple(dict.fromkeys(colors))
     templates = [MarkerTemplate(layout.point_names, colors, max_jump=max_jump, hold=hold)
@@ -266,6 +286,60 @@ def track_stereo_frames(
                 layout=layout.name if layout.name in LAYOUTS else None, source="stereo", meta=meta)
 
 
+def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, anchors,
+                    head_motion, temporal_window, max_epipolar, progress, n_frames) -> Take:
+    """`track_stereo_frames` without a layout: unnamed stickers of one colour."""
+    tracks = StickerTracks(calibration, color, max_epipolar=max_epipolar)
+    for i, (left_img, right_img) in enumerate(frames):
+        if left_img.shape != right_img.shape:
+            raise RetargetError(
+                f"stereo frame {i}: left is {left_img.shape[1]}x{left_img.shape[0]}, right "
+                f"{right_img.shape[1]}x{right_img.shape[0]}"
+            )
+        tracks(left_img, right_img)
+        if progress is not None:
+            progress(i + 1, n_frames)
+    if not tracks.n_frames:
+        raise RetargetError("track_stereo: no stereo frames to track")
+    points = tracks.points()
+    m = points.shape[1]
+    names = tuple(f"m{k + 1:0{max(2, len(str(m)))}d}" for k in range(m))
+    if m < 3:
+        raise RetargetError(f"track_stereo: {m} stickers found in both cameras; at least 3 are "
+                            f"needed for the head pose (colour {tracks.color.name!r})")
+    if anchors is None:
+        anchor_idx = rigid_anchors(points, min(4, m))
+    else:
+        items = [anchors] if isinstance(anchors, str) else list(anchors)
+        unknown = [a for a in items if a not in names]
+        if len(items) < 3 or unknown:
+            raise RetargetError(f"anchors must name at least 3 of the tracked stickers "
+                                f"{', '.join(names)}; got {anchors!r}")
+        anchor_idx = np.array([names.index(a) for a in items], dtype=np.int64)
+    try:
+        rot, trans, _ = anchored_poses(points, anchor_idx)
+    except RetargetError as exc:
+        raise RetargetError(f"track_stereo: the head frame cannot be set up: {exc}") from None
+    stabilised = np.einsum("fnj,fij->fni", points, rot) + trans[:, None]
+    meta = {"units": "calibration pattern units", "calibration_rms": calibration.rms,
+            "color": tracks.color.name, "anchors": [names[k] for k in anchor_idx],
+            "lost_share": np.isnan(points).any(axis=2).mean(axis=0).round(4).tolist(),
+            "head_motion": head_motion, "temporal_window": int(temporal_window),
+            "head_pose": _pose_json(rot, trans)}
+    points = stabilised if head_motion == "remove" else points
+    if temporal_window > 1:
+        points = temporal_mean(points, temporal_window)
+    return Take(points.astype(np.float32), names, fps, layout=None, source="stereo", meta=meta)
+
+
+def _pose_json(rot: np.ndarray, trans: np.ndarray) -> dict:
+    """Per-frame poses (F, 3, 3), (F, 3) as JSON lists of rotation vectors and translations."""
+    rotvec = np.full((len(rot), 3), np.nan)
+    ok = np.isfinite(rot).all(axis=(1, 2))
+    rotvec[ok] = np.array([cv2.Rodrigues(r)[0].ravel() for r in rot[ok]]).reshape(-1, 3)
+    return {"rotvec": _json_rows(rotvec, 6), "translation": _json_rows(trans, 4)}
+
+
 def _blobs_near(image: np.ndarray, template: MarkerTemplate, palette: Sequence[str]) -> Blobs:
     """Candidates in the part of the image the template's markers can have reached.
 
@@ -292,11 +366,7 @@ def _head_stabilised(points: np.ndarray, anchors: np.ndarray, remove: bool):
     except RetargetError as exc:
         raise RetargetError(f"track_stereo: the head frame cannot be set up: {exc}") from None
     stabilised, rot, trans = remove_head_motion(points, neutral, anchors)
-    rotvec = np.full((len(rot), 3), np.nan)
-    ok = np.isfinite(rot).all(axis=(1, 2))
-    rotvec[ok] = np.array([cv2.Rodrigues(r)[0].ravel() for r in rot[ok]]).reshape(-1, 3)
-    pose = {"rotvec": _json_rows(rotvec, 6), "translation": _json_rows(trans, 4)}
-    return (stabilised if remove else points), pose
+    return (stabilised if remove else points), _pose_json(rot, trans)
 
 
 def _json_rows(values: np.ndarray, decimals: int) -> list:
@@ -305,7 +375,7 @@ def _json_rows(values: np.ndarray, decimals: int) -> list:
 
 
 def track_stereo_videos(left, right, calibration: StereoCalibration | str | os.PathLike, *,
-                        layout: Layout | str,
+                        layout: Layout | str | None,
                         anchors: Sequence[str | int] | None = None,
                         progress: Callable[[int, int], None] | None = None,
                         **options) -> Take:
@@ -313,8 +383,9 @@ def track_stereo_videos(left, right, calibration: StereoCalibration | str | os.P
 
     left, right : video paths (the left camera's and the right one's);
     calibration : a `StereoCalibration` or the path of one saved by `save`.
-    layout, anchors, progress and the `options` (colors, assignment, head_motion,
-    temporal_window, hold, max_jump, max_epipolar) as `track_stereo_frames`.
+    layout, anchors, progress and the `options` (color, colors, assignment, head_motion,
+    temporal_window, hold, max_jump, max_epipolar) as `track_stereo_frames` (layout None:
+    unnamed stickers of one colour).
     The shorter video sets the length (``meta["frames_dropped"]`` counts the other's
     extra frames); the left video's frame rate is the take's.
     """
@@ -379,7 +450,30 @@ def _check_first_markers(left, right, calibration: StereoCalibration, layout: La
         first = (next(iter(a))[1], next(iter(b))[1])
     name = layout.name if isinstance(layout, Layout) else layout
     try:
-        track_stereo_frames([first], calibration, layout=layout, head_motion="keep")
+        if layout is None:
+            tracks = StickerTracks(calibration)
+            tracks(*first)
+            if tracks.points().shape[1] < 3:
+                raise RetargetError(f"{tracks.points().shape[1]} stickers matched between the "
+                                    "two first frames; at least 3 are needed")
+        else:
+            track_stereo_frames([first], calibration, layout=layout, head_motion="keep")
     except RetargetError as exc:
         raise RetargetError(f"the colour markers of {name!r} in the first frames of "
                             f"{str(left)!r} and {str(right)!r}: {exc}") from exc
+
+
+def stereo_layout(left, right, calibration: StereoCalibration, layout: str = "dutreve21") -> str | None:
+    """`layout` when the first frames of the video pair show its coloured markers (its
+    palette, identified by `identified_markers`), else None: stickers of one colour, tracked
+    without a layout (what `retarget track --method stereo` does without --layout)."""
+    with VideoReader(left) as a, VideoReader(right) as b:
+        first = (next(iter(a))[1], next(iter(b))[1])
+    colors = layout_marker_colors(layout)
+    palette = tuple(dict.fromkeys(colors))
+    blobs = [color_blobs(img, palette) for img in first]
+    try:
+        identified_markers(calibration, *blobs, layout, colors)
+    except RetargetError:
+        return None
+    return layout

@@ -7,9 +7,9 @@ one in one image with the lower one in the other passes the check 130-160 mm off
 Identity here comes from time instead (the "marker template" of §5, Algorithm 1, in 3D):
 
 1. every sticker candidate in both images (`color_blobs`);
-2. each track's position is predicted: constant velocity while it is seen; a lost one
-   follows the head (the rigid motion of the markers seen both when it was last seen and
-   now, applied to its last position: the rigid-plus-expression prior);
+2. each track's position is predicted: constant image velocity while it is seen; a lost
+   one moves with its neighbours since it was last seen (the image motion of the nearest
+   tracks seen then and now: rigid head motion plus the local expression);
 3. a blob that holds two predicted tracks and is big enough for two (two touching lip
    stickers) is split by 2-means of its pixels, started at the predictions;
 4. every left/right candidate pair within `max_epipolar` of each other's epipolar line is
@@ -35,7 +35,6 @@ from scipy.optimize import linear_sum_assignment
 from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
 from retarget.sources.color_markers import Blobs, MarkerColor, color_blobs, color_mask, sticker_color
-from retarget.sources.headpose import rigid_transform
 
 __all__ = ["StickerTracks", "split_blobs"]
 
@@ -63,22 +62,38 @@ def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
     nearest = d.argmin(axis=1)
     inside = d[np.arange(len(d)), nearest] <= radius[nearest] + reach
     counts = np.bincount(nearest[inside], minlength=len(blobs))
-    split = np.flatnonzero((counts >= 2) & (blobs.areas >= 1.4 * typical_area * np.maximum(counts, 2) / 2))
-    if split.size == 0:
+    split = (counts >= 2) & (blobs.areas >= 1.4 * typical_area * np.maximum(counts, 2) / 2)
+    # A blob no track is in and twice the usual size (two stickers touching where nothing
+    # is tracked yet, as at the start) is split in two if it is elongated.
+    usual = np.median(blobs.areas) if np.isinf(typical_area) else typical_area
+    unclaimed = (counts == 0) & (blobs.areas >= 1.7 * usual) & (blobs.areas >= 12)
+    if not (split | unclaimed).any():
         return blobs
     mask = color_mask(image, color)
     h, w = mask.shape
     keep = np.ones(len(blobs), dtype=bool)
     cents, areas = [blobs.centroids], [blobs.areas]
-    for b in split:
-        seeds = predicted[inside & (nearest == b)].astype(np.float64)
+    for b in np.flatnonzero(split | unclaimed):
         r = int(np.ceil(2.0 * radius[b] + reach))
         cx, cy = np.rint(blobs.centroids[b]).astype(int)
         x0, y0, x1, y1 = max(cx - r, 0), max(cy - r, 0), min(cx + r + 1, w), min(cy + r + 1, h)
         ys, xs = np.nonzero(mask[y0:y1, x0:x1])
-        if xs.size < 2 * len(seeds):
-            continue
         pix = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
+        if split[b]:
+            seeds = predicted[inside & (nearest == b)].astype(np.float64)
+        else:
+            # Two seeds along the blob's long axis, if it has one.
+            near_b = np.linalg.norm(pix - blobs.centroids[b], axis=1) <= radius[b] * 1.6 + 1
+            pix = pix[near_b]
+            if len(pix) < 8:
+                continue
+            evals, evecs = np.linalg.eigh(np.cov(pix.T))
+            if evals[1] < 2.5 * max(evals[0], 1e-9):
+                continue
+            step = np.sqrt(evals[1]) * evecs[:, 1]
+            seeds = pix.mean(axis=0) + np.stack([step, -step])
+        if len(pix) < 2 * len(seeds):
+            continue
         centres = seeds
         for _ in range(8):
             label = np.linalg.norm(pix[:, None] - centres[None], axis=2).argmin(axis=1)
@@ -115,7 +130,7 @@ class StickerTracks:
     """
 
     def __init__(self, calibration: StereoCalibration, color: str | MarkerColor = "blue", *,
-                 max_epipolar: float = 3.0, gate: float = 10.0, gate_3d: float = 25.0,
+                 max_epipolar: float = 3.0, gate: float = 6.0, gate_3d: float = 40.0,
                  confirm: int = 3, depth_range: tuple[float, float] | None = None):
         self.calibration = calibration
         self.color = sticker_color(color)
@@ -125,8 +140,8 @@ class StickerTracks:
         self.confirm = int(confirm)
         self.depth_range = depth_range
         self._xyz: list[np.ndarray] = []      # per frame (T, 3), T growing
-        self._px: list[np.ndarray] = []       # per frame (T, 2) left px
-        self._vel = np.zeros((0, 3))
+        self._px: list[np.ndarray] = []       # per frame (T, 4) left x, y, right x, y px
+        self._vel = np.zeros((0, 4))          # image velocity, px per frame
         self._streak = np.zeros(0, np.int64)  # frames in a row each track was seen
         self._confirmed = np.zeros(0, bool)
         self._area = np.zeros(0)              # each track's typical blob area, px
@@ -137,32 +152,34 @@ class StickerTracks:
     def __call__(self, left: np.ndarray, right: np.ndarray) -> None:
         frame = len(self._xyz)
         n = len(self._born)
-        pred = self._predicted(frame)
-        pred_px = [self._projected(pred, 0), self._projected(pred, 1)]
+        pred, both_px = self._predicted(frame)
+        pred_px = [both_px[:, :2], both_px[:, 2:]]
         typical = float(np.median(self._area[self._confirmed])) if self._confirmed.any() else np.inf
         blobs = []
         for cam, img in enumerate((left, right)):
-            b = color_blobs(img, self.color)
+            # Only touching components are one blob: stickers 2-4 px apart stay apart.
+            b = color_blobs(img, self.color, merge_distance=1.5)
             blobs.append(split_blobs(img, b, self.color, pred_px[cam], typical))
         bl, br = blobs
         xyz = np.full((n, 3), np.nan)
-        px = np.full((n, 2), np.nan)
+        px = np.full((n, 4), np.nan)
         used_l = np.zeros(len(bl), bool)
         used_r = np.zeros(len(br), bool)
         ii, jj, hyp = self._hypotheses(bl.centroids, br.centroids)
         if n and len(ii):
             track, h = self._assigned(pred, pred_px, bl.centroids[ii], br.centroids[jj], ii, jj, hyp)
             xyz[track] = hyp[h]
-            px[track] = bl.centroids[ii[h]]
+            px[track] = np.concatenate([bl.centroids[ii[h]], br.centroids[jj[h]]], axis=1)
             used_l[ii[h]] = used_r[jj[h]] = True
             area = np.minimum(bl.areas[ii[h]], br.areas[jj[h]]).astype(np.float64)
             fresh = ~np.isfinite(self._area[track])
             self._area[track] = np.where(fresh, area, 0.9 * np.nan_to_num(self._area[track]) + 0.1 * area)
         seen = np.isfinite(xyz[:, 0])
         if frame > 0:
-            prev = self._xyz[-1]
+            # Image velocity: 2D positions are 10-20 times steadier than the depth.
+            prev = self._px[-1]
             had = np.isfinite(prev[:, 0]) & seen
-            self._vel = np.where(had[:, None], xyz - np.where(had[:, None], prev, 0.0), 0.0)
+            self._vel = np.where(had[:, None], px - np.where(had[:, None], prev, 0.0), 0.0)
         self._streak = np.where(seen, self._streak + 1, 0)
         # A tentative track missed once is dropped: a false pairing rarely persists.
         drop = ~self._confirmed & ~seen
@@ -196,7 +213,7 @@ class StickerTracks:
         d3 = np.linalg.norm(pred[:, None] - hyp[None], axis=2)
         # 2D distances in both images are the reprojection error of the 3D hypothesis;
         # 3D adds a weak pull (its depth is 10-20 times noisier than its image positions).
-        cost = (dl + dr) / 2.0 + d3 / 10.0
+        cost = (dl + dr) / 2.0 + d3 / 20.0
         # Tentative tracks yield to confirmed ones over a contested candidate.
         cost = cost + np.where(self._confirmed, 0.0, 2.0)[:, None]
         ok = (dl <= gate[:, None]) & (dr <= gate[:, None]) & (d3 <= np.where(lost, 2.0, 1.0)[:, None] * self.gate_3d)
@@ -222,40 +239,44 @@ class StickerTracks:
                 return rows, cols
         return rows, cols
 
-    def _predicted(self, frame: int) -> np.ndarray:
-        """(T, 3) each track's expected position this frame (NaN before its first)."""
+    def _predicted(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """Each track's expected place this frame: 3D (T, 3) and px (T, 4) (left x, y,
+        right x, y). Seen last frame: its image positions moved on by its image velocity
+        (constant velocity), in 3D its last position; lost: carried by the head's motion
+        since it was last seen, and projected."""
         n = len(self._born)
         if frame == 0 or n == 0:
-            return np.zeros((n, 3))
-        last = self._xyz[-1]
-        pred = last + self._vel
-        lost = ~np.isfinite(last[:, 0])
+            return np.zeros((n, 3)), np.zeros((n, 4))
+        pred = self._xyz[-1].copy()
+        px = self._px[-1] + self._vel
+        lost = ~np.isfinite(pred[:, 0])
         if lost.any():
-            pred[lost] = self._head_carried(lost)
-        return pred
+            px[lost] = self._carried(lost)
+            pred[lost] = self.calibration.triangulate(px[lost, :2], px[lost, 2:])
+        return pred, px
 
-    def _head_carried(self, lost: np.ndarray) -> np.ndarray:
-        """(L, 3) lost tracks' last positions carried by the head's motion since then
-        (rigid fit of the tracks seen both then and in the last frame)."""
-        hist = np.stack(self._xyz)            # (F, T, 3)
+    def _carried(self, lost: np.ndarray) -> np.ndarray:
+        """(L, 4) px: lost tracks' last image positions moved by their neighbours' image
+        motion since then (the rigid-plus-expression prior, in 2D where it is steady):
+        the mean displacement of the 4 tracks nearest it then and seen then and now,
+        weighted by closeness."""
+        hist = np.stack(self._px)             # (F, T, 4)
         seen = np.isfinite(hist[..., 0])
-        out = np.full((int(lost.sum()), 3), np.nan)
-        now = hist[-1]
+        out = np.full((int(lost.sum()), 4), np.nan)
         for k, t in enumerate(np.flatnonzero(lost)):
             frames = np.flatnonzero(seen[:, t])
             if frames.size == 0:
                 continue
             f = frames[-1]
-            common = seen[f] & seen[-1]
-            common[t] = False
-            p = hist[f, t]
-            if common.sum() >= 3:
-                try:
-                    rot, trans = rigid_transform(hist[f, common], now[common])
-                    p = rot @ p + trans
-                except RetargetError:
-                    pass
-            out[k] = p
+            out[k] = hist[f, t]
+            common = np.flatnonzero(seen[f] & seen[-1])
+            if common.size == 0:
+                continue
+            dist = np.linalg.norm(hist[f, common, :2] - hist[f, t, :2], axis=1)
+            near = np.argsort(dist)[:4]
+            w = 1.0 / (dist[near] + 10.0)
+            move = hist[-1, common[near]] - hist[f, common[near]]
+            out[k] += (w[:, None] * move).sum(axis=0) / w.sum()
         return out
 
     def _projected(self, points: np.ndarray, camera: int) -> np.ndarray:
@@ -297,24 +318,24 @@ class StickerTracks:
         area = np.minimum(bl.areas[fl[pairs[:, 0]]], br.areas[fr[pairs[:, 1]]]).astype(np.float64)
         # Not a sticker already tracked (a lost one reappearing is re-taken by its track).
         if len(self._born):
-            pred = self._predicted(frame + 1)
+            _, pred_px = self._predicted(frame + 1)
             near = np.zeros(len(xyz), bool)
             for cam, at in ((0, l), (1, r)):
-                d = np.linalg.norm(at[:, None] - self._projected(pred, cam)[None], axis=2)
+                d = np.linalg.norm(at[:, None] - pred_px[None, :, 2 * cam:2 * cam + 2], axis=2)
                 near |= (np.nan_to_num(d, nan=np.inf) < self.gate).any(axis=1)
             fresh = ~near
-            xyz, l, area = xyz[fresh], l[fresh], area[fresh]
+            xyz, l, r, area = xyz[fresh], l[fresh], r[fresh], area[fresh]
         k = len(xyz)
         if k == 0:
             return
         for i in range(len(self._xyz)):
             pad = np.full((k, 3), np.nan)
-            pad2 = np.full((k, 2), np.nan)
+            pad2 = np.full((k, 4), np.nan)
             if i == len(self._xyz) - 1:
-                pad, pad2 = xyz, l.astype(np.float64)
+                pad, pad2 = xyz, np.concatenate([l, r], axis=1).astype(np.float64)
             self._xyz[i] = np.concatenate([self._xyz[i], pad])
             self._px[i] = np.concatenate([self._px[i], pad2])
-        self._vel = np.concatenate([self._vel, np.zeros((k, 3))])
+        self._vel = np.concatenate([self._vel, np.zeros((k, 4))])
         self._streak = np.concatenate([self._streak, np.ones(k, np.int64)])
         self._confirmed = np.concatenate([self._confirmed, np.full(k, frame == 0)])
         self._area = np.concatenate([self._area, area])
@@ -331,8 +352,13 @@ class StickerTracks:
 
     # -- results -------------------------------------------------------------------------
 
+    @property
+    def n_frames(self) -> int:
+        """Frames tracked so far."""
+        return len(self._xyz)
+
     def _order(self) -> np.ndarray:
-        px = np.stack(self._px)[:, self._confirmed]
+        px = np.stack(self._px)[:, self._confirmed, :2]
         seen = np.isfinite(px[..., 0])
         first = np.where(seen.any(0), seen.argmax(0), len(px))
         at = px[np.minimum(first, len(px) - 1), np.arange(px.shape[1])]
@@ -346,4 +372,4 @@ class StickerTracks:
 
     def left_px(self) -> np.ndarray:
         """(F, M, 2) float64 the same stickers' left-image positions, px."""
-        return np.stack(self._px)[:, self._order()]
+        return np.stack(self._px)[:, self._order(), :2]
