@@ -12,6 +12,9 @@ A project also saves custom layouts, its user's own markers (`retarget.custom_la
     DELETE /api/projects/{id}/layouts/{name}
     GET    /api/projects/{id}/layouts/from-take/{take_id}   the take's marker names, which
                                                a layout made from them takes as its points
+    POST   /api/projects/{id}/layouts/from-take  a take file's marker names (read, not
+                                               stored: a take of markers no layout of the
+                                               project has yet is refused as a take)
 
 A custom layout's JSON is a built-in one's plus ``custom: true``, ``saved_as`` (its name in
 the project) and ``spec``; its ``name`` (``custom-<hash of the spec>``) is what landmarks
@@ -23,13 +26,17 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Body, HTTPException, Response, status
+from fastapi import APIRouter, Body, File, Form, HTTPException, Response, UploadFile, status
 
 from retarget.custom_layouts import MAX_POINTS, layout_from_spec
 from retarget.errors import RetargetError
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
-from server.deps import ProjectDep, StoreDep
+from server.deps import IsolationDep, LimitsDep, ProjectDep, StoreDep
 from server.errors import responses
+from server.limits import body_limit
+from server.readers import take_from_upload
+from server.routers.meshes import read_capped, upload_extension
+from server.routers.takes import TAKE_EXTENSIONS
 from server.store import LAYOUT_NAME, LayoutNotFound
 
 router = APIRouter(tags=["layouts"], responses=responses())
@@ -91,6 +98,24 @@ def get_take_markers(project: ProjectDep, store: StoreDep, take_id: str) -> dict
     of them: ``{take, names}``; 404 for no such take."""
     take = store.take(project["id"], take_id, trimmed=False)
     return {"take": take_id, "names": list(take.names)}
+
+
+@router.post("/api/projects/{project_id}/layouts/from-take", responses=responses(404, 415, 503))
+@body_limit(files=1)
+def post_take_markers(project: ProjectDep, limits: LimitsDep, isolation: IsolationDep,
+                      file: UploadFile = File(description=", ".join(f".{e}" for e in TAKE_EXTENSIONS)),
+                      fps: float | None = Form(default=None, gt=0, le=1000,
+                                               description="frame rate when the file has none")) -> dict:
+    """The names of the points of a take file, read as ``POST .../takes`` reads one (in a
+    child process) but not stored: ``{take: null, names}``; 422 for a file that is no take."""
+    ext = upload_extension(file.filename, TAKE_EXTENSIONS)
+    data = read_capped(file, limits.max_upload_bytes)
+    if not data:
+        raise RetargetError(f"the uploaded file {file.filename!r} is empty")
+    take = isolation.call(take_from_upload, data, f"take.{ext}", file.filename,
+                          {"layout": None, "fps": fps}, {}, None,
+                          what=f"take file {file.filename!r} refused: not a readable {ext.upper()} file")
+    return {"take": None, "names": list(take.names)}
 
 
 @router.get("/api/projects/{project_id}/layouts/{name}", responses=responses(404))

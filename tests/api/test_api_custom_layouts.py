@@ -199,6 +199,20 @@ def test_a_take_named_by_the_markers_exports_with_partial_retargeting_and_condit
     assert only[BROWS].min() > 0.1 and np.delete(only, BROWS).max() == 0
 
 
+def test_a_take_file_s_marker_names_are_read_without_storing_it(client, project):
+    before = client.get(f"/api/projects/{project}/takes").json()
+    names = ["a1", "b2", "c3"]
+    data = json.dumps({"names": names, "frames": [[[0, 0, 0], [1, 0, 0], [0, 1, 0]]] * 3}).encode()
+    r = client.post(f"/api/projects/{project}/layouts/from-take", files={"file": ("x.json", data)},
+                    data={"fps": "30"})
+    assert r.status_code == 200 and r.json() == {"take": None, "names": names}, r.text
+    r = client.post(f"/api/projects/{project}/layouts/from-take", files={"file": ("x.json", b"{")})
+    assert r.status_code == 422 and "x.json" in r.json()["detail"]
+    r = client.post(f"/api/projects/{project}/layouts/from-take", files={"file": ("x.exe", data)})
+    assert r.status_code in (415, 422)
+    assert client.get(f"/api/projects/{project}/takes").json() == before
+
+
 def test_markerless_tracking_refuses_markers_the_face_mesh_has_no_vertex_for(client, project):
     r = client.post(f"/api/projects/{project}/takes/track", data={"method": "markerless"},
                     files={"file": ("v.mp4", b"not read")})
