@@ -1,3 +1,4 @@
+import { withGuidePositions } from './model/customLayout.js';
 import { api } from './net/api.js';
 import { DEFAULT_LAYOUT } from './panels/LandmarksPanel.js';
 import { projectFromHash } from './panels/ProjectBar.js';
@@ -54,7 +55,7 @@ export class App {
 
 	/**
 	 * The panels, each a view of part of the page.
-	 * @param {{bar: object, upload: object, marks: object, rig: object, mouth: object,
+	 * @param {{bar: object, upload: object, marks: object, customLayout: object, rig: object, mouth: object,
 	 *   paint: object, muscles: object, blendshapes: object, sources: object, live: object,
 	 *   exports: object}} panels
 	 */
@@ -119,6 +120,21 @@ export class App {
 
 	}
 
+	/**
+	 * The layouts a project can use: the built-in ones and its custom ones (those saved
+	 * with no reference positions get stand-ins for the guide, `withGuidePositions`).
+	 * @param {string} id
+	 */
+	async loadLayouts( id ) {
+
+		const layouts = ( await api.projectLayouts( id ) ).map( withGuidePositions );
+		if ( id !== this.projectId ) return;
+		this.layouts = layouts;
+		this.landmarks.setLayouts( layouts );
+		this.marks.setLayouts( layouts );
+
+	}
+
 	/** List the projects again. */
 	async refreshProjects() {
 
@@ -172,6 +188,9 @@ export class App {
 			}
 
 			this.regions.load( project.settings?.held_regions ?? null );
+			await this.loadLayouts( id );
+			if ( ! current() ) return false;
+			await this.customLayout.setProject();
 			await this.marks.load( project, current );
 			if ( ! current() ) return false;
 			this._showSavedLandmarks( project );

@@ -18,6 +18,7 @@ import { RegionMask } from './model/RegionMask.js';
 import { ProjectSettings } from './net/ProjectSettings.js';
 import { $ } from './panels/dom.js';
 import { BlendshapesPanel } from './panels/BlendshapesPanel.js';
+import { CustomLayoutPanel } from './panels/CustomLayoutPanel.js';
 import { ErrorBanner } from './panels/ErrorBanner.js';
 import { ExportPanel } from './panels/ExportPanel.js';
 import { LandmarksPanel } from './panels/LandmarksPanel.js';
@@ -56,6 +57,7 @@ app.setPanels( {
 	bar: new ProjectBar( app ),
 	upload: new MeshUpload( app ),
 	marks: new LandmarksPanel( app ),
+	customLayout: new CustomLayoutPanel( app ),
 	rig: new RigPanel( app ),
 	mouth: new MouthPanel( app ),
 	paint: new PaintPanel( app ),

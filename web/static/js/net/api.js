@@ -132,6 +132,29 @@ export const api = {
 	layouts: () => request( 'GET', '/api/layouts' ),
 
 	/**
+	 * The built-in layouts and the project's custom ones (those with `custom: true`,
+	 * `saved_as`, `spec`; a point with no reference position has `reference: null`).
+	 * @returns {Promise<Array<object>>}
+	 */
+	projectLayouts: ( id ) => request( 'GET', `/api/projects/${ id }/layouts` ),
+
+	/**
+	 * Save a custom layout (its spec: {description, points: [{name, region, side, mirror?, anchor?}]}) as `name`.
+	 * @returns {Promise<object>} the layout as GET lists it; refused (422) with the reason.
+	 */
+	putLayout: ( id, name, spec ) => request( 'PUT', `/api/projects/${ id }/layouts/${ encodeURIComponent( name ) }`, { json: spec } ),
+
+	/** @returns {Promise<{take: string, names: string[]}>} a take's marker names, in its order. */
+	takeMarkers: ( id, takeId ) => request( 'GET', `/api/projects/${ id }/layouts/from-take/${ encodeURIComponent( takeId ) }` ),
+
+	/**
+	 * A take file's marker names, read by the server and not stored (a take of markers no
+	 * layout of the project has yet is refused as a take).
+	 * @returns {Promise<{take: null, names: string[]}>}
+	 */
+	takeFileMarkers: ( id, file ) => upload( 'POST', `/api/projects/${ id }/layouts/from-take`, file, { fps: '30' } ),
+
+	/**
 	 * The mesh as arrays (the "RTMA" format of server/wire.py).
 	 * @returns {Promise<{positions: Float32Array, faces: Uint32Array, uv: Float32Array|null, textured: boolean}>}
 	 *   positions (3V) in the mesh's own units; faces (3F) vertex indices; uv (2V) or null;
