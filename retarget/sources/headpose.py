@@ -281,36 +281,45 @@ class HeadMotionRemover:
         return (p @ self.rotation_.T + self.translation_).astype(np.float32)
 
 
-def rigid_anchors(points, count: int = 4) -> np.ndarray:
+def rigid_anchors(points, count: int = 4, window: int = 7) -> np.ndarray:
     """(count,) int64 indices of the most mutually rigid markers of a take, ascending.
 
-    points : (F, M, 3) float, NaN where a marker is unseen. Rigidity is the spread
-    (standard deviation over the frames both are seen in, at least 5) of each pair's
-    distance; the stiffest pair starts the set and markers are added greedily by their
-    mean spread to those already chosen (on a face: nose, forehead, temples, Woodward
-    §5.1's anchors, which expressions barely move). `RetargetError` if fewer than
-    `count` markers are ever seen. Only markers seen in at least half as many frames as
-    the best seen one are candidates.
+    points : (F, M, 3) float, NaN where a marker is unseen. Rigidity is the spread (median
+    absolute deviation over the frames both are seen in, at least 5) of each pair's
+    distance, on positions first averaged over `window` frames (a stereo pair's depth
+    noise, millimetres at 1 m, would hide the expressions' motion). The stiffest pair
+    starts the set and markers are added greedily by their mean spread to those already
+    chosen that they are seen with (on a face: nose, forehead, temples, Woodward §5.1's
+    anchors, which expressions barely move; two temples need not be seen together).
+    Markers seen in under a quarter of the frames are no candidates. `RetargetError` if
+    fewer than `count` markers are ever seen.
     """
     p = np.asarray(points, dtype=np.float64)
     m = p.shape[1]
     if m < count or count < 3:
         raise RetargetError(f"rigid_anchors: {m} markers, {count} anchors asked (at least 3)")
-    d = np.linalg.norm(p[:, :, None] - p[:, None], axis=3)          # (F, M, M)
-    both = np.isfinite(d)
+    seen = np.isfinite(p).all(axis=2)
+    # Moving nan-mean over `window` frames.
+    kernel = np.ones(max(1, window))
+    total = np.apply_along_axis(np.convolve, 0, np.where(seen[..., None], p, 0.0), kernel, "same")
+    hits = np.apply_along_axis(np.convolve, 0, seen.astype(np.float64), kernel, "same")
+    smooth = np.where(seen[..., None], total / np.maximum(hits, 1)[..., None], np.nan)
+    d = np.linalg.norm(smooth[:, :, None] - smooth[:, None], axis=3)          # (F, M, M)
     with warnings.catch_warnings():   # pairs never seen together: NaN, then inf below
         warnings.simplefilter("ignore", RuntimeWarning)
-        spread = np.nanstd(d, axis=0)
-    # Markers seen in under half the frames (of the best seen) are no anchors: a short
-    # track's few distances say little about its rigidity.
-    seen_share = np.isfinite(p).all(axis=2).mean(axis=0)
-    often = seen_share >= 0.5 * seen_share.max()
-    spread[(both.sum(axis=0) < 5) | ~np.isfinite(spread) | ~often[:, None] | ~often[None]] = np.inf
+        spread = np.nanmedian(np.abs(d - np.nanmedian(d, axis=0)), axis=0)
+    often = seen.mean(axis=0) >= 0.25
+    spread[(np.isfinite(d).sum(axis=0) < 5) | ~np.isfinite(spread)] = np.inf
+    spread[~often] = np.inf
+    spread[:, ~often] = np.inf
     np.fill_diagonal(spread, np.inf)
     i, j = np.unravel_index(np.argmin(spread), spread.shape)
     chosen = [int(i), int(j)]
     while len(chosen) < count:
-        score = spread[:, chosen].mean(axis=1)
+        to = spread[:, chosen]
+        finite = np.isfinite(to)
+        score = np.where(finite.any(axis=1), np.where(finite, to, 0).sum(axis=1)
+                         / np.maximum(finite.sum(axis=1), 1), np.inf)
         score[chosen] = np.inf
         chosen.append(int(np.argmin(score)))
     return np.sort(np.array(chosen, dtype=np.int64))

@@ -39,6 +39,8 @@ from retarget.sources.color_markers import Blobs, MarkerColor, color_blobs, colo
 __all__ = ["StickerTracks", "split_blobs"]
 
 _BIG = 1e6   # cost of a forbidden pairing in the assignments
+_FAINT = 0.85   # floors of the colour predicate near a prediction, times the usual ones
+_DAMPING = 0.6   # share of last frame's image velocity carried into the prediction
 
 
 def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
@@ -112,6 +114,37 @@ def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
     return Blobs(c[keep], np.zeros(int(keep.sum()), np.int64), a[keep], blobs.names)
 
 
+def _with_faint(image: np.ndarray, blobs: Blobs, faint: MarkerColor, predicted: np.ndarray,
+                gate: float) -> Blobs:
+    """`blobs` plus the faint candidates (colour predicate `faint`) found within `gate` px of
+    each prediction (T, 2) that has no candidate there (Woodward §5, Algorithm 1: once the
+    template is set up, only the regions round the markers are searched)."""
+    ok = np.isfinite(predicted).all(axis=1)
+    if len(blobs):
+        d = np.linalg.norm(predicted[:, None] - blobs.centroids[None], axis=2)
+        ok &= ~(np.nan_to_num(d, nan=np.inf) <= gate).any(axis=1)
+    if not ok.any():
+        return blobs
+    h, w = image.shape[:2]
+    cents, areas = [blobs.centroids], [blobs.areas]
+    r = int(np.ceil(gate)) + 3
+    for x, y in np.rint(predicted[ok]).astype(int):
+        x0, y0, x1, y1 = max(x - r, 0), max(y - r, 0), min(x + r + 1, w), min(y + r + 1, h)
+        if x1 - x0 < 3 or y1 - y0 < 3:
+            continue
+        found = color_blobs(np.ascontiguousarray(image[y0:y1, x0:x1]), faint, min_area=2,
+                            merge_distance=1.5, median=1)
+        c = found.centroids + np.array([x0, y0], np.float32)
+        near = np.linalg.norm(c - [x, y], axis=1) <= gate
+        if len(blobs) and near.any():
+            # Not a part of a candidate found already (the window overlaps it).
+            near &= np.linalg.norm(c[:, None] - blobs.centroids[None], axis=2).min(axis=1) > 3.0
+        cents.append(c[near])
+        areas.append(found.areas[near])
+    c = np.concatenate(cents).astype(np.float32)
+    return Blobs(c, np.zeros(len(c), np.int64), np.concatenate(areas).astype(np.int32), blobs.names)
+
+
 class StickerTracks:
     """Stickers of one colour followed in 3D through a stereo take (see the module doc).
 
@@ -119,7 +152,7 @@ class StickerTracks:
     color : the stickers' colour, as `sticker_color` takes it (a name, B,G,R, ...).
     max_epipolar : px, a candidate pair further than this from its epipolar line is none.
     gate : px, furthest a tracked sticker's candidate may lie from its prediction in
-        either image (twice that for a lost sticker, whose prediction is rougher).
+        either image (1.5 times that for a lost sticker, whose prediction is rougher).
     gate_3d : mm (calibration units), the same in 3D.
     confirm : frames in a row a new track must be seen to count.
     depth_range : (near, far) z of a sticker in the left camera (default: any in front).
@@ -130,10 +163,16 @@ class StickerTracks:
     """
 
     def __init__(self, calibration: StereoCalibration, color: str | MarkerColor = "blue", *,
-                 max_epipolar: float = 3.0, gate: float = 6.0, gate_3d: float = 40.0,
+                 max_epipolar: float = 3.0, gate: float = 9.0, gate_3d: float = 80.0,
                  confirm: int = 3, depth_range: tuple[float, float] | None = None):
         self.calibration = calibration
         self.color = sticker_color(color)
+        # Near a track's prediction a sticker may be fainter (edge-on, in shadow, its
+        # colour washed out by chroma subsampling) than anywhere in the image could be
+        # without finding skin and background: lower floors there.
+        self._faint = MarkerColor(self.color.name, self.color.hue, hue_tol=self.color.hue_tol,
+                                  min_saturation=_FAINT * self.color.min_saturation,
+                                  min_value=_FAINT * self.color.min_value)
         self.max_epipolar = float(max_epipolar)
         self.gate = float(gate)
         self.gate_3d = float(gate_3d)
@@ -155,11 +194,13 @@ class StickerTracks:
         pred, both_px = self._predicted(frame)
         pred_px = [both_px[:, :2], both_px[:, 2:]]
         typical = float(np.median(self._area[self._confirmed])) if self._confirmed.any() else np.inf
-        blobs = []
+        blobs, counts = [], []
         for cam, img in enumerate((left, right)):
             # Only touching components are one blob: stickers 2-4 px apart stay apart.
             b = color_blobs(img, self.color, merge_distance=1.5)
-            blobs.append(split_blobs(img, b, self.color, pred_px[cam], typical))
+            b = split_blobs(img, b, self.color, pred_px[cam], typical)
+            counts.append(len(b))
+            blobs.append(_with_faint(img, b, self._faint, pred_px[cam], self.gate))
         bl, br = blobs
         xyz = np.full((n, 3), np.nan)
         px = np.full((n, 4), np.nan)
@@ -187,6 +228,9 @@ class StickerTracks:
         self._xyz.append(xyz)
         self._px.append(px)
         self._drop(drop)
+        # Faint candidates (those after the first `counts`) only continue tracks.
+        used_l[counts[0]:] = True
+        used_r[counts[1]:] = True
         self._spawn(frame, bl, br, used_l, used_r)
 
     def _hypotheses(self, left: np.ndarray, right: np.ndarray):
@@ -207,7 +251,7 @@ class StickerTracks:
         candidate in each image; the Hungarian method on 2D + 3D distance from the
         predictions, a candidate claimed twice going to the cheaper claim."""
         lost = ~np.isfinite(self._xyz[-1][:, 0]) if self._xyz else np.ones(len(pred), bool)
-        gate = np.where(lost, 2.0, 1.0) * self.gate
+        gate = np.where(lost, 1.5, 1.0) * self.gate
         dl = np.linalg.norm(pred_px[0][:, None] - lpx[None], axis=2)
         dr = np.linalg.norm(pred_px[1][:, None] - rpx[None], axis=2)
         d3 = np.linalg.norm(pred[:, None] - hyp[None], axis=2)
@@ -248,7 +292,8 @@ class StickerTracks:
         if frame == 0 or n == 0:
             return np.zeros((n, 3)), np.zeros((n, 4))
         pred = self._xyz[-1].copy()
-        px = self._px[-1] + self._vel
+        # Damped: a jaw reversing within a frame or two overshoots a full-velocity guess.
+        px = self._px[-1] + _DAMPING * self._vel
         lost = ~np.isfinite(pred[:, 0])
         if lost.any():
             px[lost] = self._carried(lost)

@@ -25,6 +25,7 @@ from retarget.errors import RetargetError
 from retarget.sample_face import SampleFace, sample_face
 from retarget.sources.color_markers import layout_marker_colors
 from retarget.sources.calibration import StereoCalibration
+from retarget.sources.headpose import rigid_transform
 from retarget.testing.camera import Camera, look_at
 from retarget.testing.marker_video import (
     Footage,
@@ -51,6 +52,7 @@ __all__ = [
     "sticker_head_motion",
     "render_sticker_video",
     "sticker_truth",
+    "sticker_scores",
 ]
 
 MM_PER_CM = 10.0
@@ -388,3 +390,55 @@ def sticker_truth(truth: GroundTruth) -> tuple[np.ndarray, np.ndarray]:
     still = posed @ rot[0].T + trans[0]
     return left.to_camera(truth.points3d.reshape(-1, 3)).reshape(truth.points3d.shape), \
         left.to_camera(still.reshape(-1, 3)).reshape(still.shape)
+
+
+def sticker_scores(points, stabilised, truth: GroundTruth, facing: float = 0.5) -> dict:
+    """How unnamed stereo sticker tracks fare against the truth (issue 17's figures).
+
+    points : (F, M, 3) tracked stickers in the left camera's frame (head motion kept);
+    stabilised : (F, M, 3) the same with the head motion removed; mm, NaN where unseen.
+    Each column is the truth sticker its left-image projection is nearest in most of its
+    frames (the image position is a tenth of a pixel sure, the depth millimetres); an
+    identity switch is a change of a column's nearest sticker from one of its frames to
+    the next. Returns a dict: owner (M,) truth index per column; switches; found (N,)
+    share of the frames where each sticker is seen clearly by both cameras (visible, its
+    normal within acos(`facing`) of both lines of sight) in which its column has a point
+    (0 for a sticker no column follows; NaN for one never seen clearly); error (F, N) mm,
+    the shape error: stabilised columns against `sticker_truth`'s stabilised truth, after
+    the one rigid transform that best aligns the take (the head frame's choice), NaN
+    where not tracked.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    stab = np.asarray(stabilised, dtype=np.float64)
+    left = truth.cameras[0]
+    # Projection of left-camera-frame points: x, y over z through the left camera's K.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        px = pts[..., :2] / pts[..., 2:] * left.K[[0, 1], [0, 1]] + left.K[:2, 2]
+    d = np.linalg.norm(px[:, :, None] - truth.points2d[:, 0][:, None], axis=3)   # (F, M, N)
+    tracked = np.isfinite(px[..., 0])
+    nearest = np.where(tracked, np.nan_to_num(d, nan=np.inf).argmin(2), -1)
+    owner = np.full(pts.shape[1], -1)
+    switches = 0
+    for m in range(pts.shape[1]):
+        ids = nearest[tracked[:, m], m]
+        switches += int((np.diff(ids) != 0).sum())
+        if ids.size:
+            owner[m] = np.bincount(ids).argmax()
+    n = truth.points3d.shape[1]
+    clear = (truth.visible & (truth.facing > facing)).all(axis=1)               # (F, N)
+    found = np.full(n, np.nan)
+    _, still = sticker_truth(truth)
+    error = np.full(clear.shape, np.nan)
+    column = np.full(n, -1)
+    for k in range(n):
+        mine = np.flatnonzero(owner == k)
+        if mine.size:
+            column[k] = mine[tracked[:, mine].sum(0).argmax()]
+        if clear[:, k].any():
+            found[k] = tracked[clear[:, k], column[k]].mean() if column[k] >= 0 else 0.0
+    have = column >= 0
+    a, b = stab[:, column[have]], still[:, have]
+    ok = np.isfinite(a[..., 0])
+    rot, trans = rigid_transform(a[ok], b[ok])
+    error[:, have] = np.linalg.norm(a @ rot.T + trans - b, axis=2)
+    return {"owner": owner, "switches": switches, "found": found, "error": error}

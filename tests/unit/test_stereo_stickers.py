@@ -18,6 +18,7 @@ from retarget.testing.stereo_rig import (
     STICKER_ANCHORS,
     render_sticker_video,
     rig_calibration,
+    sticker_scores,
     sticker_truth,
     webcam_cameras,
 )
@@ -42,26 +43,23 @@ def _owners(points, truth):
 
 def test_stickers_are_tracked_without_a_layout(clip):
     cal = rig_calibration(*clip.cameras)
-    keep = track_stereo_videos(*clip.videos, cal, layout=None, head_motion="keep")
-    truth, still = sticker_truth(clip)
-    assert keep.names[0] == "m01" and keep.layout is None
-    owner, switches = _owners(keep.points.astype(float), truth)
-    assert switches == 0
-    assert len(set(owner.tolist())) == len(owner) == 13
-    seen = clip.visible[:, 0] & clip.visible[:, 1]
-    found = np.isfinite(keep.points[..., 0])
-    share = [found[seen[:, o], m].mean() for m, o in enumerate(owner) if seen[:, o].sum() >= 5]
-    assert min(share) > 0.6 and np.mean(share) > 0.9
-    err = np.linalg.norm(keep.points - truth[:, owner], axis=2)
-    assert np.nanmedian(err) < 3.0   # mm at 1 m: 1 px of vertical disparity is 16 mm
-    # Head motion removed: the shape in one head frame, up to that frame's choice.
-    removed = track_stereo_videos(*clip.videos, cal, layout=None, head_motion="remove")
-    s, g = removed.points.astype(float), still[:, owner]
-    ok = np.isfinite(s[..., 0])
-    rot, trans = rigid_transform(s[ok], g[ok])
-    shape = np.linalg.norm(s @ rot.T + trans - g, axis=2)
-    assert np.nanmedian(shape) < 4.0
-    assert len(removed.meta["head_pose"]["rotvec"]) == 30 and len(removed.meta["anchors"]) == 4
+    kept = track_stereo_videos(*clip.videos, cal, layout=None, head_motion="keep")
+    assert kept.names[:2] == ("m01", "m02") and kept.layout is None and kept.n_points == 13
+    anchors = [kept.names[m] for m in range(13)
+               if sticker_scores(kept.points, kept.points, clip)["owner"][m] < STICKER_ANCHORS]
+    removed = track_stereo_videos(*clip.videos, cal, layout=None, head_motion="remove",
+                                  anchors=anchors)
+    scores = sticker_scores(kept.points, removed.points, clip)
+    assert scores["switches"] == 0
+    assert sorted(scores["owner"].tolist()) == list(range(13))
+    assert np.nanmin(scores["found"]) > 0.85
+    # Camera frame: the depth is the noisy part (1 px of vertical disparity is 16 mm).
+    truth, _ = sticker_truth(clip)
+    err = np.linalg.norm(kept.points - truth[:, scores["owner"]], axis=2)
+    assert np.nanmedian(err) < 2.5
+    shape = scores["error"][np.isfinite(scores["error"])]
+    assert np.median(shape) < 4.0 and np.percentile(shape, 95) < 12.0
+    assert removed.meta["anchors"] == anchors and len(removed.meta["head_pose"]["rotvec"]) == 30
 
 
 def _disc_frames(cal_cams, points, radius=3.5, color=(230, 80, 30)):
