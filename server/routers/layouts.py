@@ -30,7 +30,7 @@ from fastapi import APIRouter, Body, File, Form, HTTPException, Response, Upload
 
 from retarget.custom_layouts import MAX_POINTS, layout_from_spec
 from retarget.errors import RetargetError
-from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout, get_layout
+from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout
 from server.deps import IsolationDep, LimitsDep, ProjectDep, StoreDep
 from server.errors import responses
 from server.limits import body_limit
@@ -79,8 +79,8 @@ def list_layouts() -> list[dict]:
 @router.get("/api/layouts/{name}")
 def get_layout_json(name: str) -> dict:
     """One layout; 422 naming the known ones for an unknown name."""
-    if name not in LAYOUTS:
-        get_layout(name)  # the library's refusal, naming the built-in ones
+    if name not in LAYOUTS:  # a custom layout is a project's: GET /api/projects/{id}/layouts/{name}
+        raise RetargetError(f"unknown layout {name!r:.80}; available: {', '.join(LAYOUTS)}")
     return _layout_json(LAYOUTS[name])
 
 
@@ -131,7 +131,7 @@ def get_project_layout(project: ProjectDep, store: StoreDep, name: str) -> dict:
 
 
 @router.put("/api/projects/{project_id}/layouts/{name}", status_code=status.HTTP_201_CREATED,
-            responses=responses(404, 409))
+            responses={200: {"description": "a layout of that name replaced"}, **responses(404, 409)})
 def put_project_layout(project: ProjectDep, store: StoreDep, name: str, response: Response,
                        spec: dict[str, Any] = Body(examples=[{"points": [
                            {"name": "m01", "region": "brows", "side": "right", "mirror": "m02"},
