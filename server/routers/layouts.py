@@ -28,7 +28,7 @@ from typing import Any
 
 from fastapi import APIRouter, Body, File, Form, HTTPException, Response, UploadFile, status
 
-from retarget.custom_layouts import MAX_POINTS, layout_from_spec
+from retarget.custom_layouts import layout_from_spec
 from retarget.errors import RetargetError
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout
 from server.deps import IsolationDep, LimitsDep, ProjectDep, StoreDep
@@ -145,10 +145,7 @@ def put_project_layout(project: ProjectDep, store: StoreDep, name: str, response
         raise RetargetError(f"layout name {name!r:.80} must be 1 to 64 letters, digits, '_' or '-'")
     if name in LAYOUTS or name.startswith("custom-"):
         raise RetargetError(f"layout name {name!r} is taken by the library's layouts: choose another")
-    points = spec.get("points")
-    if isinstance(points, list) and len(points) > MAX_POINTS:  # before any per-point work
-        raise RetargetError(f"a custom layout needs 3 to {MAX_POINTS} points, got {len(points)}")
-    layout = layout_from_spec(spec)
+    layout = layout_from_spec(spec)  # counts the points before any per-point work
     try:
         info, new = store.put_layout(project["id"], name, layout.spec(), layout=layout.name,
                                      n_points=layout.n_points)

@@ -98,6 +98,8 @@ def test_a_saved_layout_is_listed_with_the_built_in_ones(client, project):
     assert by_hash == client.get(f"/api/projects/{project}/layouts/markers").json() == mine
     assert client.get(f"/api/projects/{project}/layouts/dutreve22").json()["n_points"] == 22
     assert client.get(f"/api/projects/{project}/layouts/nothing").status_code == 404
+    r = client.get(f"/api/layouts/{mine['name']}")  # the global list is the built-in layouts
+    assert r.status_code == 422 and "unknown layout" in r.json()["detail"]
     # another project sees only the built-in layouts
     other = client.post("/api/projects", json={"name": "other"}).json()["id"]
     assert len(client.get(f"/api/projects/{other}/layouts").json()) == len(LAYOUTS)

@@ -185,3 +185,15 @@ def test_conditioning_removes_head_motion_on_the_user_s_anchors():
     np.testing.assert_allclose(moved[:, 6:], 0, atol=1e-4)  # the anchors stay: the head is removed
     np.testing.assert_allclose(moved[:, :6, 0], 0, atol=1e-4)
     np.testing.assert_allclose(moved[-1, :6, 1], 1, atol=1e-4)  # the face's own motion is kept
+
+
+def test_the_registry_keeps_the_most_recently_used_layouts(monkeypatch):
+    from retarget import layouts
+
+    monkeypatch.setattr(layouts, "MAX_REGISTERED", 3)
+    made = [layout_from_spec(markers_spec(m01={"name": f"x{k}"}, m02={"mirror": f"x{k}"})) for k in range(3)]
+    get_layout(made[0].name)  # used: the oldest is now made[1]
+    layout_from_spec(markers_spec(m01={"name": "y"}, m02={"mirror": "y"}))
+    assert len(layouts._REGISTERED) == 3
+    assert made[1].name not in layouts._REGISTERED
+    assert get_layout(made[0].name) == made[0] and get_layout(made[2].name) == made[2]
