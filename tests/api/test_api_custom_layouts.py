@@ -201,6 +201,20 @@ def test_a_take_named_by_the_markers_exports_with_partial_retargeting_and_condit
     assert only[BROWS].min() > 0.1 and np.delete(only, BROWS).max() == 0
 
 
+def test_an_exported_glb_imports_with_its_custom_layout(client, project):
+    glb = client.get(f"/api/projects/{project}/export.glb").content
+    r = client.post("/api/projects/import", files={"file": ("markers.glb", glb)})
+    assert r.status_code == 201, r.text
+    imported = r.json()["project"]
+    original = client.get(f"/api/projects/{project}/landmarks").json()
+    landmarks = client.get(f"/api/projects/{imported['id']}/landmarks").json()
+    assert landmarks["layout"] == original["layout"] and landmarks["layout_spec"] == original["layout_spec"]
+    # its takes are read in it: the layout comes from the landmarks, though the project saved none
+    r = client.post(f"/api/projects/{imported['id']}/takes", files={"file": ("perf.json", take_json(30))},
+                    data={"fps": "30"})
+    assert r.status_code == 201, r.text
+
+
 def test_a_take_file_s_marker_names_are_read_without_storing_it(client, project):
     before = client.get(f"/api/projects/{project}/takes").json()
     names = ["a1", "b2", "c3"]
