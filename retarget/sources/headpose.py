@@ -397,3 +397,4 @@ def anchored_poses(points, anchors, iterations: int = 2):
     rot = np.einsum("ji,fjk->fik", r0, rot)
     trans = (trans - t0) @ r0
     return rot, trans, (ref_all - t0) @ r0
+

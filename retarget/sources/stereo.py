@@ -33,6 +33,7 @@ from retarget.sources.headpose import (
     rigid_transform,
     stable_indices,
 )
+from retarget.sources.stereo_depth import sight_smoothed
 from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.take import Take
 from retarget.sources.video import VideoReader
@@ -193,6 +194,7 @@ def track_stereo_frames(
     layout: Layout | str | None,
     fps: float = 30.0,
     color="blue",
+    depth_window: int = 15,
     colors: Sequence[str] | None = None,
     assignment: tuple[np.ndarray, np.ndarray] | None = None,
     anchors: Sequence[str | int] | None = None,
@@ -215,8 +217,11 @@ def track_stereo_frames(
         one in view followed in 3D (`StickerTracks`) into columns m01..mM, by when each is
         first seen, then top to bottom; `anchors` then name columns (default: the 4 most
         mutually rigid, `rigid_anchors`) and each frame's head pose comes from the anchors
-        it sees (`anchored_poses`). `assignment`, `colors`, `hold` and `max_jump` are for
-        layouts only.
+        it sees (`anchored_poses`); with the head motion removed, the stickers' depth
+        noise is smoothed along their lines of sight over `depth_window` frames in the
+        head frame (`sight_smoothed`, 1 = none; kept, the points are as triangulated: the
+        smoothing's head frame carries the pose's own noise back into the camera's).
+        `assignment`, `colors`, `hold` and `max_jump` are for layouts only.
     assignment : optional (left (N, 2), right (N, 2)) first-frame pixel positions of
         the markers; default: identified automatically (`identified_markers`).
     anchors : points that define the head frame (names or indices; default
@@ -235,6 +240,7 @@ def track_stereo_frames(
         raise RetargetError(f"head_motion must be 'remove' or 'keep'; got {head_motion!r}")
     if layout is None:
         return _track_stickers(frames, calibration, fps=fps, color=color, anchors=anchors,
+                               depth_window=depth_window,
                                head_motion=head_motion, temporal_window=temporal_window,
                                max_epipolar=max_epipolar, progress=progress, n_frames=n_frames)
     layout = layout if isinstance(layout, Layout) else get_layout(layout)
@@ -286,7 +292,7 @@ def track_stereo_frames(
                 layout=layout.name if layout.name in LAYOUTS else None, source="stereo", meta=meta)
 
 
-def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, anchors,
+def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, anchors, depth_window,
                     head_motion, temporal_window, max_epipolar, progress, n_frames) -> Take:
     """`track_stereo_frames` without a layout: unnamed stickers of one colour."""
     tracks = StickerTracks(calibration, color, max_epipolar=max_epipolar)
@@ -318,14 +324,20 @@ def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, ancho
         anchor_idx = np.array([names.index(a) for a in items], dtype=np.int64)
     try:
         rot, trans, _ = anchored_poses(points, anchor_idx)
+        # Twice: the second pose, from depth-smoothed anchors, is steadier, and so is the
+        # head frame the second smoothing works in.
+        steady = points
+        for _ in range(2 if depth_window > 1 else 0):
+            steady = sight_smoothed(steady, rot, trans, depth_window)
+            rot, trans, _ = anchored_poses(steady, anchor_idx)
     except RetargetError as exc:
         raise RetargetError(f"track_stereo: the head frame cannot be set up: {exc}") from None
-    stabilised = np.einsum("fnj,fij->fni", points, rot) + trans[:, None]
+    stabilised = np.einsum("fnj,fij->fni", steady, rot) + trans[:, None]
     meta = {"units": "calibration pattern units", "calibration_rms": calibration.rms,
             "color": tracks.color.name, "anchors": [names[k] for k in anchor_idx],
             "lost_share": np.isnan(points).any(axis=2).mean(axis=0).round(4).tolist(),
             "head_motion": head_motion, "temporal_window": int(temporal_window),
-            "head_pose": _pose_json(rot, trans)}
+            "depth_window": int(depth_window), "head_pose": _pose_json(rot, trans)}
     points = stabilised if head_motion == "remove" else points
     if temporal_window > 1:
         points = temporal_mean(points, temporal_window)
