@@ -4,6 +4,8 @@ layouts (a user's own markers, `retarget.custom_layouts`) made and checked as JS
     retarget layouts                                   list the built-in layouts
     retarget layouts new --names a,b,c --regions brows,brows,nose [--sides right,left,center]
         [--mirror b,a,-] [--anchors a,b,c] [--description TEXT] --out L.json
+    retarget layouts new --names-from TAKE.c3d --regions ... --out L.json   the names of a
+                                                       take's markers, in its order
     retarget layouts new --from dutreve22 --out L.json a built-in layout's spec, to edit
     retarget layouts check L.json                      check a layout file (or a landmarks
                                                        JSON that carries one) and sum it up
@@ -17,6 +19,7 @@ from pathlib import Path
 from retarget.custom_layouts import layout_from_spec, load_layout_file, spec_of_names
 from retarget.errors import RetargetError
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, SIDES, Layout, get_layout
+from retarget.sources.files import read_take
 
 __all__ = ["add_layouts"]
 
@@ -33,6 +36,8 @@ def add_layouts(commands) -> None:
                              "each point's name, region, side and left/right partner.")
     new.add_argument("--names", metavar="A,B,...", help="the points' names, comma-separated "
                      "(letters, digits, underscores: a take's column names must match them)")
+    new.add_argument("--names-from", metavar="TAKE", help="the names of a take file's points (csv, "
+                     "json, trc, c3d, ...: its markers), in its order, instead of --names")
     new.add_argument("--regions", metavar="R,R,...", help="each point's region, or one for all: "
                      + ", ".join(REGIONS))
     new.add_argument("--sides", metavar="S,S,...", help="each point's side (the subject's), or one "
@@ -64,8 +69,10 @@ def _list_layouts(args) -> int:
 
 
 def _new_layout(args) -> int:
-    if (args.names is None) == (args.from_layout is None):
-        raise RetargetError("layouts new: give --names (with --regions) or --from")
+    given = [o for o, v in (("--names", args.names), ("--names-from", args.names_from),
+                            ("--from", args.from_layout)) if v is not None]
+    if len(given) != 1:
+        raise RetargetError("layouts new: give one of --names or --names-from (with --regions), or --from")
     if args.from_layout is not None:
         base = _existing_layout(args.from_layout)
         spec = base.spec()
@@ -73,8 +80,8 @@ def _new_layout(args) -> int:
             spec["description"] = args.description
     else:
         if args.regions is None:
-            raise RetargetError("layouts new: --names needs --regions")
-        names = _listed(args.names)
+            raise RetargetError(f"layouts new: {given[0]} needs --regions")
+        names = _listed(args.names) if args.names is not None else list(read_take(args.names_from).names)
         spec = spec_of_names(names, _each(args.regions, len(names), "--regions"),
                              _each(args.sides, len(names), "--sides") if args.sides else None,
                              [None if m == "-" else m for m in _each(args.mirror, len(names), "--mirror")]

@@ -83,7 +83,8 @@ def test_layouts_new_writes_a_file_that_check_sums_up(files, capsys):
     (["--names", "a,b,c", "--regions", "nose", "--anchors", "a,z"], "--anchors names points that --names lacks: z"),
     (["--names", "a,b", "--regions", "nose"], "needs 3 to 1000 points, got 2"),
     (["--names", "a;b,c,d", "--regions", "nose"], "'a;b' is not a safe identifier"),
-    (["--regions", "nose"], "give --names (with --regions) or --from"),
+    (["--regions", "nose"], "give one of --names or --names-from (with --regions), or --from"),
+    (["--names", "a,b,c", "--from", "dutreve22"], "give one of --names"),
 ])
 def test_layouts_new_refuses_a_bad_layout_in_one_line(tmp_path, capsys, args, message):
     out = tmp_path / "L.json"
@@ -147,3 +148,17 @@ def test_export_gltf_names_the_joints_after_the_markers_and_carries_the_layout(f
     back = read_gltf(out)
     assert back.joint_names == tuple(NAMES) or list(back.joint_names) == NAMES
     assert back.points.layout == files["name"] and get_layout(files["name"]).point_names == tuple(NAMES)
+
+
+def test_layouts_new_takes_the_names_of_a_take_s_markers(tmp_path, capsys):
+    take = tmp_path / "perf.json"
+    take.write_text(json.dumps({"names": ["LBRO", "RBRO", "NOSE"], "frames": [[[1, 0, 0], [-1, 0, 0], [0, 0, 1]]]}))
+    out = tmp_path / "L.json"
+    assert main(["layouts", "new", "--names-from", str(take), "--regions", "brows,brows,nose",
+                 "--sides", "left,right,center", "--mirror", "RBRO,LBRO,-", "--out", str(out)]) == 0
+    spec = json.loads(out.read_text())
+    assert [p["name"] for p in spec["points"]] == ["LBRO", "RBRO", "NOSE"]
+    assert spec["points"][0]["mirror"] == "RBRO"
+    assert main(["layouts", "new", "--names-from", str(tmp_path / "none.json"), "--regions", "nose",
+                 "--out", str(out)]) == 2
+    assert "none.json" in capsys.readouterr().err
