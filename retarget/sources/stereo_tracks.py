@@ -44,13 +44,16 @@ _DAMPING = 0.6   # share of last frame's image velocity carried into the predict
 
 
 def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
-                typical_area: float, *, reach: float = 4.0) -> Blobs:
+                areas: np.ndarray, *, reach: float = 4.0) -> Blobs:
     """`blobs` with each blob that holds two or more predicted markers split among them.
 
     image : (H, W, 3) uint8 BGR; color : the stickers' colour (as `color_mask` takes it).
     predicted : (T, 2) float px, where the tracks are expected (NaN rows ignored).
-    typical_area : px, one sticker's blob area; a blob is split only when its area is at
-        least 1.4 times that for two (a sticker whose neighbour is hidden keeps its blob).
+    areas : (T,) px, each track's usual blob area (NaN if not known); a blob is split only
+        when its area is at least 0.75 times the sum of those of the tracks it holds (a
+        sticker whose neighbour is hidden, or merely predicted near it, keeps its blob).
+    A blob no track is in, elongated and at least 1.7 times the median blob's area, is
+    split in two along its long axis (two stickers touching before they are tracked).
     reach : px beyond a blob's equivalent radius within which a prediction counts as in it.
     Each split blob's mask pixels (in a window round it) are clustered by k-means started
     at the predictions; the parts' centroids replace the blob, each with its part's area.
@@ -64,11 +67,10 @@ def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
     nearest = d.argmin(axis=1)
     inside = d[np.arange(len(d)), nearest] <= radius[nearest] + reach
     counts = np.bincount(nearest[inside], minlength=len(blobs))
-    split = (counts >= 2) & (blobs.areas >= 1.4 * typical_area * np.maximum(counts, 2) / 2)
-    # A blob no track is in and twice the usual size (two stickers touching where nothing
-    # is tracked yet, as at the start) is split in two if it is elongated.
-    usual = np.median(blobs.areas) if np.isinf(typical_area) else typical_area
-    unclaimed = (counts == 0) & (blobs.areas >= 1.7 * usual) & (blobs.areas >= 12)
+    held = np.bincount(nearest[inside], weights=np.nan_to_num(np.asarray(areas, float)[inside], nan=np.inf),
+                       minlength=len(blobs))
+    split = (counts >= 2) & (blobs.areas >= 0.75 * held)
+    unclaimed = (counts == 0) & (blobs.areas >= 1.7 * np.median(blobs.areas)) & (blobs.areas >= 12)
     if not (split | unclaimed).any():
         return blobs
     mask = color_mask(image, color)
@@ -193,12 +195,11 @@ class StickerTracks:
         n = len(self._born)
         pred, both_px = self._predicted(frame)
         pred_px = [both_px[:, :2], both_px[:, 2:]]
-        typical = float(np.median(self._area[self._confirmed])) if self._confirmed.any() else np.inf
         blobs, counts = [], []
         for cam, img in enumerate((left, right)):
             # Only touching components are one blob: stickers 2-4 px apart stay apart.
             b = color_blobs(img, self.color, merge_distance=1.5)
-            b = split_blobs(img, b, self.color, pred_px[cam], typical)
+            b = split_blobs(img, b, self.color, pred_px[cam], self._area)
             counts.append(len(b))
             blobs.append(_with_faint(img, b, self._faint, pred_px[cam], self.gate))
         bl, br = blobs
