@@ -718,13 +718,17 @@ class ProjectStore:
             if painted is not None and painted.n_rows:
                 name = f"paint-r{row['revision']}-{secrets.token_hex(4)}.npz"
                 write_atomic(folder / name, writer=painted.save)
+            n_painted = 0 if name is None else painted.n_rows
             db.execute(
                 "UPDATE projects SET painted_file = ?, rig_version = rig_version + 1, "
                 "rig_painted = ?, updated = ? WHERE id = ?",
-                (name, 0 if name is None else painted.n_rows, _now(), project_id),
+                (name, n_painted, _now(), project_id),
             )
+            # the status this paint made, from inside its transaction: read afterwards, a
+            # concurrent landmark edit may already have dropped the rig (a 500 under fuzzing)
+            status = {"version": row["rig_version"] + 1, "painted_vertices": n_painted}
         self._sweep(project_id)
-        return self.rig_status(project_id)
+        return status
 
     def rig(self, project_id: str) -> SkinWeights | None:
         """The rig in use (the automatic rig with its painted rows), or None."""

@@ -114,7 +114,10 @@ def get_rig(project: ProjectDep, store: StoreDep) -> dict:
     `version` counts the rig's changes (compute, paint, reset); `painted_vertices` is how
     many rows differ from the automatic rig's."""
     rig = _rig(project, store)
-    return rig_info(rig, store.rig_status(project["id"]))
+    rig_status = store.rig_status(project["id"])
+    if rig_status is None:  # dropped by a landmark edit since the rig was read
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"project {project['id']!r} has no rig yet")
+    return rig_info(rig, rig_status)
 
 
 @router.get("/api/projects/{project_id}/rig/weights", response_class=Response,
