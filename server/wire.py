@@ -5,6 +5,7 @@ JavaScript twin in `web/static/js/net/wire.js`, and tests run the two against ea
 - contraction frame ``RTMC`` (server -> page, WebSocket, muscle mode): a frame's muscle
   contractions and the expression they show;
 - source points ``RTSP`` (page -> server, WebSocket): one frame of tracked points;
+- stereo pair ``RTSJ`` (page -> server, WebSocket): two cameras' JPEGs of one moment;
 - mesh arrays ``RTMA`` (GET .../mesh/arrays): vertices and triangles to draw, and uv;
 - rig weights ``RTSW`` (GET .../rig/weights): joint indices and weights per vertex;
 - weight edit ``RTSE`` (PATCH .../rig/weights): painted rows;
@@ -370,6 +371,75 @@ def decode_points(data: bytes) -> PointsFrame:
     if np.isinf(p).any():
         raise ValueError("source points must be finite or NaN (lost); got an infinity")
     return PointsFrame(p, index, t)
+
+
+# -- stereo pair (RTSJ): the page's two cameras -> the server ------------------------------
+#
+# One WebSocket binary message per frame pair (`server.routers.stereo_live`). Layout:
+#
+#     0   4 bytes  magic b"RTSJ"
+#     4   uint16   version (1)
+#     6   uint16   flags (0; reserved)
+#     8   uint32   frame index
+#     12  uint32   L, the left camera's JPEG length, bytes
+#     16  uint32   R, the right camera's JPEG length, bytes
+#     20  4 bytes  reserved (zero)
+#     24  float64  capture time, seconds since the Unix epoch (the page's clock, for the
+#                  camera-to-screen latency)
+#     32  L bytes  the left image, a baseline or progressive JPEG (starts FF D8)
+#     ... R bytes  the right image, likewise
+#
+# Only the framing is checked here; the JPEGs are decoded in a child process.
+
+STEREO_MAGIC = b"RTSJ"
+STEREO_VERSION = 1
+_STEREO_HEADER = struct.Struct("<4sHHIII4xd")
+MAX_STEREO_JPEG = 384 * 1024
+"""Bytes one camera's JPEG may take (a 640 x 480 webcam frame at quality 0.9 is ~60 kB)."""
+
+
+@dataclass(frozen=True)
+class StereoPair:
+    """A decoded stereo-pair message: the two JPEGs (bytes, undecoded) and its header."""
+
+    left: bytes
+    right: bytes
+    frame_index: int
+    capture_time: float
+
+
+def encode_stereo_pair(left: bytes, right: bytes, *, frame_index: int, capture_time: float) -> bytes:
+    """Bytes of one stereo-pair message (what the page sends; used by tests and benchmarks)."""
+    header = _STEREO_HEADER.pack(STEREO_MAGIC, STEREO_VERSION, 0, frame_index, len(left), len(right),
+                                 float(capture_time))
+    return header + bytes(left) + bytes(right)
+
+
+def decode_stereo_pair(data: bytes) -> StereoPair:
+    """Parse a stereo-pair message's framing; ValueError naming what is wrong."""
+    if len(data) < _STEREO_HEADER.size:
+        raise ValueError(f"stereo pair message is {len(data)} bytes, shorter than its "
+                         f"{_STEREO_HEADER.size}-byte header")
+    magic, version, _, index, n_left, n_right, t = _STEREO_HEADER.unpack_from(data)
+    if magic != STEREO_MAGIC:
+        raise ValueError(f"not a stereo pair message (magic {magic!r})")
+    if version != STEREO_VERSION:
+        raise ValueError(f"unsupported stereo pair version {version}")
+    for side, n in (("left", n_left), ("right", n_right)):
+        if not 0 < n <= MAX_STEREO_JPEG:
+            raise ValueError(f"stereo pair: the {side} JPEG is {n} bytes; expected 1..{MAX_STEREO_JPEG}")
+    size = _STEREO_HEADER.size + n_left + n_right
+    if len(data) != size:
+        raise ValueError(f"stereo pair message with JPEGs of {n_left} and {n_right} bytes must be "
+                         f"{size} bytes; got {len(data)}")
+    if not np.isfinite(t):
+        raise ValueError("stereo pair capture time must be finite")
+    at = _STEREO_HEADER.size
+    left, right = bytes(data[at:at + n_left]), bytes(data[at + n_left:])
+    for side, jpeg in (("left", left), ("right", right)):
+        if jpeg[:2] != b"\xff\xd8":
+            raise ValueError(f"stereo pair: the {side} image is not a JPEG (it must start FF D8)")
+    return StereoPair(left, right, index, t)
 
 
 # -- mesh arrays (RTMA) ------------------------------------------------------------------

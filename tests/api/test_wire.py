@@ -409,3 +409,40 @@ def test_javascript_decodes_exactly_the_arkit_shapes_python_encodes(tmp_path, n_
     assert "ArkitShapesDecoder" in decode_in_node(tmp_path, [data[:-4]], "decode-arkit-shapes")[0]["error"]
     with pytest.raises(ValueError):
         decode_arkit_shapes(data[:-4])
+
+
+# -- stereo pair (RTSJ): JavaScript encodes, Python decodes ---------------------------------
+
+def test_python_decodes_exactly_the_stereo_pairs_javascript_encodes(tmp_path):
+    from server.wire import decode_stereo_pair, encode_stereo_pair
+
+    rng = np.random.default_rng(5)
+    left = b"\xff\xd8" + rng.integers(0, 256, 999).astype(np.uint8).tobytes()
+    right = b"\xff\xd8" + rng.integers(0, 256, 4321).astype(np.uint8).tobytes()
+    run, out = encode_in_node(tmp_path, "encode-stereo-pair", {"left": list(left), "right": list(right),
+                                                               "frameIndex": 4_000_000_000,
+                                                               "captureTime": 1764662400.125})
+    assert run.returncode == 0, run.stdout + run.stderr
+    data = out.read_bytes()
+    assert data == encode_stereo_pair(left, right, frame_index=4_000_000_000, capture_time=1764662400.125)
+    pair = decode_stereo_pair(data)
+    assert (pair.left, pair.right, pair.frame_index, pair.capture_time) == (left, right, 4_000_000_000,
+                                                                           1764662400.125)
+    run, _ = encode_in_node(tmp_path, "encode-stereo-pair", {"left": [1, 2, 3], "right": list(right),
+                                                             "frameIndex": 0, "captureTime": 0.0})
+    assert run.returncode == 3 and "the left image is not JPEG bytes" in run.stdout
+
+
+def test_broken_stereo_pairs_are_refused_with_the_reason():
+    from server.wire import MAX_STEREO_JPEG, decode_stereo_pair, encode_stereo_pair
+
+    jpeg = b"\xff\xd8" + b"\x00" * 100
+    good = encode_stereo_pair(jpeg, jpeg, frame_index=1, capture_time=0.5)
+    huge = good[:12] + struct.pack("<I", MAX_STEREO_JPEG + 1) + good[16:]
+    for bad, message in ((good[:20], "shorter than"), (b"XXXX" + good[4:], "magic"),
+                         (good[:-1], "must be 236 bytes; got 235"), (huge, "left JPEG is 393217 bytes"),
+                         (encode_stereo_pair(jpeg, b"GIF89a", frame_index=1, capture_time=0.5),
+                          "right image is not a JPEG"),
+                         (encode_stereo_pair(jpeg, jpeg, frame_index=1, capture_time=np.nan), "finite")):
+        with pytest.raises(ValueError, match=message):
+            decode_stereo_pair(bad)

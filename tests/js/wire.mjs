@@ -8,6 +8,7 @@
 //   node wire.mjs decode-arkit-weights FILE  length-prefixed RTAW frames -> one JSON object each
 //   node wire.mjs decode-arkit-shapes FILE   length-prefixed RTAK bodies -> one JSON object each
 //   node wire.mjs encode-points IN OUT  {points, dims, frameIndex, captureTime} -> RTSP bytes
+//   node wire.mjs encode-stereo-pair IN OUT  {left, right (byte lists), frameIndex, captureTime} -> RTSJ bytes
 //   node wire.mjs encode-edit IN OUT    {version, nJoints, k, vertices, indices, weights} -> RTSE bytes
 //
 // Length prefixes are uint32 little-endian. Decoders print a JSON list with {error: msg} for
@@ -15,7 +16,7 @@
 // are exact, and null stands for NaN in encoder input. Encoders exit 3 after printing a
 // refusal's message.
 import { readFileSync, writeFileSync } from 'node:fs';
-import { ArkitShapesDecoder, ArkitWeightsDecoder, ContractionDecoder, MeshArraysDecoder, MuscleMorphsDecoder, PointsEncoder, RigWeightsDecoder, StreamDecoder, WeightEditEncoder } from '../../web/static/js/net/wire.js';
+import { ArkitShapesDecoder, ArkitWeightsDecoder, ContractionDecoder, MeshArraysDecoder, MuscleMorphsDecoder, PointsEncoder, RigWeightsDecoder, StereoPairEncoder, StreamDecoder, WeightEditEncoder } from '../../web/static/js/net/wire.js';
 
 const bits = ( floats ) => floats ? Array.from( new Uint32Array( floats.buffer, floats.byteOffset, floats.length ) ) : null;
 
@@ -71,6 +72,8 @@ const decoders = {
 const encoders = {
 	'encode-points': ( { points, dims, frameIndex, captureTime } ) => new PointsEncoder().encode(
 		Float32Array.from( points, ( v ) => ( v === null ? NaN : v ) ), dims, frameIndex, captureTime ),
+	'encode-stereo-pair': ( { left, right, frameIndex, captureTime } ) => new StereoPairEncoder().encode(
+		Uint8Array.from( left ), Uint8Array.from( right ), frameIndex, captureTime ),
 	'encode-edit': ( { version, nJoints, k, vertices, indices, weights } ) => new WeightEditEncoder().encode(
 		version, nJoints, k, Int32Array.from( vertices ), { indices: Uint16Array.from( indices ), weights: Float32Array.from( weights ) } ),
 };

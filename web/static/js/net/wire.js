@@ -7,6 +7,7 @@
  *   displacements;
  * - `ContractionDecoder`: contraction frames "RTMC" (server -> page, WebSocket, muscle
  *   mode), a frame's muscle contractions and the expression they show;
+ * - `StereoPairEncoder`: a stereo pair "RTSJ" (page -> server, WebSocket), two JPEGs;
  * - `PointsEncoder`: source points "RTSP" (page -> server, WebSocket), one frame of
  *   tracked points;
  * - `MeshArraysDecoder`: mesh arrays "RTMA" (GET .../mesh/arrays);
@@ -231,6 +232,55 @@ export class PointsEncoder {
 		view.setUint32( 12, count, true );
 		view.setFloat64( 16, captureTime, true );
 		new Float32Array( buffer, PointsEncoder.HEADER_BYTES ).set( points );
+		return buffer;
+
+	}
+
+}
+
+/**
+ * Encoder of stereo-pair messages, the page's two cameras for the server's live stereo
+ * tracker: a 32-byte header (magic "RTSJ", uint16 version, uint16 flags (0), uint32 frame
+ * index, uint32 left JPEG length, uint32 right JPEG length, 4 reserved bytes, float64
+ * capture time in seconds since the Unix epoch) followed by the two JPEGs.
+ */
+export class StereoPairEncoder {
+
+	static MAGIC = magicNumber( 'RTSJ' );
+	static VERSION = 1;
+	static HEADER_BYTES = 32;
+
+	/**
+	 * @param {Uint8Array} left - the left camera's JPEG bytes.
+	 * @param {Uint8Array} right - the right camera's JPEG bytes.
+	 * @param {number} frameIndex
+	 * @param {number} captureTime - seconds since the Unix epoch.
+	 * @returns {ArrayBuffer}
+	 */
+	encode( left, right, frameIndex, captureTime ) {
+
+		for ( const [ side, jpeg ] of [ [ 'left', left ], [ 'right', right ] ] ) {
+
+			if ( ! ( jpeg instanceof Uint8Array ) || jpeg.length < 2 || jpeg[ 0 ] !== 0xff || jpeg[ 1 ] !== 0xd8 ) {
+
+				throw new RangeError( `StereoPairEncoder: the ${ side } image is not JPEG bytes.` );
+
+			}
+
+		}
+
+		const buffer = new ArrayBuffer( StereoPairEncoder.HEADER_BYTES + left.length + right.length );
+		const view = new DataView( buffer );
+		view.setUint32( 0, StereoPairEncoder.MAGIC, true );
+		view.setUint16( 4, StereoPairEncoder.VERSION, true );
+		view.setUint16( 6, 0, true );
+		view.setUint32( 8, frameIndex >>> 0, true );
+		view.setUint32( 12, left.length, true );
+		view.setUint32( 16, right.length, true );
+		view.setFloat64( 24, captureTime, true );
+		const bytes = new Uint8Array( buffer );
+		bytes.set( left, StereoPairEncoder.HEADER_BYTES );
+		bytes.set( right, StereoPairEncoder.HEADER_BYTES + left.length );
 		return buffer;
 
 	}
