@@ -166,6 +166,9 @@ def sticker_figures(frames: int, seed: int, folder: Path, window: int):
         out[f"{label}_p95_mm"] = float(np.percentile(err, 95))
     out["found_min"] = float(np.nanmin(first["found"]))
     out["found_mean"] = float(np.nanmean(first["found"]))
+    # Also over every frame the renderer calls visible (up to 73 degrees edge-on).
+    out["found_visible_min"] = float(np.nanmin(sticker_scores(kept.points, kept.points, truth,
+                                                              facing=0.3)["found"]))
     out["switches"] = first["switches"]
     return out
 
@@ -179,7 +182,8 @@ def sticker_lines(rows: list[dict], frames: int, window: int) -> list[str]:
         f"stickers, one colour (13 blue, vertical 80 mm webcam pair at 1 m, head turns, blur, "
         f"JPEG + MPEG-4; {frames} frames, median over {len(rows)} seeds):",
         f"  found (worst sticker, frames seen clearly by both cameras): {stat('found_min', '.3f', min)}; "
-        f"mean over stickers {stat('found_mean', '.3f', min)}   (target >= 0.95)",
+        f"mean over stickers {stat('found_mean', '.3f', min)}   (target >= 0.95); worst sticker over "
+        f"every frame it is visible in, up to 73 degrees edge-on: {stat('found_visible_min', '.3f', min)}",
         f"  shape error after head removal{mean}, anchors chosen automatically: median "
         f"{stat('auto_median_mm', '.2f')} mm, p95 {stat('auto_p95_mm', '.2f')} mm",
         f"  shape error after head removal{mean}, anchors named (temples, forehead, nose bridge): "

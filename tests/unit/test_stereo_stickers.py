@@ -133,3 +133,27 @@ def test_head_pose_does_not_jump_when_the_visible_anchors_change():
     assert rigid_anchors(points, 4).tolist() == [0, 1, 2, 3]
     with pytest.raises(RetargetError, match="3 anchors"):
         anchored_poses(np.full((3, 5, 3), np.nan), np.arange(3))
+
+
+def test_cli_tracks_stickers_without_a_layout(clip, tmp_path, capsys):
+    from retarget.cli import main
+
+    calib = tmp_path / "calib.npz"
+    rig_calibration(*clip.cameras).save(calib)
+    out, take = tmp_path / "stickers.npy", tmp_path / "take.npz"
+    assert main(["track", clip.videos[0], "--method", "stereo", "--right", clip.videos[1],
+                 "--calibration", str(calib), "--color", "230,80,30", "--anchors", "m01,m02,m03",
+                 "--out", str(out), "--take", str(take), "-q"]) == 0
+    frames = np.load(out)
+    # Found in most frames (a temple turned away is NaN, as it should be).
+    assert frames.shape == (30, 13, 3) and np.isfinite(frames).all(axis=2).mean() > 0.7
+    assert "own labels" in capsys.readouterr().out
+    with np.load(take, allow_pickle=False) as saved:
+        assert [str(n) for n in saved["names"]][:3] == ["m01", "m02", "m03"]
+    assert main(["track", clip.videos[0], "--method", "markers", "--anchors", "m01,m02,m03",
+                 "--out", str(tmp_path / "o.npy"), "-q"]) == 2
+    assert "--anchors" in capsys.readouterr().err
+    assert main(["track", clip.videos[0], "--method", "stereo", "--right", clip.videos[1],
+                 "--calibration", str(calib), "--anchors", "m01,m99,m03",
+                 "--out", str(tmp_path / "o.npy"), "-q"]) == 2
+    assert "m99" in capsys.readouterr().err and not (tmp_path / "o.npy").exists()
