@@ -183,3 +183,22 @@ def test_layout_colours_keep_same_coloured_markers_apart():
 def test_bad_input_is_refused(call, match):
     with pytest.raises(RetargetError, match=match):
         call()
+
+
+def test_sticker_color_takes_names_picked_colours_and_hsv():
+    from retarget.sources.color_markers import MarkerColor, sticker_color
+
+    blue = sticker_color("blue")
+    assert blue.hue == MARKER_COLORS["blue"].hue and blue.min_saturation < MARKER_COLORS["blue"].min_saturation
+    picked = sticker_color((230, 80, 30))          # BGR of a blue sticker
+    assert abs(picked.hue - 112) <= 2               # OpenCV hue (degrees / 2)
+    assert sticker_color("hsv:60,200,200").hue == 60
+    own = MarkerColor("mine", 40.0)
+    assert sticker_color(own) is own
+    for bad in ("teal", "hsv:1,2", (1, 2)):
+        with pytest.raises(RetargetError, match="colour"):
+            sticker_color(bad)
+    # An integer hue makes the same mask as a float one (inRange needs one bound type).
+    img = np.zeros((4, 4, 3), np.uint8)
+    img[1:3, 1:3] = (230, 80, 30)
+    assert (color_mask(img, MarkerColor("b", 105, hue_tol=12), median=1) > 0).sum() == 4
