@@ -28,10 +28,12 @@ rarely closes, so:
    an eye corner when a track starts.
 6. `retarget.sources.ring_tracks.RingTracks` follows every marker in view through a whole clip without a layout:
    each track moves with its neighbours' motion (plus its own expression's), snaps to the
-   nearest peak, established tracks first; strong peaks no track claims start new tracks
-   at any frame, followed back to where the marker appeared. `track_marker_video` uses it
-   without a layout (columns m01..mM) or when the first frame shows fewer rings than the
-   layout has (named by `assign_markers` on the frame that sees most).
+   nearest peak, established tracks first; two markers within a marker's width or two of
+   each other are placed together by a two-marker fit (the ghost peak between their rings
+   takes neither); strong peaks no track claims start new tracks at any frame, followed
+   back to where the marker appeared. `track_marker_video` uses it without a layout
+   (columns m01..mM) or when the first frame shows fewer rings than the layout has (named
+   by `assign_markers` on the frame that sees most).
 """
 
 from __future__ import annotations

@@ -35,6 +35,14 @@ _REACQUIRE = 4.0       # px, the same for a marker lost for a while
 _NEIGHBOURS = 6        # markers whose motion predicts a marker's
 _MIN_SPREAD = 12.0     # grey levels: standard deviation in a template's window below which
                        # nothing there is taken for a marker (noise on flat background)
+_PAIR = 12.0           # px: two tracks predicted this near are placed by one two-marker fit
+                       # when either lacks a bright peak (rings 8 px apart make a ghost
+                       # peak between them, or merge into one)
+_PAIR_BLUR = 0.7       # px, the camera's blur in the two-marker picture
+_PAIR_DRIFT = 0.1      # cost (correlation) per px that a close pair's distance changes in a
+                       # frame (a ghost peak between two markers halves it)
+_PAIR_GAIN = 0.05      # cost by which the fit must beat the matched peaks to move them
+_PAIR_SNAP = 1.0       # px: a fitted centre this near a peak takes the peak (sharper)
 
 
 def ring_template(ring_radius: float, *, dot_share: float = 0.5, skin_reach: float = 1.6,
@@ -150,7 +158,12 @@ class RingTracks:
     held by faint peaks only is handed a strong free peak near where its neighbours carry
     its last bright sighting (and twice nearer than its faint peak): faint peaks let a
     marker turning edge-on creep onto the skin, and the marker facing the camera again
-    then became a new track beside it. A strong
+    then became a new track beside it. Two tracks predicted within `_PAIR` px of each
+    other, one of them without a bright peak, are placed together (`_split_pairs`): the
+    two rings make a ghost peak between them (or one peak for both), which a prediction
+    pulled toward the other marker took, one track after the other; a fit of two ring
+    markers to the image, the pair's distance kept from jumping, puts each on its own
+    marker, never swapping the two. A strong
     peak (`ring_score` over `birth` with a bright dot, or a clear dot whatever the score)
     that no track claims starts a new track, at any frame, and the clip is then walked
     backward from there, so that a marker found late (uncovered, turned into view) is
@@ -168,9 +181,9 @@ class RingTracks:
     On issue 17's webcam material (`render_webcam_marker_video`, 150 frames, four seeds
     each on the sample face and on the ICT face; ``python bench/markers.py
     --only-webcam``): every marker in clear view found, median error 0.12-0.15 px, 99.5-100
-    % within 3 px; no identity switch on the sample face nor on three ICT clips (one had 6
-    before the faint-peak rule above), 1 on the fourth, where two lip markers 8 px apart
-    merge into one peak between them for a few frames.
+    % within 3 px; no identity switch on any of the eight (one ICT clip had 6 before the
+    faint-peak rule above, another 1 before the pair fit, where a lip marker's track
+    followed the ghost peak between it and one 8 px below for a dozen frames).
     """
 
     def __init__(self, *, radii=_SCORE_RADII, birth: float = _BIRTH_SCORE, keep: float = _KEEP_SCORE,
@@ -189,14 +202,17 @@ class RingTracks:
         if not grays:
             raise RetargetError("RingTracks.fit needs at least one frame")
         n = len(grays)
-        peaks, bright, strong = [], [], []
+        peaks, bright, strong, ring = [], [], [], []
         for g in grays:
             score, radius = _ring_scores(g, self.radii, self.min_spread)
             cand, val = score_peaks(score, self.keep)
             ix = np.rint(cand).astype(np.int64)
-            contrast = ring_contrast(g, cand, radius[ix[:, 1], ix[:, 0]])
+            peak_radius = radius[ix[:, 1], ix[:, 0]]
+            contrast = ring_contrast(g, cand, peak_radius)
             peaks.append((cand, val, contrast))
             bright.append(contrast >= self.min_contrast)
+            # the markers' size in this frame, for the two-marker fit
+            ring.append(float(np.median(peak_radius[bright[-1]])) if bright[-1].any() else self.radii[1])
             # births: a clear match with a dot, or a clear dot in a ring the round
             # templates fit less well (a marker seen obliquely)
             strong.append(bright[-1] & ((val >= self.birth) | (contrast >= _CLEAR_DOT)))
@@ -241,6 +257,19 @@ class RingTracks:
             _hand_back(take, faint, anchor[faint], cand, strong[t],
                        np.minimum(2.5 * self.reacquire, 0.5 * crept))
             take = _apart(take, cand, d, _APART)
+            # two markers close together: a ghost peak between their rings, or one peak for
+            # both, may hold one of them; one fit of both markers to the image places them
+            take, split, split_val = _split_pairs(grays[t], pos, pts[t - 1] if t else pos + np.nan, take, cand,
+                                                  bright[t], d < gate, ring[t])
+            if len(split):
+                split_contrast = ring_contrast(grays[t], split, np.full(len(split), ring[t]))
+                cand = np.concatenate([cand, split])
+                val = np.concatenate([val, split_val])
+                contrast = np.concatenate([contrast, split_contrast])
+                strong_t = np.concatenate([strong[t], np.zeros(len(split), bool)])
+                bright_t = np.concatenate([bright[t], split_contrast >= self.min_contrast])
+            else:
+                strong_t, bright_t = strong[t], bright[t]
             hit = take >= 0
             pts[t, hit] = cand[take[hit]]
             sc[t, hit] = val[take[hit]]
@@ -249,14 +278,14 @@ class RingTracks:
             rel[~hit] = 0.0
             rel = np.clip(rel, -self.snap, self.snap)
             pos[hit] = cand[take[hit]]
-            sighted = hit & bright[t][np.maximum(take, 0)]
+            sighted = hit & bright_t[np.maximum(take, 0)]
             anchor[sighted] = pos[sighted]
             # births: strong peaks away from every track
             free = np.ones(len(cand), bool)
             free[take[hit]] = False
             if len(pos):
                 free &= np.linalg.norm(cand[:, None] - pos[None], axis=2).min(1) > 2.0 * self.snap
-            new = np.flatnonzero(free & strong[t])
+            new = np.flatnonzero(free & strong_t)
             if new.size:
                 # two strong peaks of one marker: keep the stronger
                 new = new[np.argsort(-val[new])]
@@ -408,6 +437,154 @@ def _hand_back(take: np.ndarray, tracks: np.ndarray, where: np.ndarray, cand: np
     if tracks.size and back.size:
         again = _matched(np.linalg.norm(where[:, None] - cand[back][None], axis=2), gate[:, None])
         take[tracks[again >= 0]] = back[again[again >= 0]]
+
+
+def _split_pairs(gray: np.ndarray, pos: np.ndarray, last: np.ndarray, take: np.ndarray, cand: np.ndarray,
+                 bright: np.ndarray, near: np.ndarray, ring_radius: float):
+    """(take (M,), centres (E, 2) float64 px, scores (E,)): each pair of tracks seen last
+    frame at last (M, 2) (NaN: not seen) and predicted at pos (M, 2) within `_PAIR` px of
+    each other, one of them without a bright peak, placed by one fit of two ring markers to
+    the grey image (h, w) uint8 round them.
+
+    take (M,): each track's candidate (of cand (K, 2), bright (K,) bool), -1 for none;
+    near (M, K) bool: the candidates each track may take; ring_radius: the markers' outer
+    ring radius, px. Each track of a pair may be at one of its `near` candidates that no
+    other track took, or, if it has none matched (its peak went to the other), at its
+    prediction. Of the pairs of places at least `_APART` px apart and in the tracks' order
+    (a pair never swaps), the one whose two-marker picture correlates best with the image,
+    less `_PAIR_DRIFT` per px that the pair's distance changed since last frame (two
+    markers this near move nearly alike; a ghost peak between them halves it), is chosen;
+    one with a prediction in it is refined by Gauss-Newton (one peak for both lies between
+    them). It replaces the matched peaks if it costs `_PAIR_GAIN` less than they do (a
+    track without one: only the other's picture, no distance term). A fitted centre within
+    `_PAIR_SNAP` px of a free candidate takes it; the others are the new centres, appended
+    after cand (take's indices count them), with their picture's correlation as their
+    score. Pairs go nearest first; a track a nearer pair placed (or left) stays there."""
+    take = take.copy()
+    extra, scores = [], []
+    h, w = gray.shape
+    margin = 1.6 * ring_radius + _SNAP
+    placed = np.zeros(len(take), bool)
+    for i, j in _close_pairs(pos, last, take, bright):
+        if placed[i] and placed[j]:
+            continue
+        ends, offset = pos[[i, j]], last[j] - last[i]
+        lo = np.maximum(np.floor(ends.min(0) - margin), 0).astype(int)
+        hi = np.minimum(np.ceil(ends.max(0) + margin), [w - 1, h - 1]).astype(int)
+        ys, xs = np.mgrid[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1]
+        xy = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
+        patch = gray[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1].ravel().astype(np.float64)
+        everyone = np.concatenate([cand, extra]) if extra else cand
+        others = np.delete(take, [i, j])
+        free = np.ones(len(everyone), bool)
+        free[others[others >= 0]] = False
+        # each track's places: the free candidates near it, and for one that lost its peak to
+        # the other (one peak for both) its prediction; one that a closer pair placed (or
+        # left where it was) stays
+        spots = np.concatenate([everyone, ends])
+        opts = [[take[k]] if placed[k] else
+                np.append(np.flatnonzero(near[k] & free[:len(cand)]), [len(everyone) + n] if take[k] < 0 else [])
+                for n, k in enumerate((i, j))]
+        choice = np.stack(np.meshgrid(*opts, indexing="ij"), -1).reshape(-1, 2).astype(np.int64)
+        pairs = spots[choice]                                                   # (C, 2, 2)
+        gap = pairs[:, 1] - pairs[:, 0]
+        ok = (np.linalg.norm(gap, axis=1) >= _APART) & (gap @ offset > 0)
+        if not ok.any():
+            continue
+        cost = _pair_costs(xy, patch, pairs[ok], ring_radius, offset)
+        fitted, best = pairs[ok][cost.argmin()], cost.min()
+        if (choice[ok][cost.argmin()] >= len(everyone)).any():
+            # a track where no peak is (one peak for both): both move to fit the picture
+            fitted = _refined(xy, patch, fitted, ring_radius, offset)
+            best = _pair_costs(xy, patch, fitted[None], ring_radius, offset)[0]
+        held = take[[i, j]] >= 0
+        now = _pair_costs(xy, patch, np.array([everyone[take[k]] if take[k] >= 0 else _FAR for k in (i, j)])[None],
+                          ring_radius, offset if held.all() else np.zeros(2))[0]
+        placed[[i, j]] = True
+        if best >= now - _PAIR_GAIN:
+            continue
+        for k, c in zip((i, j), fitted):
+            d = np.where(free, np.linalg.norm(everyone - c, axis=1), np.inf)
+            if d.size and d.min() < _PAIR_SNAP:
+                take[k] = int(d.argmin())
+            else:
+                take[k] = len(everyone)
+                extra.append(c)
+                scores.append(-_pair_costs(xy, patch, fitted[None], ring_radius, np.zeros(2))[0])
+                everyone = np.concatenate([everyone, c[None]])
+                free = np.append(free, True)
+            free[take[k]] = False
+    return take, np.array(extra, np.float64).reshape(-1, 2), np.array(scores, np.float32)
+
+
+_FAR = np.array([1e6, 1e6])   # a centre no pixel sees: "no marker" in `_pair_picture`
+
+
+def _close_pairs(pos: np.ndarray, last: np.ndarray, take: np.ndarray, bright: np.ndarray) -> np.ndarray:
+    """(Q, 2) int64 pairs (i < j) of tracks seen last frame (last (M, 2) finite) whose
+    predictions pos (M, 2) lie within `_PAIR` px, one of them not holding a bright peak
+    (take (M,), bright (K,)), nearest first."""
+    held = (take >= 0) & bright[np.maximum(take, 0)] if len(bright) else np.zeros(len(take), bool)
+    live = np.isfinite(last[:, 0])
+    d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+    i, j = np.nonzero(np.triu(d < _PAIR, 1) & live[:, None] & live[None])
+    doubt = np.flatnonzero(~(held[i] & held[j]))
+    doubt = doubt[np.argsort(d[i[doubt], j[doubt]], kind="stable")]
+    return np.stack([i[doubt], j[doubt]], 1)
+
+
+def _pair_picture(xy: np.ndarray, centres: np.ndarray, ring_radius: float) -> np.ndarray:
+    """(C, P) float64 `ring_template`'s picture (dot 1, ring 0, skin 0.6) of two ring
+    markers of `ring_radius` px at centres (C, 2, 2) (`_FAR`: no marker), at pixels xy
+    (P, 2), blurred by `_PAIR_BLUR` px; where one's ring covers the other's skin it is dark."""
+    from scipy.special import ndtr
+
+    r = np.linalg.norm(xy[None, None] - centres[:, :, None], axis=3)          # (C, 2, P)
+    ring = ndtr((ring_radius - r) / _PAIR_BLUR)
+    dot = ndtr((0.5 * ring_radius - r) / _PAIR_BLUR)
+    return 0.6 * (1.0 - ring).prod(1) + dot.sum(1)
+
+
+def _pair_costs(xy: np.ndarray, patch: np.ndarray, pairs: np.ndarray, ring_radius: float,
+                offset: np.ndarray) -> np.ndarray:
+    """(C,) cost of two markers at pairs (C, 2, 2) px: minus the normalised correlation (as
+    `ring_score`'s, blind to the light's gain and offset) of their `_pair_picture` at pixels
+    xy (P, 2) with the image patch (P,), plus `_PAIR_DRIFT` per px that their distance
+    differs from the length of offset (2,) (zero: no such term)."""
+    m = _pair_picture(xy, pairs, ring_radius)
+    m -= m.mean(1, keepdims=True)
+    p = patch - patch.mean()
+    corr = (m @ p) / np.sqrt((m * m).sum(1) * (p @ p) + 1e-12)
+    drift = np.abs(np.linalg.norm(pairs[:, 1] - pairs[:, 0], axis=1) - np.linalg.norm(offset)) if offset.any() else 0.0
+    return _PAIR_DRIFT * drift - corr
+
+
+def _refined(xy: np.ndarray, patch: np.ndarray, centres: np.ndarray, ring_radius: float,
+             offset: np.ndarray, steps: int = 4) -> np.ndarray:
+    """(2, 2) two markers' centres (2, 2) px moved by Gauss-Newton to fit `_pair_picture`
+    to the patch (P,) at pixels xy (P, 2), a step at most 1 px per marker, kept while they
+    stay `_APART` px apart in the order of offset (2,) and cost less (`_pair_costs`)."""
+    probe = 0.2 * np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])  # central differences
+    p = patch - patch.mean()
+    best = centres
+    cost = _pair_costs(xy, patch, centres[None], ring_radius, offset)[0]
+    theta = centres.ravel()
+    for _ in range(steps):
+        pics = _pair_picture(xy, (theta + probe).reshape(-1, 2, 2), ring_radius)
+        pics -= pics.mean(1, keepdims=True)
+        gain = (pics[0] @ p) / max(pics[0] @ pics[0], 1e-12)
+        jac = gain * (pics[1:5] - pics[5:9]) / 0.4                              # (4, P)
+        step = np.linalg.lstsq(jac.T, p - gain * pics[0], rcond=None)[0].reshape(2, 2)
+        step *= np.minimum(1.0, 1.0 / np.maximum(np.linalg.norm(step, axis=1), 1e-12))[:, None]
+        theta = theta + step.ravel()
+        c = theta.reshape(2, 2)
+        gap = c[1] - c[0]
+        if np.linalg.norm(gap) < _APART or gap @ offset <= 0:
+            break
+        now = _pair_costs(xy, patch, c[None], ring_radius, offset)[0]
+        if now < cost:
+            best, cost = c.copy(), now
+    return best
 
 
 def _apart(take: np.ndarray, cand: np.ndarray, cost: np.ndarray, apart: float) -> np.ndarray:

@@ -1,0 +1,68 @@
+"""`RingTracks` where two ring markers come within about a marker's width of each other
+(issue 17: two lip markers 8 px apart, a ghost peak between their rings)."""
+
+import cv2
+import numpy as np
+
+from retarget.sources.ring_tracks import RingTracks
+
+HELD = 0               # the marker that stays put
+BELOW = 3              # the marker that closes in on it and parts again
+
+
+def _ring_frame(markers, rng, h=100, w=140, radius=2.6, blur=0.8) -> np.ndarray:
+    """(h, w) uint8: skin at 150 with ring markers (x, y, dot grey level; pixel centres at
+    integers) of `radius` px (a dot of half that, the ring at 40), drawn at 4x4
+    supersampling, blurred by `blur` px (the camera's) with sensor noise, like a 640x480
+    webcam's view of 3 mm markers at 60 cm."""
+    ss = 4
+    yy, xx = (np.mgrid[0:h * ss, 0:w * ss] + 0.5) / ss - 0.5
+    img = np.full((h * ss, w * ss), 150.0)
+    for x, y, dot in markers:
+        r = np.hypot(xx - x, yy - y)
+        img = np.where(r < radius, 40.0, img)
+        img = np.where(r < 0.5 * radius, dot, img)
+    img = cv2.GaussianBlur(img.reshape(h, ss, w, ss).mean((1, 3)), (0, 0), blur)
+    return np.clip(img + rng.normal(0, 3, (h, w)), 0, 255).astype(np.uint8)
+
+
+def _lips(seed: int):
+    """(frames [(h, w) uint8], truth (F, 11, 2) px): an upper-lip marker (HELD, its dot
+    dimmer, as a marker seen a little obliquely) between two others, a lower lip of four
+    below it and four far markers. The lower lip closes in at 1 px a frame until its middle
+    marker (BELOW) is 7 px from HELD, stays three frames, then everything but HELD drops 3 px
+    a frame for three frames (the head and jaw going down, the upper lip held): HELD's
+    neighbours then predict it between the two, where their rings make a ghost peak."""
+    rng = np.random.default_rng(seed)
+    upper = np.array([(70, 40), (54, 38), (86, 38)], float)
+    lower = np.array([(70, 40), (55, 42), (85, 42), (70, 53)], float)
+    far = np.array([(15, 15), (125, 15), (15, 85), (125, 85)], float)
+    gap = np.concatenate([np.arange(12.0, 7.0, -1.0), [7.0] * 3, [10.0, 13.0, 16.0], [16.0] * 5])
+    drop = gap - 7.0
+    drop[:8] = 0.0
+    frames, truth = [], []
+    for g, z in zip(gap, drop):
+        pts = np.concatenate([upper[:1], upper[1:] + [0, z], lower + [0, g], far + [0, z]])
+        dots = np.where(np.arange(len(pts)) == HELD, 170.0, 220.0)
+        frames.append(_ring_frame(np.column_stack([pts, dots]), rng))
+        truth.append(pts)
+    return frames, np.array(truth)
+
+
+def test_a_marker_held_beside_one_that_closes_in_and_parts_keeps_its_track():
+    """Two markers 7 px apart part again while everything round one of them moves: its
+    neighbours' motion puts it halfway to the other, on the ghost peak between their rings,
+    which matching one track at a time took (4.7 px off as they part, then back). The
+    two-marker fit of the close pair keeps each track on its own marker."""
+    frames, truth = _lips(seed=0)
+    p = RingTracks().fit(frames).points_.astype(np.float64)
+    d = np.linalg.norm(p[:, :, None] - truth[:, None], axis=3)                # (F, M, 11)
+    nearest = np.nan_to_num(d, nan=np.inf).argmin(2)
+    seen = np.isfinite(p[..., 0])
+    owner = np.array([np.bincount(nearest[seen[:, m], m]).argmax() for m in range(p.shape[1])])
+    assert p.shape[1] == 11 and sorted(owner) == list(range(11))           # one track per marker
+    for m in range(p.shape[1]):                                              # no identity switch
+        assert (nearest[seen[:, m], m] == owner[m]).all()
+    for marker in (HELD, BELOW):
+        col = int(np.flatnonzero(owner == marker)[0])
+        assert seen[:, col].all() and d[:, col, marker].max() < 1.0
