@@ -155,7 +155,8 @@ class StickerTracks:
     max_epipolar : px, a candidate pair further than this from its epipolar line is none.
     gate : px, furthest a tracked sticker's candidate may lie from its prediction in
         either image (1.5 times that for a lost sticker, whose prediction is rougher).
-    gate_3d : mm (calibration units), the same in 3D.
+    gate_3d : mm (calibration units), the same in 3D (twice that for a lost sticker); loose,
+        since the depth is the noisy part, it only keeps out pairings 10-20 cm off.
     confirm : frames in a row a new track must be seen to count.
     depth_range : (near, far) z of a sticker in the left camera (default: any in front).
 
@@ -343,7 +344,7 @@ class StickerTracks:
     def _spawn(self, frame, bl: Blobs, br: Blobs, used_l, used_r) -> None:
         """New tentative tracks from candidate pairs no track took (at frame 0 every pair,
         confirmed at once: nothing is yet tracked to mistake them for)."""
-        from retarget.sources.stereo import stereo_matches
+        from retarget.sources.stereo import stereo_matches   # stereo imports this module
 
         fl, fr = np.flatnonzero(~used_l), np.flatnonzero(~used_r)
         if fl.size == 0 or fr.size == 0:

@@ -10,9 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from retarget.errors import RetargetError
-from retarget.sources.headpose import anchored_poses, rigid_anchors, rigid_transform
+from retarget.sources.headpose import anchored_poses, rigid_anchors
 from retarget.sources.stereo import track_stereo_frames, track_stereo_videos
-from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (
     FACE_CENTRE,
     STICKER_ANCHORS,
