@@ -41,8 +41,8 @@ built-in face (scaled to mm), 150 mm apart, verged; 8 mm coloured stickers on th
   Targets: every sticker in >= 95 % of frames, median <= 1 mm, p95 <= 3 mm, 0 switches.
   On this 2-core machine (``--only-stickers``, 3 seeds x 150 frames): worst sticker found
   in 0.963 of its clear frames (worst seed 0.927; 0.75 over every frame it is visible in,
-  edge-on ones included), shape error median 1.77 mm / p95 5.13 mm with named anchors
-  (1.86 / 4.88 automatic), 0 identity switches, 13 tracks for 13 stickers, 109 pairs/s:
+  edge-on ones included), shape error median 1.44 mm / p95 4.20 mm with named anchors
+  (1.71 / 4.55 automatic), 0 identity switches, 13 tracks for 13 stickers, 107 pairs/s:
   the found share and switches meet the targets, the shape error does not (its depth: a
   tenth of a pixel of vertical disparity is 1.6 mm at 1 m with 80 mm between the webcams).
 """

@@ -194,7 +194,7 @@ def track_stereo_frames(
     layout: Layout | str | None,
     fps: float = 30.0,
     color="blue",
-    depth_window: int = 15,
+    depth_window: int = 25,
     colors: Sequence[str] | None = None,
     assignment: tuple[np.ndarray, np.ndarray] | None = None,
     anchors: Sequence[str | int] | None = None,
