@@ -62,10 +62,12 @@ def test_stickers_are_tracked_without_a_layout(clip):
 
 
 def _disc_frames(cal_cams, points, radius=3.5, color=(230, 80, 30)):
-    """Frame pairs of blue discs (radius mm) at points (F, N, 3) world mm on grey skin."""
+    """Frame pairs of blue discs (radius mm) at points (F, N, 3) world mm on grey skin
+    (none where a point is NaN)."""
     frames = []
     for pts in points:
         pair = []
+        pts = pts[np.isfinite(pts).all(axis=1)]
         for cam in cal_cams:
             img = np.full((cam.size[1], cam.size[0], 3), (120, 150, 200), np.uint8)
             px = cam.project(pts)
@@ -101,6 +103,23 @@ def test_lip_stickers_on_one_epipolar_line_keep_their_identity():
     assert switches == 0 and sorted(owner.tolist()) == list(range(6))
     err = np.linalg.norm(take.points - truth[:, owner], axis=2)
     assert np.isfinite(err).all() and err.max() < 8.0
+
+
+def test_a_sticker_hidden_at_the_start_gets_a_column_when_it_appears():
+    cams = webcam_cameras()
+    cal = rig_calibration(*cams)
+    n = 16
+    base = FACE_CENTRE + np.array([[-60, 30, -40], [60, 30, -40], [0, 60, 10], [0, 25, 25],
+                                   [0, -30, 20], [45, -5, 0]], dtype=np.float64)
+    points = np.repeat(base[None], n, axis=0)
+    points[..., 1] += np.linspace(0, 15, n)[:, None]   # the head nods
+    points[:8, 5] = np.nan                             # a cheek sticker under a finger
+    take = track_stereo_frames(_disc_frames(cams, points), cal, layout=None, head_motion="keep")
+    assert take.names == ("m01", "m02", "m03", "m04", "m05", "m06")
+    late = np.isfinite(take.points[..., 0])
+    assert late[:, :5].all() and not late[:8, 5].any() and late[8:, 5].all()
+    truth = cams[0].to_camera(points[8:, 5])
+    assert np.linalg.norm(take.points[8:, 5] - truth, axis=1).max() < 8.0
 
 
 def test_head_pose_does_not_jump_when_the_visible_anchors_change():
