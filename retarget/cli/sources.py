@@ -39,16 +39,16 @@ def add_track(commands, parents) -> None:
                    help="markerless: MediaPipe's face mesh (run natively, no browser); markers: white dots with a black ring, one camera; stereo: "
                    "coloured markers seen by a calibrated pair")
     p.add_argument("--layout", choices=list(LAYOUTS), metavar="NAME",
-                   help="points to produce (default: ibug68 for markerless; for stereo dutreve21 when "
-                   "the first frames show its coloured markers, else every sticker of one --color in "
-                   "view, named m01..mM; for "
+                   help="points to produce (default: ibug68 for markerless, dutreve21 for stereo; for "
                    "markers, dutreve21 when the first frame shows its 21 markers, else every marker "
                    "in view, named m01..mM by when it is first seen, then top to bottom)")
     p.add_argument("--right", metavar="VIDEO", help="stereo: the right camera's video")
     p.add_argument("--calibration", metavar="CALIB.npz", help="stereo: from 'retarget calibrate'")
     p.add_argument("--color", default="blue", metavar="COLOUR",
-                   help="stereo without --layout: the stickers' one colour, a name (blue, green, "
-                   "cyan, magenta, yellow), B,G,R picked from the video, or hsv:H,S,V (default blue)")
+                   help="stereo without --layout: dutreve21 when the first frames show its coloured "
+                   "markers, else every sticker of this one colour in view, named m01..mM: a name "
+                   "(blue, green, cyan, magenta, yellow), B,G,R picked from the video, or hsv:H,S,V "
+                   "(default blue)")
     p.add_argument("--anchors", metavar="m01,m03,...",
                    help="stereo without --layout: the stickers that fix the head (3 or more; "
                    "default the 4 most mutually rigid)")
