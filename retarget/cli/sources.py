@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from retarget.cli.parser import positive_float, positive_int
+from retarget.cli.parser import layout_name, positive_float, positive_int
 from retarget.errors import RetargetError
 from retarget.files import progress_bar, require_file, require_parent, write_file, write_npy
 from retarget.layouts import LAYOUTS
@@ -146,8 +146,9 @@ def add_condition(commands, parents) -> None:
         "take (neutral capture, head-motion removal, jitter filter, gain per region) and write "
         "the neutral and the frames for 'transfer' and 'export-gltf'.")
     p.add_argument("take", metavar="TAKE", help="the performance file")
-    p.add_argument("--layout", choices=list(LAYOUTS), required=True, metavar="NAME",
-                   help="the layout whose points to produce, in its order (every point needed)")
+    p.add_argument("--layout", type=layout_name, required=True, metavar="NAME|L.json",
+                   help="the layout whose points to produce, in its order (every point needed): "
+                   f"a built-in one ({', '.join(LAYOUTS)}) or a custom layout file")
     p.add_argument("--mapping", metavar="MAP.json", help='{"file label": "layout point name"} for '
                    "labels that are not point names (motion-capture marker names)")
     p.add_argument("--labelled-vertices", metavar="LV.json", help="animated meshes: "

@@ -162,3 +162,33 @@ def test_layouts_new_takes_the_names_of_a_take_s_markers(tmp_path, capsys):
     assert main(["layouts", "new", "--names-from", str(tmp_path / "none.json"), "--regions", "nose",
                  "--out", str(out)]) == 2
     assert "none.json" in capsys.readouterr().err
+
+
+def test_condition_reads_a_take_named_by_the_markers_into_the_custom_layout(files, tmp_path, capsys):
+    """The user's take (columns named m00..m13, the head turning) conditioned in their layout:
+    the neutral is the first frame and the head motion is removed on their anchors."""
+    s0, s = np.load(files["s0"]), np.load(files["s"])
+    turn = np.array([[np.cos(0.2), 0.0, np.sin(0.2)], [0.0, 1.0, 0.0], [-np.sin(0.2), 0.0, np.cos(0.2)]])
+    frames = np.stack([s0, s0 @ turn.T, s[1] @ turn.T])  # rest, the head turned, then brows + jaw too
+    take = tmp_path / "take.json"
+    take.write_text(json.dumps({"names": NAMES, "frames": frames.tolist()}))
+    out, neutral = tmp_path / "frames.npy", tmp_path / "neutral.npy"
+    settings = tmp_path / "settings.json"
+    settings.write_text(json.dumps({"neutral": {"mode": "frame", "frame": 0}, "head_pose": "remove"}))
+    assert main(["condition", str(take), "--layout", str(files["layout"]), "--settings", str(settings),
+                 "--neutral-out", str(neutral), "--out", str(out), "--fps", "30"]) == 0
+    got = np.load(out)
+    np.testing.assert_allclose(np.load(neutral), s0, atol=1e-4)
+    np.testing.assert_allclose(got[1], s0, atol=1e-3)  # the turn alone is head motion: removed
+    # with the expression the anchors move a little too (the sample face's eye corners rise
+    # with the brows), so the frame comes back by the rigid fit of its anchors to the
+    # neutral's (Kabsch), here computed independently of the library
+    anchors = [NAMES.index(a) for a in ANCHORS]
+    a, b = frames[2][anchors], s0[anchors]
+    u, _, vt = np.linalg.svd((a - a.mean(0)).T @ (b - b.mean(0)))
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    rot = (u @ d @ vt).T
+    expected = (frames[2] - a.mean(0)) @ rot.T + b.mean(0)
+    np.testing.assert_allclose(got[2], expected, atol=1e-3)
+    assert np.abs(got[2] - s0).max() > 0.3  # the expression stays
+    assert files["name"] in capsys.readouterr().out
