@@ -9,7 +9,8 @@
       - name: alice                      # a folder name: letters, digits, . _ -
         mesh: alice.obj                  # a mesh and its landmarks JSON ...
         landmarks: alice.json
-        layout: ibug68                   # default: the landmarks JSON's own
+        layout: ibug68                   # default: the landmarks JSON's own; or a custom
+                                         # layout file ('retarget layouts new')
         rig: {deformer: ellipsoid, k: 4, kernel: ..., smoothing: ...}   # or rig: RIG.npz
       - name: bob
         project: bob.glb                 # ... or a project exported from the app
@@ -36,6 +37,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from retarget.custom_layouts import load_layout_file
 from retarget.errors import RetargetError
 from retarget.layouts import LAYOUTS
 from retarget.pipeline import DEFAULT_KERNEL
@@ -92,6 +94,9 @@ class Character:
     rig_file: Path | None = None
     layout: str | None = None
     rig: RigSettings = field(default_factory=RigSettings)
+    layout_spec: dict | None = None
+    """A custom layout's spec (`layout` is then its ``custom-<hash>`` name): the workers
+    register it, since a layout file is read here, where the manifest is."""
 
     def files(self) -> tuple[Path, ...]:
         """The input files whose bytes the character depends on."""
@@ -235,9 +240,13 @@ def _character(entry, i: int, folder: Path) -> Character:
         raise RetargetError(f"{where}: give a 'project' (an exported .glb) or a 'mesh' and 'landmarks', not both")
     if project is None and (mesh is None or landmarks is None):
         raise RetargetError(f"{where}: needs 'mesh' and 'landmarks', or 'project' (a .glb exported by the app)")
-    layout = entry.get("layout")
-    if layout is not None and layout not in LAYOUTS:
-        raise RetargetError(f"{where}: unknown layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
+    layout, layout_spec = entry.get("layout"), None
+    if isinstance(layout, str) and layout.endswith(".json"):
+        custom = load_layout_file(_path(entry, "layout", folder, where))
+        layout, layout_spec = custom.name, custom.spec()
+    elif layout is not None and layout not in LAYOUTS:
+        raise RetargetError(f"{where}: unknown layout {layout!r}; choose one of {', '.join(LAYOUTS)}, "
+                            "or a custom layout .json")
     rig, rig_file = entry.get("rig", {}), None
     if isinstance(rig, str):
         rig_file, rig = _path(entry, "rig", folder, where), {}
@@ -257,7 +266,7 @@ def _character(entry, i: int, folder: Path) -> Character:
         raise RetargetError(f"{where}: rig k must be a positive integer; got {k!r}")
     smoothing = _number(rig.get("smoothing"), f"{where}: rig smoothing", positive=False)
     return Character(name, mesh, landmarks, project, rig_file, layout,
-                     RigSettings(deformer, k, kernel, smoothing))
+                     RigSettings(deformer, k, kernel, smoothing), layout_spec)
 
 
 def _take(entry, i: int, folder: Path) -> TakeEntry:

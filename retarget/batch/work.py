@@ -23,6 +23,7 @@ import numpy as np
 from retarget.arkit.shapes import ArkitShapes, arkit_shapes
 from retarget.arkit.solve import ArkitSolver
 from retarget.batch.manifest import OUTPUTS, Character, TakeEntry
+from retarget.custom_layouts import layout_from_spec
 from retarget.errors import RetargetError
 from retarget.files import computed_weights, layout_for, read_landmarks, read_mesh, read_rig, require_file
 from retarget.landmarks import SurfacePoints
@@ -107,6 +108,8 @@ def character_state(character: Character, arkit: bool) -> CharacterState | Chara
     project .glb), and with `arkit` its ARKit shapes; a `CharacterFailure` naming the
     problem when an input is missing or bad."""
     try:
+        if character.layout_spec is not None:
+            layout_from_spec(character.layout_spec)  # registered in this worker too
         if character.project is not None:
             from retarget.gltf import read_gltf
 

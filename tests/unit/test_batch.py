@@ -6,10 +6,12 @@ take setting redoing only its pairs, a worker killed mid-run survived."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -236,3 +238,29 @@ def test_side_files_of_an_obj_and_a_gltf(tmp_path):
     assert side_files(tmp_path / "face.obj") == [tmp_path / "face.mtl", tmp_path / "skin.png"]
     (tmp_path / "face.gltf").write_text('{"buffers": [{"uri": "face.bin"}], "images": [{"uri": "data:x"}]}')
     assert side_files(tmp_path / "face.gltf") == [tmp_path / "face.bin"]
+
+
+def test_a_custom_layout_file_reaches_the_workers(manifest_path, reference, client, tmp_path):
+    """A character whose layout is a custom layout file (here ibug68's points as the user's
+    own layout) and whose landmarks name none: the file is read with the manifest, the
+    workers of the cluster register it, and the result is the built-in layout's."""
+    data = yaml.safe_load(manifest_path.read_text())
+    folder = manifest_path.parent
+    assert main(["layouts", "new", "--from", "ibug68", "--description", "my markers",
+                 "--out", str(folder / "mine.json")]) == 0
+    bare = {"vertex_indices": json.loads((folder / "wide.json").read_text())["vertex_indices"]}
+    (folder / "wide_bare.json").write_text(json.dumps(bare))
+    data["characters"] = [{**data["characters"][0], "landmarks": "wide_bare.json", "layout": "mine.json"}]
+    data["pairs"] = [{"character": "wide", "take": "take0"}]
+    changed = folder / "custom.yaml"
+    changed.write_text(yaml.safe_dump(data))
+    manifest = read_manifest(changed)
+    assert manifest.characters[0].layout.startswith("custom-")
+    report = run_batch(plan_batch(manifest, tmp_path), client=client)
+    assert report.succeeded == ["wide/take0"], report.failed
+    mine, built_in = (np.load(root / "wide/take0/vertices.npy") for root in (tmp_path, reference))
+    np.testing.assert_allclose(mine, built_in, atol=1e-5)
+    data["characters"][0]["layout"] = "nowhere.json"
+    changed.write_text(yaml.safe_dump(data))
+    with pytest.raises(RetargetError, match="nowhere.json"):
+        read_manifest(changed)
