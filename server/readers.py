@@ -17,6 +17,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from retarget.errors import RetargetError
 from retarget.facemesh.placement import CHECK_BELOW, find_face_mesh, layout_landmarks
 from retarget.gltf import export_mesh_gltf, read_gltf
@@ -37,7 +39,7 @@ from retarget.weights import METHODS, compute_weights
 
 __all__ = ["FoundLandmarks", "ImportedProject", "OpenedMesh", "arkit", "face_mesh_take", "found_landmarks",
            "imported_project", "marker_take", "mesh_counts", "opened_mesh", "rig", "stereo_calibration", "stereo_take", "take_from_upload",
-           "video_opens"]
+           "TrackedMarkers", "video_opens"]
 
 def mesh_counts(data: bytes, ext: str, shown: str, max_vertices: int,
                 max_bytes: int) -> tuple[int, int, dict]:
@@ -220,16 +222,57 @@ def _too_long(shown: str, max_frames: int, fps: float, frames: int | None = None
             f"({span(max_frames)}) of a video: cut it into shorter takes")
 
 
-def marker_take(path: Path, layout: str, names: dict[Path, str], progress) -> Take:
-    """Ring markers tracked through a video (Dutreve §5, `track_marker_video`)."""
+PREVIEW_WIDTH = 640
+"""Widest first-frame preview a marker take keeps, px (the page shows it in a panel)."""
+
+
+@dataclass(frozen=True)
+class TrackedMarkers:
+    """A ring-marker video's take and a JPEG of its first frame (at most `PREVIEW_WIDTH`
+    px wide), for the page to show where each marker column was; the take's
+    ``meta["first_frame"]`` has each column's place there (`marker_take`)."""
+
+    take: Take
+    preview: bytes
+
+
+def marker_take(path: Path, layout: str | None, names: dict[Path, str], progress) -> TrackedMarkers:
+    """Ring markers tracked through a video (Dutreve §5, `track_marker_video`; layout None:
+    every marker in view, columns m01..mM), with the first frame's preview. The take's
+    ``meta["first_frame"]`` is ``[[x, y] | null per column]``: where each column is on the
+    first frame in the video's pixels, x right and y down as in the image (the take's
+    points have y up), null for a marker not seen there."""
     shown = names[path]
     try:
         with _naming(names):
-            return track_marker_video(path, layout=layout, progress=progress)
+            take = track_marker_video(path, layout=layout, progress=progress)
+            preview = _first_frame_jpeg(path)
     except RetargetError as exc:
         if repr(shown) in str(exc):
             raise
         raise RetargetError(f"video {shown!r}: {exc}") from None
+    height = take.meta["size"][1]
+    take.meta["first_frame"] = [
+        [round(float(x), 2), round(float(height - y), 2)] if np.isfinite([x, y]).all() else None
+        for x, y in take.points[0]] if take.n_frames else []
+    return TrackedMarkers(take, preview)
+
+
+def _first_frame_jpeg(path: Path) -> bytes:
+    """The video's first frame as a JPEG at most `PREVIEW_WIDTH` px wide (re-encoded
+    here, so what the page shows is never the upload's own bytes)."""
+    import cv2
+
+    with VideoReader(path) as reader:
+        _, frame = next(iter(reader))
+    height, width = frame.shape[:2]
+    if width > PREVIEW_WIDTH:
+        size = (PREVIEW_WIDTH, max(1, round(height * PREVIEW_WIDTH / width)))
+        frame = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
+    ok, jpeg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 85])
+    if not ok:
+        raise RetargetError("its first frame cannot be encoded as a JPEG")
+    return jpeg.tobytes()
 
 
 def face_mesh_take(path: Path, layout: str, max_frames: int, names: dict[Path, str],

@@ -9,6 +9,7 @@ Layout on disk::
     <data_dir>/projects/<id>/paint-r<R>-<hex>.npz `retarget.weights.painting.WeightEdit.save`:
                                                  the rows painted over it, if any
     <data_dir>/projects/<id>/take-<take id>.npz  `retarget.sources.take.Take.save`, one per take
+    <data_dir>/projects/<id>/take-<take id>.jpg  a tracked video's first frame (marker takes)
     <data_dir>/projects/<id>/muscles-r<R>-<hex>.json  `retarget.muscles.MuscleFace.to_json`:
                                                  the virtual muscles, placed or edited
     <data_dir>/projects/<id>/arkit-r<R>-<hex>.npz  `retarget.arkit.ArkitShapes.save`: the 52
@@ -108,7 +109,7 @@ whatever its size."""
 
 TAKE_ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{16}")
 """What `secrets.token_urlsafe(12)` returns: a take id."""
-_TAKE_FILE = re.compile(r"take-[A-Za-z0-9_-]{16}\.npz")
+_TAKE_FILE = re.compile(r"take-[A-Za-z0-9_-]{16}\.(npz|jpg)")
 
 LAYOUT_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 """The name a project's custom layout is saved under (a URL path segment)."""
@@ -226,6 +227,11 @@ def _unique_name(db, name: str, project_id: str | None = None) -> str:
     while f"{name} ({k})" in taken:
         k += 1
     return f"{name} ({k})"
+
+
+def _preview_file(take_file: str) -> str:
+    """The name of a take's first-frame JPEG beside its file ``take-<id>.npz``."""
+    return take_file.removesuffix(".npz") + ".jpg"
 
 
 def _mesh_bytes(mesh: Mesh) -> int:
@@ -350,8 +356,8 @@ class ProjectStore:
             if row["previous_mesh"] is not None:
                 previous = json.loads(row["previous_mesh"])
                 keep.update((previous["mesh_file"], previous["landmarks_file"]))
-            keep.update(r["file"] for r in self._db.execute(
-                "SELECT file FROM takes WHERE project_id = ?", (project_id,)))
+            for r in self._db.execute("SELECT file FROM takes WHERE project_id = ?", (project_id,)):
+                keep.update((r["file"], _preview_file(r["file"])))
             for path in folder.iterdir() if folder.is_dir() else ():
                 if path.is_file() and path.name not in keep and (
                         _FILE_PATTERN.fullmatch(path.name) or _TAKE_FILE.fullmatch(path.name)):
@@ -875,10 +881,12 @@ class ProjectStore:
             raise TakeNotFound(take_id)
         return row
 
-    def put_take(self, project_id: str, take: Take, *, name: str, key: str | None = None) -> dict:
+    def put_take(self, project_id: str, take: Take, *, name: str, key: str | None = None,
+                 preview: bytes | None = None) -> dict:
         """Store a new take (an already validated `Take`); answers its info. With `key`
         (the uploader's Idempotency-Key) a take already stored under that key in the
-        project is answered instead, and nothing is stored twice."""
+        project is answered instead, and nothing is stored twice. `preview`: the JPEG of
+        a tracked video's first frame, kept with the take (`take_preview`)."""
         folder = self.folder(project_id)
         take_id = secrets.token_urlsafe(12)
         file = f"take-{take_id}.npz"
@@ -890,6 +898,8 @@ class ProjectStore:
             if earlier is not None:
                 return self._take_info(earlier)
             write_atomic(folder / file, writer=take.save)
+            if preview is not None:
+                write_atomic(folder / _preview_file(file), preview)
             db.execute(
                 "INSERT INTO takes (id, project_id, name, created, source, layout, fps, n_frames, "
                 "n_points, dims, duration, file, upload_key) "
@@ -932,6 +942,13 @@ class ProjectStore:
             take = take.trimmed(row["trim_start"], row["trim_stop"])
         return take
 
+    def take_preview(self, project_id: str, take_id: str) -> bytes | None:
+        """The JPEG of the first frame of the video the take was tracked from, or None."""
+        with self._lock:
+            row = self._take_row(project_id, take_id)
+            path = self.folder(project_id) / _preview_file(row["file"])
+            return path.read_bytes() if path.is_file() else None
+
     def update_take(self, project_id: str, take_id: str, *, name: str | None = None,
                     trim: tuple[float, float | None] | None = None) -> dict:
         """Rename and/or set the trimmed span (seconds from the take's first frame; an
@@ -947,7 +964,8 @@ class ProjectStore:
         with self._transaction() as db:
             row = self._take_row(project_id, take_id)
             db.execute("DELETE FROM takes WHERE id = ?", (take_id,))
-        (self.folder(project_id) / row["file"]).unlink(missing_ok=True)  # after the commit
+        for file in (row["file"], _preview_file(row["file"])):  # after the commit
+            (self.folder(project_id) / file).unlink(missing_ok=True)
 
     # -- custom layouts -----------------------------------------------------------------
 

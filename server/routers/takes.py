@@ -11,12 +11,17 @@
     GET    /api/projects/{id}/takes/{take}          its info
     GET    /api/projects/{id}/takes/{take}/points   (F, N, D) float32 .npy of the trimmed take
     GET    /api/projects/{id}/takes/{take}/calibration  a stereo take's calibration (.npz)
+    GET    /api/projects/{id}/takes/{take}/preview  a marker take's first video frame (JPEG)
+    GET    /api/projects/{id}/takes/{take}/preview/markers  where each marker is on it (JSON)
     PATCH  /api/projects/{id}/takes/{take}          {"name"?, "trim"?: [start, stop|null]} (s)
     DELETE /api/projects/{id}/takes/{take}
 
 A take's info is ``{id, name, created, source, layout, fps, n_frames, n_points, dims,
 duration, trim: [start, stop]}``. Takes keep the source's own point names; playing one
-maps them to the project's layout by name (`retarget.performance`). Files are parsed by
+maps them to the project's layout by name (`retarget.performance`). A ring-marker video
+tracked with layout ``*`` keeps every marker in view, named m01..mM: the page shows the
+take's first frame with each marker on it, and the user makes their own layout of them
+(a click on a marker, then on the mesh). Files are parsed by
 `retarget.sources.files.read_take`, videos tracked by `retarget.sources.facemesh_video`
 (markerless: MediaPipe's face mesh, run natively), `retarget.sources.markers` and
 `retarget.sources.stereo`, all in child processes (`server.readers` through
@@ -68,6 +73,9 @@ TRACK_METHODS = ("markerless", "markers", "stereo")
 """The trackers: markerless, any face (the layout's points picked out of the face mesh's
 468); markers, white dots with a black ring (Dutreve §5); stereo, colour markers seen by
 a calibrated pair (Woodward §5)."""
+EVERY_MARKER = "*"
+"""The layout form value that asks the marker tracker for every marker in view (columns
+m01..mM, `retarget.sources.markers.track_marker_video` with no layout)."""
 JOB_META = ("truncated", "frames_claimed", "frames_with_face")
 """What a tracking job's result repeats of its take's meta, for the page to say."""
 CALIBRATION_EXTENSIONS = ("npz",)
@@ -142,8 +150,9 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                 method: str = Form(default="markers", description=" | ".join(TRACK_METHODS)),
                 layout: str | None = Form(
                     default=None, description="the layout whose points the take holds: for "
-                    "markers and stereo the markers' (default dutreve21); markerless, any "
-                    "(default the project's landmarks', else ibug68)"),
+                    "markers and stereo the markers' (default dutreve21), for markers '*' "
+                    "for every marker in view, named m01..mM; markerless, any (default the "
+                    "project's landmarks', else ibug68)"),
                 name: str | None = Form(default=None, max_length=200),
                 right: UploadFile | None = File(default=None,
                                                 description="stereo: the right camera's video"),
@@ -183,7 +192,13 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
     if layout is None:
         saved = project["landmarks"] and project["landmarks"]["layout"]
         layout = (saved or "ibug68") if method == "markerless" else "dutreve21"
-    chosen = resolve_layout(store, project["id"], layout)  # 422 for an unknown name
+    if layout == EVERY_MARKER:
+        if method != "markers":
+            raise RetargetError(f"layout {EVERY_MARKER!r} (every marker in view) is for method "
+                                f"'markers'; {method!r} tracks a layout's points")
+        layout = None
+    else:
+        chosen = resolve_layout(store, project["id"], layout)  # 422 for an unknown name
     if method == "markerless" and not chosen.has_mediapipe468:
         raise RetargetError(f"layout {layout!r} has points that are no face-mesh vertex: markerless "
                             "tracking cannot follow them; track markers, or upload a take of them")
@@ -207,10 +222,10 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
 
         def work(job) -> tuple[str, dict]:
             try:
-                take = run(lambda done, total: job.report(done / total) if total else None)
+                take, preview = run(lambda done, total: job.report(done / total) if total else None)
             finally:
                 scratch.remove()
-            info = store.put_take(project["id"], take, name=take_name)
+            info = store.put_take(project["id"], take, name=take_name, preview=preview)
             meta = {k: take.meta[k] for k in JOB_META if k in take.meta}
             # a cut-off video still gives the frames up to the cut: the page says so
             cut_note = (f" (the video ends early: {info['n_frames']} of {meta['frames_claimed']} "
@@ -254,39 +269,41 @@ class _Scratch:
             path.unlink(missing_ok=True)
 
 
-def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str):
-    """The marker job's work, ``run(progress) -> Take``, once the video opens. Videos
-    are decoded by FFmpeg, so both run in a child process (`server.isolation`)."""
+def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str | None):
+    """The marker job's work, ``run(progress) -> (take, first-frame JPEG)``, once the
+    video opens (layout None: every marker in view). Videos are decoded by FFmpeg, and
+    the preview encoded by OpenCV, so both run in a child process (`server.isolation`)."""
     path = scratch.save(video, VIDEO_EXTENSIONS, "video")
     what = f"video {scratch.names[path]!r} refused: not a readable video"
     isolation.call(video_opens, path, scratch.names, what=what)
 
-    def run(progress) -> Take:
-        return isolation.call(marker_take, path, layout, scratch.names, what=what,
-                              progress=progress, job=True)
+    def run(progress) -> tuple[Take, bytes]:
+        tracked = isolation.call(marker_take, path, layout, scratch.names, what=what,
+                                 progress=progress, job=True)
+        return tracked.take, tracked.preview
 
     return run
 
 
 def _face_mesh_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str,
                        max_frames: int):
-    """The markerless job's work, ``run(progress) -> Take``, once the video opens and its
+    """The markerless job's work, ``run(progress) -> (take, None)``, once the video opens and its
     header claims at most `max_frames` frames (`Limits.max_video_frames`); as for markers,
     FFmpeg decodes it in a child process."""
     path = scratch.save(video, VIDEO_EXTENSIONS, "video")
     what = f"video {scratch.names[path]!r} refused: not a readable video"
     isolation.call(video_opens, path, scratch.names, max_frames, what=what)
 
-    def run(progress) -> Take:
+    def run(progress) -> tuple[Take, None]:
         return isolation.call(face_mesh_take, path, layout, max_frames, scratch.names, what=what,
-                              progress=progress, job=True)
+                              progress=progress, job=True), None
 
     return run
 
 
 def _stereo_tracker(scratch: _Scratch, isolation, left: UploadFile, right: UploadFile | None,
                     calibration: UploadFile | None, boards: tuple, pattern: tuple, layout: str):
-    """The stereo job's work, ``run(progress) -> Take``, once everything that can be
+    """The stereo job's work, ``run(progress) -> (take, None)``, once everything that can be
     checked before tracking is (see the module docstring, `retarget.sources.stereo.stereo_pair_calibration`);
     and the answer's extras."""
     _require_stereo_fields(right, calibration, boards, pattern)
@@ -303,9 +320,9 @@ def _stereo_tracker(scratch: _Scratch, isolation, left: UploadFile, right: Uploa
     cal, source = isolation.call(stereo_calibration, videos, cal_file, board_videos, pattern,
                                  layout, scratch.names, what=what)
 
-    def run(progress) -> Take:
+    def run(progress) -> tuple[Take, None]:
         return isolation.call(stereo_take, videos, cal, layout, scratch.names, what=what,
-                              progress=progress, job=True)
+                              progress=progress, job=True), None
 
     views = cal.meta.get("views")
     return run, {"calibration": {"source": source, "rms": cal.rms, "baseline": cal.baseline,
@@ -371,6 +388,38 @@ def get_take_calibration(project: ProjectDep, store: StoreDep, take_id: str) -> 
     return Response(buffer.getvalue(), media_type="application/octet-stream",
                     headers={"Content-Disposition":
                              f'attachment; filename="calibration-{take_id}.npz"'})
+
+
+@router.get("/{take_id}/preview", response_class=Response,
+            responses={200: {"content": {"image/jpeg": {}}}})
+def get_take_preview(project: ProjectDep, store: StoreDep, take_id: str) -> Response:
+    """The first frame of the video a ring-marker take was tracked from, a JPEG at most
+    640 px wide; 404 for a take that has none (files, markerless and stereo takes)."""
+    jpeg = store.take_preview(project["id"], take_id)
+    if jpeg is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, _NO_PREVIEW.format(take_id))
+    return Response(jpeg, media_type="image/jpeg")
+
+
+@router.get("/{take_id}/preview/markers")
+def get_take_preview_markers(project: ProjectDep, store: StoreDep, take_id: str) -> dict:
+    """Where each of a ring-marker take's columns is on its first frame:
+    ``{size: [width, height], markers: [{name, x, y}]}`` in the video's pixels (x right,
+    y down, as in the image; the preview is the frame scaled to at most 640 px wide), x
+    and y null for a marker not seen there. 404 for a take that has no preview."""
+    take = store.take(project["id"], take_id, trimmed=False)
+    places = take.meta.get("first_frame")
+    if places is None or store.take_preview(project["id"], take_id) is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, _NO_PREVIEW.format(take_id))
+    markers = []
+    for name, xy in zip(take.names, places):
+        x, y = xy or (None, None)
+        markers.append({"name": name, "x": x, "y": y})
+    return {"size": take.meta["size"], "markers": markers}
+
+
+_NO_PREVIEW = ("take {!r} has no first-frame preview: only takes tracked here from a "
+               "ring-marker video have one")
 
 
 class TakePatch(BaseModel):
