@@ -148,6 +148,16 @@ export const api = {
 	takeMarkers: ( id, takeId ) => request( 'GET', `/api/projects/${ id }/layouts/from-take/${ encodeURIComponent( takeId ) }` ),
 
 	/**
+	 * Where each marker of a take tracked from a ring-marker video is on its first frame
+	 * (x, y in the video's pixels, y down; null when not seen there); 404 for other takes.
+	 * @returns {Promise<{size: number[], markers: Array<{name: string, x: number|null, y: number|null}>}>}
+	 */
+	takePreviewMarkers: ( id, takeId ) => request( 'GET', `/api/projects/${ id }/takes/${ encodeURIComponent( takeId ) }/preview/markers` ),
+
+	/** @returns {string} the URL of that take's first frame (a JPEG at most 640 px wide). */
+	takePreviewUrl: ( id, takeId ) => `/api/projects/${ id }/takes/${ encodeURIComponent( takeId ) }/preview`,
+
+	/**
 	 * A take file's marker names, read by the server and not stored (a take of markers no
 	 * layout of the project has yet is refused as a take).
 	 * @returns {Promise<{take: null, names: string[]}>}

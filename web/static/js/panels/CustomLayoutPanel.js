@@ -1,6 +1,7 @@
 import { REGIONS, SIDES, layoutSpec } from '../model/customLayout.js';
 import { ApiError, api } from '../net/api.js';
 import { $, guarded, option } from './dom.js';
+import { MarkerFrame } from './MarkerFrame.js';
 
 /**
  * *Custom layout from a take's markers* (a fold under the Landmarks panel): the marker
@@ -10,6 +11,11 @@ import { $, guarded, option } from './dom.js';
  * project (PUT /api/projects/{id}/layouts/{name}). The saved layout is then chosen in the
  * layout select, and its points are clicked on the mesh with the landmark picker, in the
  * take's order, as any layout's are.
+ *
+ * A take tracked from a ring-marker video also shows the video's first frame with each
+ * marker labelled (MarkerFrame): a click on a label (or on a row's marker name) chooses
+ * that marker, and once the layout is chosen the next click on the mesh places its point
+ * (the landmark set's `select` of an unplaced point makes it the next one placed).
  */
 export class CustomLayoutPanel {
 
@@ -21,13 +27,46 @@ export class CustomLayoutPanel {
 		this.app = app;
 		/** @type {Array<{name: string, region: string, side: string, mirror: string, anchor: boolean}>} */
 		this.rows = [];
-		this.root = build();
+		/** The marker last clicked on the frame or in the table, or null. */
+		this.chosen = null;
+		this._pending = false; // chosen before its layout was: placed once the layout is chosen
+		this.frame = new MarkerFrame( ( name ) => this.choose( name ) );
+		this.root = build( this.frame.root );
 		$( 'landmarks-panel' ).append( this.root );
 		const errors = app.errors;
 		this.root.addEventListener( 'toggle', guarded( errors, () => this.root.open && this.refreshTakes() ) );
 		$( 'custom-markers' ).addEventListener( 'click', guarded( errors, () => this.useTake( $( 'custom-take' ).value ) ) );
 		$( 'custom-file' ).addEventListener( 'change', guarded( errors, () => this.useFile( $( 'custom-file' ).files[ 0 ] ) ) );
 		$( 'custom-save' ).addEventListener( 'click', guarded( errors, () => this.save() ) );
+		app.landmarks.addEventListener( 'change', () => this._landmarksChanged() );
+
+	}
+
+	/**
+	 * Open the fold on a take's markers (a ring-marker video just tracked).
+	 * @param {string} takeId
+	 */
+	async showTake( takeId ) {
+
+		this.root.open = true; // its toggle lists the takes too; this waits for the list
+		await this.refreshTakes();
+		$( 'custom-take' ).value = takeId;
+		await this.useTake( takeId );
+		this.root.scrollIntoView( { block: 'nearest' } );
+
+	}
+
+	/**
+	 * Choose a marker: its row is marked, and the landmark picker places its point with the
+	 * next click on the mesh once the layout is the one chosen for the landmarks.
+	 * @param {string} name
+	 */
+	choose( name ) {
+
+		this.chosen = name;
+		this._pending = ! this._pointAt( name );
+		if ( this._pending ) $( 'custom-note' ).textContent = `${ name } chosen: save the layout, then click its point on the mesh.`;
+		this._mark();
 
 	}
 
@@ -35,6 +74,7 @@ export class CustomLayoutPanel {
 	async setProject() {
 
 		this._showRows( [] );
+		this.frame.show( null );
 		$( 'custom-note' ).textContent = '';
 		if ( this.root.open ) await this.refreshTakes();
 
@@ -46,7 +86,9 @@ export class CustomLayoutPanel {
 		const id = this.app.projectId;
 		const takes = id ? await api.takes( id ) : [];
 		if ( id !== this.app.projectId ) return;
-		$( 'custom-take' ).replaceChildren( ...takes.map( ( t ) => option( t.id, `${ t.name } · ${ t.n_points } markers` ) ) );
+		const select = $( 'custom-take' ), kept = select.value; // a list again keeps the take shown
+		select.replaceChildren( ...takes.map( ( t ) => option( t.id, `${ t.name } · ${ t.n_points } markers` ) ) );
+		if ( takes.some( ( t ) => t.id === kept ) ) select.value = kept;
 		$( 'custom-markers' ).disabled = takes.length === 0;
 		if ( takes.length === 0 ) $( 'custom-note' ).textContent = 'Choose a take file of your markers, or upload one as a take first.';
 
@@ -60,9 +102,12 @@ export class CustomLayoutPanel {
 
 		const id = this.app.projectId;
 		if ( ! id || ! takeId ) throw new ApiError( 0, 'Choose a take whose markers make the layout.' );
-		const { names } = await api.takeMarkers( id, takeId );
+		const [ { names }, frame ] = await Promise.all( [ api.takeMarkers( id, takeId ), firstFrame( id, takeId ) ] );
 		if ( id !== this.app.projectId ) return;
 		this._useNames( names );
+		this.frame.show( frame );
+		this._mark();
+		if ( frame ) $( 'custom-note' ).textContent += ' Click a marker on the frame, then its point on the mesh.';
 
 	}
 
@@ -76,12 +121,15 @@ export class CustomLayoutPanel {
 		if ( ! id || ! file ) return;
 		const { names } = await api.takeFileMarkers( id, file );
 		$( 'custom-file' ).value = '';
-		if ( id === this.app.projectId ) this._useNames( names );
+		if ( id !== this.app.projectId ) return;
+		this._useNames( names );
+		this.frame.show( null ); // a file has no frame to show
 
 	}
 
 	_useNames( names ) {
 
+		this.chosen = null;
 		this._showRows( names.map( ( name ) => ( { name, region: guessRegion( name ), side: guessSide( name ), mirror: '', anchor: false } ) ) );
 		$( 'custom-note' ).textContent = `${ names.length } markers: set each one's region and side, pair left with right, tick 3 that move with the head only (or none), then save.`;
 
@@ -101,7 +149,8 @@ export class CustomLayoutPanel {
 		const select = $( 'layout-select' );
 		select.value = saved.name;
 		select.dispatchEvent( new Event( 'change' ) );
-		$( 'custom-note' ).textContent = `Saved ${ name } (${ saved.n_points } points): click them on the mesh in order, then Save landmarks.`;
+		const how = this.frame.root.hidden ? 'click them on the mesh in order' : 'click a marker on the frame, then its point on the mesh';
+		$( 'custom-note' ).textContent = `Saved ${ name } (${ saved.n_points } points): ${ how }, then Save landmarks.`;
 
 	}
 
@@ -122,7 +171,10 @@ export class CustomLayoutPanel {
 			};
 
 			cell( document.createTextNode( row.name ) );
-			tr.cells[ 0 ].title = row.name;
+			tr.dataset.marker = row.name;
+			tr.cells[ 0 ].title = `${ row.name }: click, then click its point on the mesh`;
+			tr.cells[ 0 ].style.cursor = 'pointer';
+			tr.cells[ 0 ].addEventListener( 'click', () => this.choose( row.name ) );
 			tr.cells[ 0 ].style.overflow = 'hidden';
 			tr.cells[ 0 ].style.textOverflow = 'ellipsis';
 			cell( choice( REGIONS, row.region, `custom-region-${ i }`, ( v ) => ( row.region = v ) ) );
@@ -141,10 +193,71 @@ export class CustomLayoutPanel {
 
 	}
 
+	/**
+	 * Make `name`'s point the next the picker places (or select it, when placed).
+	 * @returns {boolean} false when the landmarks' layout has no point of that name.
+	 */
+	_pointAt( name ) {
+
+		const landmarks = this.app.landmarks;
+		const index = landmarks.layout ? landmarks.layout.points.findIndex( ( p ) => p.name === name ) : - 1;
+		if ( index < 0 ) return false;
+		landmarks.select( index );
+		$( 'custom-note' ).textContent = landmarks.state.points[ index ]
+			? `${ name } is placed: drag its marker on the mesh to move it.`
+			: `Click ${ name }'s point on the mesh.`;
+		return true;
+
+	}
+
+	_landmarksChanged() {
+
+		// a marker chosen before the layout was saved: its point comes next once it is chosen
+		if ( this._pending && this.chosen ) {
+
+			this._pending = false; // before select, whose change event comes back here
+			this._pending = ! this._pointAt( this.chosen );
+
+		}
+
+		this._mark();
+
+	}
+
+	/** Mark the chosen marker's row and label, and the labels of the points placed. */
+	_mark() {
+
+		const landmarks = this.app.landmarks, layout = landmarks.layout;
+		const placed = new Set( layout ? layout.points.filter( ( _, i ) => landmarks.state.points[ i ] ).map( ( p ) => p.name ) : [] );
+		for ( const tr of $( 'custom-points' ).tBodies[ 0 ].rows ) tr.style.background = tr.dataset.marker === this.chosen ? 'rgba(68, 170, 255, 0.25)' : '';
+		this.frame.mark( this.chosen, placed );
+
+	}
+
+}
+
+/**
+ * A take's first frame and its markers' places, or null for a take tracked from no
+ * ring-marker video (404).
+ * @returns {Promise<{url: string, size: number[], markers: object[]}|null>}
+ */
+async function firstFrame( id, takeId ) {
+
+	try {
+
+		return { url: api.takePreviewUrl( id, takeId ), ...await api.takePreviewMarkers( id, takeId ) };
+
+	} catch ( error ) {
+
+		if ( error instanceof ApiError && error.status === 404 ) return null;
+		throw error;
+
+	}
+
 }
 
 /** The fold's elements (the page has no markup for it). */
-function build() {
+function build( frame ) {
 
 	const root = document.createElement( 'details' );
 	root.id = 'custom-layout';
@@ -195,7 +308,7 @@ function build() {
 	const note = document.createElement( 'div' );
 	note.id = 'custom-note';
 	note.className = 'note';
-	root.append( summary, pick, fileRow, table, store, note );
+	root.append( summary, pick, fileRow, frame, table, store, note );
 	return root;
 
 }

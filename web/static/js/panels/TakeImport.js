@@ -1,14 +1,17 @@
 import { api } from '../net/api.js';
-import { $ } from './dom.js';
+import { $, option } from './dom.js';
 import { StereoTrackDialog } from './StereoTrackDialog.js';
 
 const TAKE_EXTENSIONS = [ 'csv', 'json', 'npy', 'trc', 'c3d', 'glb', 'gltf', 'zip' ];
+const OWN_MARKERS = 'own-markers'; // the Video choice: every ring marker in view, the user's layout
 
 /**
  * New takes for the Performance panel: *Import take…* (a file the server reads) and
  * *Track…* a video on the server, markerless or ring markers (a job, its progress in the
  * bar), or a stereo pair of colour-marker videos (its own form, StereoTrackDialog). Each
- * new take becomes the chosen one.
+ * new take becomes the chosen one. Ring markers may be tracked as a layout's or as every
+ * marker in view (m01…): then the Custom layout fold opens on the take's first frame, for
+ * the user to make their own layout of them.
  */
 export class TakeImport {
 
@@ -30,6 +33,15 @@ export class TakeImport {
 			onTracked: onTake,
 		} );
 		this._events = new AbortController();
+		// after "ring markers" (the page's markup lists the layouts' trackers); once per page
+		const methods = $( 'video-method' );
+		if ( ! methods.querySelector( `option[value="${ OWN_MARKERS }"]` ) ) {
+
+			methods.querySelector( 'option[value="markers"]' ).after( option( OWN_MARKERS, 'ring markers, every one in view (your own layout)',
+				'Every ring marker in view, named m01…: click each on the first frame, then its point on the mesh' ) );
+
+		}
+
 		this._bind();
 
 	}
@@ -51,16 +63,18 @@ export class TakeImport {
 
 	/**
 	 * Track a video into a take on the server, by the method chosen: markerless (the face
-	 * mesh, into the project's layout) or ring markers (dutreve21). The bar shows the
-	 * upload, then the server's job.
+	 * mesh, into the project's layout), ring markers (dutreve21) or every ring marker in
+	 * view (layout *, shown in the Custom layout fold). The bar shows the upload, then the
+	 * server's job.
 	 * @param {File} file
 	 */
 	async trackVideoFile( file ) {
 
-		const method = $( 'video-method' ).value;
+		const choice = $( 'video-method' ).value, own = choice === OWN_MARKERS;
+		const method = own ? 'markers' : choice;
 		const markers = method === 'markers';
 		const id = this.app.projectId, status = this.status;
-		const fields = { method, layout: markers ? 'dutreve21' : this.app.sources.layout().name };
+		const fields = { method, layout: own ? '*' : markers ? 'dutreve21' : this.app.sources.layout().name };
 		const job = await status.withProgress( `Uploading ${ file.name }…`, ( progress ) => api.trackVideo( id, file, fields, progress ) );
 		status.bar.value = 0; // the job's share done, no longer the upload's
 		status.bar.hidden = false;
@@ -100,7 +114,9 @@ export class TakeImport {
 
 		// a cut-off file still gives its frames up to the cut: say so, or the take looks whole
 		if ( result.truncated ) text += ` The file is cut off: only ${ result.frames } of the ${ result.frames_claimed } frames it announces could be read.`;
+		if ( own ) text += ' Make your layout of them under Landmarks › Custom layout.';
 		status.note( text, warn );
+		if ( own ) await this.app.customLayout.showTake( result.take );
 
 	}
 
