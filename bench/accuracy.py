@@ -32,7 +32,9 @@ from bench.ict import (DATA, REPORT_REGIONS, benchmark_layout, expression_weight
                        foreign_frame, image_points, load_model, vertex_regions)
 from bench.timing import median_ms  # noqa: E402
 from retarget.landmarks import from_vertex_indices  # noqa: E402
+from retarget.layouts import get_layout  # noqa: E402
 from retarget.pipeline import DEFAULT_KERNEL, DEFAULT_SMOOTHING, Retargeter  # noqa: E402
+from retarget.rbf import SimilarityTransform  # noqa: E402
 from retarget.skin import skin_displacements  # noqa: E402
 from retarget.weights import DEFAULT_METHOD, METHODS, compute_weights  # noqa: E402
 
@@ -124,13 +126,15 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
     (B's own points' true motion: the deformer's floor with 468 joints). The "found" row
     also carries how far apart the two placements are: B's points carried onto A's surface
     through ICT's shared topology against A's own (mm, mean and p95), the disagreement
-    that separates "found" from "matched".
+    that separates "found" from "matched". B is rigged with the ``mediapipe468`` layout,
+    as the app and `retarget landmarks` label the points they find.
     """
     from retarget.facemesh.placement import find_face_mesh
     from retarget.facemesh.tracker import FaceMeshTracker
     from retarget.mesh import mesh_from_arrays
 
     model, src0, tgt0, offsets = scenario(seed, n_random)
+    layout = get_layout("mediapipe468")
     report, _ = vertex_regions(tgt0, model.faces, model.feature_vertices(), benchmark_layout(), model.face_count)
     truth = tgt0 + offsets
     tracker = FaceMeshTracker()
@@ -142,14 +146,16 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
     rows = []
     for label, target in (("found", on_b), ("matched", on_a)):
         t = time.perf_counter()
-        matrix = compute_weights(method, tgt0, model.faces, target, None).matrix()
+        matrix = compute_weights(method, tgt0, model.faces, target, layout).matrix()
         rig_s = time.perf_counter() - t
         t0 = target.positions(tgt0)
         rt = Retargeter(kernel, smoothing=smoothing).fit(s0, t0)
         frame_ms = median_ms(lambda: skin_displacements(matrix, rt.displacements(s[0])), 50)
         transfer_ms = median_ms(lambda: rt.displacements(s[0]), 200)
         pred = tgt0 + skin_displacements(matrix, rt.displacements(s))
-        rows.append({"setup": f"468 {label}", "kernel": kernel, "condition": "same", "rig_s": rig_s,
+        # the pipeline's default for a dense 3D source is the similarity transform
+        shown = "similarity" if isinstance(rt.transform_, SimilarityTransform) else kernel
+        rows.append({"setup": f"468 {label}", "kernel": shown, "condition": "same", "rig_s": rig_s,
                      "fit_ms": median_ms(lambda: Retargeter(kernel, smoothing=smoothing).fit(s0, t0), 20),
                      "frame_ms": frame_ms, "transfer_ms": transfer_ms,
                      "leak_upper": float("nan"), "leak_lower": float("nan"),

@@ -26,6 +26,10 @@ Degenerate input has a written policy:
 - coplanar centres (a 2D source with z = 0, Dutreve §4) with a linear polynomial: the
   polynomial spans only the centres' own plane (its normal direction would be
   undetermined), so a 2D source still maps into 3D target space.
+
+`SimilarityTransform` is the transform's polynomial alone with its linear part held to a
+similarity (scale times an orthogonal matrix): what `retarget.pipeline` uses for dense 3D
+sources, where a free affine part would carry the two faces' proportions into the motion.
 """
 
 from __future__ import annotations
@@ -273,6 +277,72 @@ def _polynomial_frame(c: np.ndarray, degree: int, spread: float):
     return origin, vt[:rank] / max(spread, 1e-300)
 
 
+def spans_volume(points) -> bool:
+    """Whether (N, 3) points span 3D space (no direction flat within `_FLAT_TOL` of the
+    widest): what `SimilarityTransform` needs; a 2D source padded with z = 0 does not."""
+    p = np.asarray(points, dtype=np.float64)
+    sv = np.linalg.svd(p - p.mean(0), compute_uv=False) if len(p) >= 4 else np.zeros(1)
+    return len(sv) == 3 and sv[-1] > _FLAT_TOL * max(sv[0], 1e-300)
+
+
 def _polynomial(x: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> np.ndarray:
     """(M, 1 + len(axes)) polynomial basis [1, projections on the axes]."""
     return np.hstack([np.ones((len(x), 1)), (x - origin) @ axes.T])
+
+
+class SimilarityTransform(RBFTransform):
+    """The space transform ``F(s) = c Q s + t`` (scale c > 0, orthogonal Q, translation t)
+    that best maps (N, 3) source onto (N, 3) target points in least squares: orthogonal
+    Procrustes with scale (Umeyama 1991, eq. 40-42, without the det(Q) = +1 constraint, so
+    a mirrored source frame is mapped as the affine map would map it).
+
+    It is `RBFTransform`'s linear polynomial with every kernel weight zero, the limit of
+    infinite smoothing, except that the least-squares affine part there is replaced by the
+    closest map that only rotates, mirrors and scales uniformly: a displacement keeps its
+    direction relative to the face and is scaled by the faces' size ratio, instead of being
+    stretched and sheared by how the two faces' proportions differ. The learned attributes
+    are `RBFTransform`'s but ``solution_`` (``coefs_`` holds zeros for the kernel terms), so
+    code that reads the transform's coefficients reads this one too; ``transform``
+    evaluates the polynomial alone.
+    """
+
+    def __init__(self):
+        super().__init__("linear", degree=1)
+
+    def fit(self, source, target) -> "SimilarityTransform":
+        t = as_points(target, "target", dims=(3,))
+        s = as_points(source, "source", dims=(3,))
+        if len(s) != len(t):
+            raise RetargetError(
+                f"source and target must have the same number of feature points; "
+                f"got {len(s)} and {len(t)}")
+        if not spans_volume(s):
+            raise RetargetError("a similarity transform needs 3D source points that span a volume")
+        spread = float(np.sqrt(((s - s.mean(0)) ** 2).sum(1).mean()))
+        origin, axes = _polynomial_frame(s, 1, spread)
+        mu_s, mu_t = s.mean(0), t.mean(0)
+        a, b = s - mu_s, t - mu_t
+        u, sigma, vt = np.linalg.svd(b.T @ a)
+        q = u @ vt                                  # (3, 3) maximises trace(Qᵀ BᵀA)
+        scale = float(sigma.sum() / (a ** 2).sum())
+        linear = scale * q                          # F(s) = linear @ s + shift
+        n = len(s)
+        coefs = np.zeros((n + 4, 3))
+        # the polynomial basis is [1, (s - origin_) @ axes_ᵀ] (`_polynomial`)
+        coefs[n] = mu_t + linear @ (origin - mu_s)
+        coefs[n + 1:] = np.linalg.solve(axes.T, linear.T)
+        self.centers_, self.shape_, self.degree_ = s, np.ones(n), 1
+        self.origin_, self.axes_, self.coefs_ = origin, axes, coefs
+        return self
+
+    def operator(self, points):
+        raise RetargetError("a similarity transform is not linear in the target points: it has "
+                            "no operator on values; use transform()")
+
+    def _check_fitted(self):
+        if not hasattr(self, "coefs_"):
+            raise RetargetError(f"{type(self).__name__} is not fitted; call fit() first")
+
+    def _combination(self, x: np.ndarray, coefs: np.ndarray) -> np.ndarray:
+        """(M, K): the polynomial terms alone (the kernel weights are zero)."""
+        return _polynomial(x, self.origin_, self.axes_) @ coefs[len(self.centers_):]

@@ -21,6 +21,13 @@ vertex is given to its nearest feature along the surface (a geodesic Voronoi cel
 lower-lip and jaw features are held at zero weight on the upper lip's cells, upper-lip
 features on the lower lip's and jaw's: the lips move only with their own features, the
 corners with both.
+
+Dense layouts (`DENSE_LAYOUT_POINTS`, the face mesh's 468) are not separated: each lip
+is pinned along its whole length by its own points, and the two lips' Voronoi cells
+interleave near the mouth corners, so the zeros would cut every lip feature's weight off
+along jagged cell borders. The weights there then stop summing to one (ICT, seed 1 of
+bench/accuracy.py --dense: up to 2.0 off on the mouth, 0.007 unseparated) and motion the
+lips share, a jaw drop or a smile, is lost near the corners.
 """
 
 from __future__ import annotations
@@ -33,15 +40,21 @@ from retarget.skin import SkinWeights
 from retarget.weights.geodesic import nearest_features
 from retarget.weights.quadratic import constrained_weights
 
+# A layout with at least this many points is dense (every built-in sparse layout has at
+# most 68; the face mesh 468): its lips are not separated (module docstring).
+DENSE_LAYOUT_POINTS = 200
+
 
 def biharmonic_weights(vertices, faces, points, layout=None, *, k: int | None = None,
                        damping: float = 100.0, membrane: float = 30.0,
-                       separate_lips: bool = True, constraint_weight: float = 1e4,
+                       separate_lips: bool | None = None, constraint_weight: float = 1e4,
                        progress=None) -> SkinWeights:
     """(V, N) biharmonic weights; ``k`` keeps the k largest per vertex (all if None).
 
     damping : α of the module docstring.
     membrane : β of the module docstring.
+    separate_lips : hold lip features off the other lip (module docstring); None: for a
+        sparse layout only.
     """
     v = np.asarray(vertices, dtype=np.float64)
     lap = cotmatrix(v, faces)
@@ -51,6 +64,8 @@ def biharmonic_weights(vertices, faces, points, layout=None, *, k: int | None = 
     t0 = points.positions(v)
     ell = float(np.sqrt(((t0 - t0.mean(0)) ** 2).sum(1).mean()))
     q = q + ((membrane / ell**2) * (-lap) + (damping / ell**4) * mass)  # one merge with the 2-ring q
+    if separate_lips is None:
+        separate_lips = layout is not None and layout.n_points < DENSE_LAYOUT_POINTS
     supports = lip_supports(v, faces, points, layout) if separate_lips and layout is not None else ()
     w = constrained_weights(q, points, constraint_weight, progress, supports, vertices=v)
     return SkinWeights.from_dense(w, k, "biharmonic")

@@ -158,6 +158,23 @@ def test_every_method_rigs_the_dense_layout(method, dense_face):
     assert (np.abs(weights[:, new]).max(0) > 0.1).all()
 
 
+def test_biharmonic_separates_the_lips_of_sparse_layouts_only(face, all_weights, dense_face):
+    """A sparse layout's rig holds each lip's features off the other lip; a dense one's is
+    pinned by each lip's own points, and there the cells the separation would cut leave
+    the weights summing to one round the mouth."""
+    f, layout, pts = face
+    separated = compute_weights("biharmonic", f.vertices, f.faces, pts, layout, separate_lips=True)
+    np.testing.assert_array_equal(all_weights["biharmonic"].dense(), separated.dense())
+    dense_f, found = dense_face
+    weights = compute_weights("biharmonic", dense_f.vertices, dense_f.faces, found,
+                              get_layout("mediapipe468")).dense()
+    lips = get_layout("mediapipe468").region_mask(("upper_lip", "lower_lip", "mouth_corners"))
+    at_lips = found.positions(dense_f.vertices)[lips]
+    near = np.linalg.norm(dense_f.vertices[:, None] - at_lips[None], axis=2).min(1) < 0.5
+    assert near.sum() > 50
+    assert np.abs(weights[near].sum(1) - 1.0).max() < 0.005   # 0.02 separated
+
+
 # -- the sparse Cholesky of the quadratic rigs (retarget/weights/cholesky.py) --------------
 
 def _system(f, pts):
