@@ -1,8 +1,8 @@
 """From a ring-marker video to the user's own layout, in the app (issue 17): *Track…* with
 "every marker in view" makes a take of markers m01..m04; the Custom layout fold opens on
-the video's first frame with each marker labelled; the user saves the layout, then clicks
-a marker on the frame (or its row) and its point on the mesh, in an order of their own,
-and saves the landmarks. The saved landmarks name each point after the marker clicked.
+the video's first frame with each marker labelled; the user clicks a marker on the frame
+(or its row) and its point on the mesh, in an order of their own (the first chosen before
+the layout is saved), and saves the layout and the landmarks. The saved landmarks name each point after the marker clicked.
 
 The video is the built-in face with four ring markers (brows, nose tip, lower lip) rendered
 by `retarget.testing.marker_video`; the mesh is the same face with another identity, so
@@ -75,6 +75,10 @@ def test_markers_clicked_on_the_first_frame_place_their_points(server, page, fac
         spot[m["name"]] = face.vertices[vertices[k]]
     assert len({tuple(p) for p in spot.values()}) == 4
 
+    # a marker chosen before the layout is saved is the first placed once it is chosen
+    page.click("#custom-frame button[data-marker='m03']")
+    assert page.inner_text("#custom-note") == "m03 chosen: save the layout, then click its point on the mesh."
+    assert page.get_attribute("#custom-frame button[data-marker='m03']", "aria-pressed") == "true"
     page.select_option("#custom-region-2", "nose")
     page.fill("#custom-name", "four")
     page.click("#custom-save")
@@ -84,14 +88,17 @@ def test_markers_clicked_on_the_first_frame_place_their_points(server, page, fac
         page.click("#confirm-ok")  # the found points give way to the user's layout
         page.wait_for_function("() => window.app.landmarks.state.layout.startsWith('custom-')")
     assert page.inner_text("#landmark-count") == "0 / 4"
+    page.wait_for_function("() => document.getElementById('next-point').textContent === 'm03'")
+    page.mouse.click(*_screen(page, spot["m03"]))
 
-    # out of the layout's order: three markers on the frame, the last by its row
-    for name in ("m03", "m01", "m04"):
+    # out of the layout's order: markers on the frame, the last by its row
+    for name in ("m01", "m04"):
         page.click(f"#custom-frame button[data-marker='{name}']")
         assert page.inner_text("#next-point") == name
         assert page.inner_text("#custom-note") == f"Click {name}'s point on the mesh."
         page.mouse.click(*_screen(page, spot[name]))
     assert page.inner_text("#landmark-count") == "3 / 4"
+    assert page.get_attribute("#custom-frame button[data-marker='m04']", "aria-pressed") == "true"
     page.click("#custom-points tbody tr[data-marker='m02'] td")
     assert page.inner_text("#next-point") == "m02"
     page.mouse.click(*_screen(page, spot["m02"]))

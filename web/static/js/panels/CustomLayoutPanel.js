@@ -64,6 +64,7 @@ export class CustomLayoutPanel {
 	choose( name ) {
 
 		this.chosen = name;
+		this._pending = false; // before select, whose change event comes back here
 		this._pending = ! this._pointAt( name );
 		if ( this._pending ) $( 'custom-note' ).textContent = `${ name } chosen: save the layout, then click its point on the mesh.`;
 		this._mark();
@@ -129,7 +130,6 @@ export class CustomLayoutPanel {
 
 	_useNames( names ) {
 
-		this.chosen = null;
 		this._showRows( names.map( ( name ) => ( { name, region: guessRegion( name ), side: guessSide( name ), mirror: '', anchor: false } ) ) );
 		$( 'custom-note' ).textContent = `${ names.length } markers: set each one's region and side, pair left with right, tick 3 that move with the head only (or none), then save.`;
 
@@ -157,6 +157,8 @@ export class CustomLayoutPanel {
 	_showRows( rows ) {
 
 		this.rows = rows;
+		this.chosen = null;
+		this._pending = false;
 		const names = rows.map( ( r ) => r.name );
 		const body = $( 'custom-points' ).tBodies[ 0 ];
 		body.replaceChildren( ...rows.map( ( row, i ) => {
