@@ -26,7 +26,7 @@ from server.jobs import JobRegistry
 from server.hub import StreamHub
 from server.limits import BodyLimit, Limits
 from server.routers import (arkit, batch, exports, info, landmarks, layouts, meshes, mouth, muscles, projects,
-                            rigs, stream, takes)
+                            rigs, stereo_live, stream, takes)
 from server.sample import ensure_sample_project
 from server.store import ProjectStore
 from server.web import mount_web
@@ -88,7 +88,7 @@ def create_app(data_dir: Path, *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYT
         ensure_sample_project(app.state.store)
     errors.install(app)
     for module in (projects, meshes, mouth, landmarks, rigs, muscles, arkit, takes, exports, batch, stream,
-                   layouts, info):
+                   stereo_live, layouts, info):
         app.include_router(module.router)
     mount_web(app)
     app.add_middleware(BodyLimit, limits=app.state.limits)

@@ -1,0 +1,255 @@
+"""Live stereo capture: ``WS /api/projects/{id}/stereo/live``.
+
+Two cameras chosen in the page send their frames here as JPEG pairs (RTSJ binary
+messages, `server.wire.decode_stereo_pair`); the session's child process
+(`server.stereo_worker`) decodes them and runs the library's live stereo objects
+(`retarget.sources.stereo_live`). Woodward et al.'s live set-up (§3, §5).
+
+On connect the server sends ``{"type": "hello", "project", "layout", "n_points",
+"calibration": {rms, baseline, size, views} | null, "limits": {...}}``. JSON controls:
+
+- ``{"type": "calibrate", "pattern": {"cols": 9, "rows": 6, "square": 25}, "size": [w, h]}``:
+  calibration mode (a checkerboard of cols x rows inner corners, `square` in mm, shown to
+  both cameras of w x h px); every pair then answers ``{"type": "views", "frame", "good",
+  "count", "needed"}`` (the good views so far);
+- ``{"type": "calibration_save"}``: calibrate from the good views and save the
+  calibration with the project; answered ``{"type": "calibrated", "calibration": {...}}``;
+- ``{"type": "start", "settings": {...}}``: tracking mode, on the project's saved
+  calibration and its landmarks' layout (its points carry the coloured stickers,
+  `retarget.sources.color_markers.layout_marker_colors`); a live source is started for
+  the project exactly as the webcam's (`server.players.LivePlayer`, the settings are
+  `ConditionSettings`) and every pair's points, in the head frame, are pushed to it, so
+  every viewer of ``/stream`` sees the retargeted face. Each pair answers ``{"type":
+  "tracked", "frame", "found", "n_points", "identified", "anchored", "ms", "detail"}``
+  (found: points seen; ms: the server's time on the pair);
+- ``{"type": "stop"}``: stop tracking (and the project's source, if it is still ours).
+
+Bounds before any work: a pair of more than `MAX_PAIR_BYTES`, more than
+`MAX_PAIRS_PER_SECOND` pairs or `MAX_BYTES_PER_SECOND` bytes in the last second is refused
+undecoded; the JPEGs' sizes are read from their headers before decoding (the calibration's
+or the calibrate message's size, at most `MAX_SIZE`). A refused message is answered
+``{"type": "error", "detail"}`` and the session goes on; a child that dies (a JPEG that
+crashed the decoder, a limit) ends the session with ``{"type": "ended", "detail"}`` and
+close code 1011. Other origins are refused at the handshake (`server.access`), as for
+every WebSocket.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import logging
+import time
+
+import numpy as np
+from fastapi import APIRouter, WebSocket
+
+from retarget.errors import RetargetError
+from retarget.sources.calibration import StereoCalibration
+from server.deps import HubDep, StoreDep
+from server.hub import StreamHub
+from server.players import LivePlayer
+from server.project_layouts import resolve_layout
+from server.routers.stream import _GONE, POLICY_VIOLATION, _start, _target_points
+from server.stereo_worker import StereoWorker, WorkerDied
+from server.store import ProjectNotFound, write_atomic
+from server.wire import MAX_STEREO_JPEG, decode_stereo_pair
+
+router = APIRouter(tags=["stream"])
+log = logging.getLogger(__name__)
+
+MAX_PAIR_BYTES = 32 + 2 * MAX_STEREO_JPEG
+MAX_PAIRS_PER_SECOND = 60
+MAX_BYTES_PER_SECOND = 8 * 2**20
+MAX_SIZE = (1920, 1080)
+CALIBRATION_FILE = "stereo-calibration.json"
+"""The project's saved live calibration, in its folder (not a store revision file, so the
+store's sweep leaves it)."""
+INTERNAL_ERROR = 1011
+
+
+@router.websocket("/api/projects/{project_id}/stereo/live")
+async def stereo_live(websocket: WebSocket, project_id: str, store: StoreDep, hub: HubDep) -> None:
+    try:
+        await _serve(websocket, project_id, store, hub)
+    except _GONE:
+        return  # the page left
+
+
+class _Rate:
+    """Pairs and bytes received in the last second, to refuse a flood before decoding it."""
+
+    def __init__(self):
+        self._seen: collections.deque[tuple[float, int]] = collections.deque()
+
+    def refused(self, size: int) -> str | None:
+        now = time.monotonic()
+        while self._seen and now - self._seen[0][0] > 1.0:
+            self._seen.popleft()
+        if len(self._seen) >= MAX_PAIRS_PER_SECOND:
+            return f"more than {MAX_PAIRS_PER_SECOND} stereo pairs a second; this one was dropped"
+        if sum(n for _, n in self._seen) + size > MAX_BYTES_PER_SECOND:
+            return f"more than {MAX_BYTES_PER_SECOND // 2**20} MiB of frames a second; this pair was dropped"
+        self._seen.append((now, size))
+        return None
+
+
+def saved_calibration(store, project_id: str) -> StereoCalibration | None:
+    """The project's saved live calibration, or None."""
+    path = store.folder(project_id) / CALIBRATION_FILE
+    return StereoCalibration.from_dict(json.loads(path.read_text())) if path.is_file() else None
+
+
+def _summary(calibration: StereoCalibration | None) -> dict | None:
+    if calibration is None:
+        return None
+    return {"rms": round(float(calibration.rms), 4), "baseline": round(float(calibration.baseline), 3),
+            "size": list(calibration.size), "views": calibration.meta.get("views")}
+
+
+class _Session:
+    """One page's live stereo session: its child, its mode and the project's live source."""
+
+    def __init__(self, store, hub: StreamHub, project_id: str, target_points, layout: str, worker: StereoWorker):
+        self.store, self.hub, self.project_id = store, hub, project_id
+        self.target_points, self.layout, self.worker = target_points, layout, worker
+        self.mode: str | None = None
+        self.player: LivePlayer | None = None
+        self.rate = _Rate()
+
+    async def control(self, text: str | None) -> dict:
+        if text is None:
+            raise ValueError("control messages are JSON text")
+        try:
+            msg = json.loads(text)
+        except (json.JSONDecodeError, RecursionError):
+            raise ValueError("control message is not one JSON object of ours") from None
+        if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
+            raise ValueError('control message must be an object with a "type"')
+        kind = msg["type"]
+        if kind == "calibrate":
+            pattern, size = _pattern(msg.get("pattern")), _size(msg.get("size"))
+            answer = await self._call("calibrate", pattern, size)
+            self.mode = "calibrate"
+            return {"type": "calibrating", **answer}
+        if kind == "calibration_save":
+            if self.mode != "calibrate":
+                raise ValueError('"calibration_save" follows a "calibrate" and its views')
+            calibration = StereoCalibration.from_dict(await self._call("solve", seconds=120.0))
+            data = json.dumps(calibration.to_dict()).encode()
+            await asyncio.to_thread(write_atomic, self.store.folder(self.project_id) / CALIBRATION_FILE, data)
+            return {"type": "calibrated", "calibration": _summary(calibration)}
+        if kind == "start":
+            return await self._start(msg)
+        if kind == "stop":
+            self._stop()
+            return {"type": "stopped"}
+        raise ValueError(f"unknown control message type {kind!r}; available: calibrate, "
+                         "calibration_save, start, stop")
+
+    async def _start(self, msg: dict) -> dict:
+        calibration = await asyncio.to_thread(saved_calibration, self.store, self.project_id)
+        if calibration is None:
+            raise ValueError("this project has no stereo calibration yet: calibrate the cameras first")
+        layout = await asyncio.to_thread(resolve_layout, self.store, self.project_id, self.layout or "ibug68")
+        await self._call("track", calibration.to_dict(), layout)
+        settings = msg.get("settings") or {}
+        player = await _start({"source": "live", "dims": 3, "fps": 30.0, "settings": settings}, self.hub,
+                              self.store, self.project_id, self.target_points, self.layout)
+        self.hub.start_source(self.project_id, player)
+        self.player, self.mode = player, "track"
+        return {"type": "started", **player.describe(), "calibration": _summary(calibration)}
+
+    def _stop(self) -> None:
+        if self.player is not None and self.hub.source(self.project_id) is self.player:
+            self.hub.stop_source(self.project_id)
+        self.player, self.mode = None, None
+
+    async def pair(self, data: bytes) -> dict:
+        if len(data) > MAX_PAIR_BYTES:
+            raise ValueError(f"a stereo pair message is {len(data)} bytes; at most {MAX_PAIR_BYTES}")
+        refused = self.rate.refused(len(data))
+        if refused:
+            raise ValueError(refused)
+        pair = decode_stereo_pair(data)
+        if self.mode == "calibrate":
+            answer = await self._call("view", pair.left, pair.right)
+            return {"type": "views", "frame": pair.frame_index, **answer}
+        if self.mode != "track":
+            raise ValueError('binary messages are stereo pairs for "calibrate" or "start"; send one first')
+        if self.hub.source(self.project_id) is not self.player:
+            self.player, self.mode = None, None
+            raise ValueError("the project's stream now plays another source; start again to track")
+        began = time.perf_counter()
+        points, info = await self._call("pair", pair.left, pair.right, pair.capture_time)
+        found = int(np.isfinite(points).all(axis=1).sum())
+        if found:
+            self.player.push(points, pair.capture_time, pair.frame_index)
+        return {"type": "tracked", "frame": pair.frame_index, "found": found, "n_points": len(points),
+                "ms": round(1000 * (time.perf_counter() - began), 1), **info}
+
+    async def _call(self, kind: str, *args, seconds: float | None = None):
+        return await asyncio.to_thread(self.worker.call, kind, *args, seconds=seconds)
+
+
+def _pattern(pattern) -> tuple:
+    if not isinstance(pattern, dict):
+        raise ValueError('"pattern" must be {"cols", "rows", "square"}: inner corners and the square in mm')
+    cols, rows, square = (pattern.get(k) for k in ("cols", "rows", "square"))
+    if not all(isinstance(v, int) and not isinstance(v, bool) and 2 <= v <= 30 for v in (cols, rows)):
+        raise ValueError(f'"cols" and "rows" must be whole numbers of inner corners, 2 to 30; got {cols!r}, {rows!r}')
+    if isinstance(square, bool) or not isinstance(square, (int, float)) or not 1 <= square <= 500:
+        raise ValueError(f'"square" must be the square\'s side in mm, 1 to 500; got {square!r}')
+    return ("checkerboard", cols, rows, float(square))
+
+
+def _size(size) -> tuple[int, int]:
+    if not (isinstance(size, list) and len(size) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in size)):
+        raise ValueError('"size" must be [width, height] of the cameras\' images in px')
+    if not (64 <= size[0] <= MAX_SIZE[0] and 64 <= size[1] <= MAX_SIZE[1]):
+        raise ValueError(f"camera images of {size[0]}x{size[1]} px; 64x64 to {MAX_SIZE[0]}x{MAX_SIZE[1]} are taken")
+    return size[0], size[1]
+
+
+async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -> None:
+    await websocket.accept()
+    try:
+        project = store.get(project_id)
+        target_points, layout = await asyncio.to_thread(_target_points, store, project)
+        calibration = await asyncio.to_thread(saved_calibration, store, project_id)
+    except (ProjectNotFound, RetargetError) as exc:
+        await websocket.close(code=POLICY_VIOLATION, reason=str(exc)[:120])
+        return
+    worker = await asyncio.to_thread(StereoWorker, name=f"stereo-live-{project_id}")
+    session = _Session(store, hub, project_id, target_points, layout, worker)
+    try:
+        await websocket.send_json({
+            "type": "hello", "project": project_id, "layout": layout, "n_points": len(target_points),
+            "calibration": _summary(calibration),
+            "limits": {"pair_bytes": MAX_PAIR_BYTES, "pairs_per_second": MAX_PAIRS_PER_SECOND,
+                       "bytes_per_second": MAX_BYTES_PER_SECOND, "size": list(MAX_SIZE)}})
+        while True:
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            try:
+                if message.get("bytes") is not None:
+                    reply = await session.pair(message["bytes"])
+                else:
+                    reply = await session.control(message.get("text"))
+            except WorkerDied as exc:
+                await websocket.send_json({"type": "ended", "detail": str(exc)})
+                await websocket.close(code=INTERNAL_ERROR, reason=str(exc)[:120])
+                return
+            except (ValueError, RetargetError) as exc:
+                reply = {"type": "error", "detail": str(exc)}
+            except Exception as exc:  # noqa: BLE001 - one bad message never ends the session
+                log.exception("stereo live message of project %s failed", project_id)
+                reply = {"type": "error", "detail": f"the server could not act on this message "
+                                                    f"({type(exc).__name__}); the session goes on"}
+            await websocket.send_json(reply)
+    finally:
+        session._stop()
+        await asyncio.to_thread(worker.close)
