@@ -192,16 +192,17 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
     if layout is None:
         saved = project["landmarks"] and project["landmarks"]["layout"]
         layout = (saved or "ibug68") if method == "markerless" else "dutreve21"
+    if layout == EVERY_MARKER and method != "markers":
+        raise RetargetError(f"layout {EVERY_MARKER!r} (every marker in view) is for method "
+                            f"'markers'; {method!r} tracks a layout's points")
     if layout == EVERY_MARKER:
-        if method != "markers":
-            raise RetargetError(f"layout {EVERY_MARKER!r} (every marker in view) is for method "
-                                f"'markers'; {method!r} tracks a layout's points")
-        layout = None
+        layout = None  # the library's "no layout"
     else:
         chosen = resolve_layout(store, project["id"], layout)  # 422 for an unknown name
-    if method == "markerless" and not chosen.has_mediapipe468:
-        raise RetargetError(f"layout {layout!r} has points that are no face-mesh vertex: markerless "
-                            "tracking cannot follow them; track markers, or upload a take of them")
+        if method == "markerless" and not chosen.has_mediapipe468:
+            raise RetargetError(f"layout {layout!r} has points that are no face-mesh vertex: "
+                                "markerless tracking cannot follow them; track markers, or upload "
+                                "a take of them")
     scratch = _Scratch(store, limits.max_upload_bytes)
     try:
         if method == "stereo":
