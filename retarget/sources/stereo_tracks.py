@@ -17,7 +17,11 @@ Identity here comes from time instead (the "marker template" of §5, Algorithm 1
    hypothesis from the prediction in both images (px) and in 3D (mm), each candidate
    serving one track: the hypothesis that continues a track wins, not the epipolar
    distance;
-5. pairs of candidates left over are matched as at the start (`stereo_matches`: epipolar
+5. the pairs taken are triangulated from finer centres (`refined_centres`: luma contrast
+   times chroma share round each blob's centre; JPEG halves the chroma's resolution and a
+   tenth of a pixel of disparity is 1.6 mm of depth), the blobs' own centres kept for the
+   tracking;
+6. pairs of candidates left over are matched as at the start (`stereo_matches`: epipolar
    and depth) and start tentative tracks, confirmed after `confirm` frames in a row (a
    sticker hidden at the start gets its own column when it appears).
 
@@ -34,13 +38,15 @@ from scipy.optimize import linear_sum_assignment
 
 from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
-from retarget.sources.color_markers import Blobs, MarkerColor, color_blobs, color_mask, sticker_color
+from retarget.sources.color_markers import (Blobs, MarkerColor, color_blobs, color_mask,
+                                            refined_centres, sticker_color)
 
 __all__ = ["StickerTracks", "split_blobs"]
 
 _BIG = 1e6   # cost of a forbidden pairing in the assignments
 _FAINT = 0.85   # floors of the colour predicate near a prediction, times the usual ones
 _DAMPING = 0.6   # share of last frame's image velocity carried into the prediction
+_STRAY = 1.0   # px, furthest a refined centre may move from its blob's centre
 
 
 def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
@@ -183,6 +189,7 @@ class StickerTracks:
         self.depth_range = depth_range
         self._xyz: list[np.ndarray] = []      # per frame (T, 3), T growing
         self._px: list[np.ndarray] = []       # per frame (T, 4) left x, y, right x, y px
+        self._fine: list[np.ndarray] = []     # the same, refined (`refined_centres`)
         self._vel = np.zeros((0, 4))          # image velocity, px per frame
         self._streak = np.zeros(0, np.int64)  # frames in a row each track was seen
         self._confirmed = np.zeros(0, bool)
@@ -206,13 +213,23 @@ class StickerTracks:
         bl, br = blobs
         xyz = np.full((n, 3), np.nan)
         px = np.full((n, 4), np.nan)
+        fine_px = np.full((n, 4), np.nan)
         used_l = np.zeros(len(bl), bool)
         used_r = np.zeros(len(br), bool)
         ii, jj, hyp = self._hypotheses(bl.centroids, br.centroids)
         if n and len(ii):
             track, h = self._assigned(pred, pred_px, bl.centroids[ii], br.centroids[jj], ii, jj, hyp)
-            xyz[track] = hyp[h]
             px[track] = np.concatenate([bl.centroids[ii[h]], br.centroids[jj[h]]], axis=1)
+            # The blobs' centres follow identities; the depth needs finer ones (a tenth of
+            # a pixel of disparity is millimetres): refined with the luma, unless that
+            # strays (a touching neighbour's pull), and kept apart from the tracking.
+            coarse = px[track].reshape(-1, 2, 2)
+            fine = np.stack([refined_centres(img, coarse[:, cam], self.color)
+                             for cam, img in enumerate((left, right))], axis=1)
+            near = (np.linalg.norm(fine - coarse, axis=2) <= _STRAY).all(axis=1)
+            fine[~near] = coarse[~near]
+            fine_px[track] = fine.reshape(-1, 4)
+            xyz[track] = self.calibration.triangulate(fine[:, 0], fine[:, 1])
             used_l[ii[h]] = used_r[jj[h]] = True
             area = np.minimum(bl.areas[ii[h]], br.areas[jj[h]]).astype(np.float64)
             fresh = ~np.isfinite(self._area[track])
@@ -229,6 +246,7 @@ class StickerTracks:
         self._confirmed |= self._streak >= self.confirm
         self._xyz.append(xyz)
         self._px.append(px)
+        self._fine.append(fine_px)
         self._drop(drop)
         # Faint candidates (those after the first `counts`) only continue tracks.
         used_l[counts[0]:] = True
@@ -382,6 +400,7 @@ class StickerTracks:
                 pad, pad2 = xyz, np.concatenate([l, r], axis=1).astype(np.float64)
             self._xyz[i] = np.concatenate([self._xyz[i], pad])
             self._px[i] = np.concatenate([self._px[i], pad2])
+            self._fine[i] = np.concatenate([self._fine[i], pad2])
         self._vel = np.concatenate([self._vel, np.zeros((k, 4))])
         self._streak = np.concatenate([self._streak, np.ones(k, np.int64)])
         self._confirmed = np.concatenate([self._confirmed, np.full(k, frame == 0)])
@@ -394,6 +413,7 @@ class StickerTracks:
         keep = ~drop
         self._xyz = [x[keep] for x in self._xyz]
         self._px = [x[keep] for x in self._px]
+        self._fine = [x[keep] for x in self._fine]
         self._vel, self._streak = self._vel[keep], self._streak[keep]
         self._confirmed, self._area, self._born = self._confirmed[keep], self._area[keep], self._born[keep]
 
@@ -418,5 +438,5 @@ class StickerTracks:
         return np.stack(self._xyz)[:, self._order()]
 
     def left_px(self) -> np.ndarray:
-        """(F, M, 2) float64 the same stickers' left-image positions, px."""
-        return np.stack(self._px)[:, self._order(), :2]
+        """(F, M, 2) float64 the same stickers' left-image positions (refined), px."""
+        return np.stack(self._fine)[:, self._order(), :2]

@@ -18,6 +18,8 @@ from retarget.sources.color_markers import (
     color_blobs,
     color_mask,
     layout_marker_colors,
+    refined_centres,
+    sticker_color,
 )
 
 BGR = {"green": (40, 200, 40), "blue": (230, 80, 30), "magenta": (220, 40, 220),
@@ -202,3 +204,21 @@ def test_sticker_color_takes_names_picked_colours_and_hsv():
     img = np.zeros((4, 4, 3), np.uint8)
     img[1:3, 1:3] = (230, 80, 30)
     assert (color_mask(img, MarkerColor("b", 105, hue_tol=12), median=1) > 0).sum() == 4
+
+
+def test_refined_centres_find_small_stickers_through_jpeg():
+    # Issue 17's stickers are 3-6 px across and webcam JPEG keeps chroma at half
+    # resolution (the gain over the blobs' centres on the rendered webcam material is
+    # tested in test_stereo_stickers.py).
+    rng = np.random.default_rng(8)
+    centres = np.stack([np.linspace(30, 290, 12), rng.uniform(30, 210, 12)], 1)
+    centres += rng.uniform(-0.5, 0.5, (12, 2))
+    raw = _image(centres, ["blue"] * 12, radius=2.5, noise=3.0)
+    _, jpeg = cv2.imencode(".jpg", raw, [cv2.IMWRITE_JPEG_QUALITY, 75])
+    img = cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
+    start = centres + rng.uniform(-0.7, 0.7, centres.shape)
+    err = np.linalg.norm(refined_centres(img, start, sticker_color("blue")) - centres, axis=1)
+    assert np.median(err) < 0.15 and err.max() < 0.3
+    # NaN rows pass through; a centre with no sticker near it stays within its window.
+    out = refined_centres(img, [[np.nan, np.nan], [5.0, 5.0]], "blue")
+    assert np.isnan(out[0]).all() and np.linalg.norm(out[1] - 5.0) < 3.5
