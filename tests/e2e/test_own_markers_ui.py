@@ -61,6 +61,7 @@ def test_markers_clicked_on_the_first_frame_place_their_points(server, page, fac
                            " && document.getElementById('custom-frame-image').naturalWidth === 640",
                            timeout=scaled_ms(60_000))
     assert page.evaluate("() => document.getElementById('custom-layout').open")
+    assert page.inner_text("#custom-note").endswith(" Click a marker on the frame, then its point on the mesh.")
     [take] = server.api("GET", f"/api/projects/{pid}/takes")
     assert page.input_value("#custom-take") == take["id"]
     names = [f"m0{k}" for k in range(1, 5)]

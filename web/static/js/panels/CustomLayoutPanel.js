@@ -108,7 +108,10 @@ export class CustomLayoutPanel {
 		this._useNames( names );
 		this.frame.show( frame );
 		this._mark();
-		if ( frame ) $( 'custom-note' ).textContent += ' Click a marker on the frame, then its point on the mesh.';
+		if ( ! frame ) return;
+		const unseen = frame.markers.filter( ( m ) => m.x === null ).map( ( m ) => m.name );
+		$( 'custom-note' ).textContent += ' Click a marker on the frame, then its point on the mesh'
+			+ ( unseen.length ? ` (${ unseen.join( ', ' ) }, not on the first frame: click ${ unseen.length > 1 ? 'their rows' : 'its row' }).` : '.' );
 
 	}
 
