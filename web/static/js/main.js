@@ -30,6 +30,7 @@ import { PaintPanel } from './panels/PaintPanel.js';
 import { PerformancePanel } from './panels/PerformancePanel.js';
 import { ProjectBar } from './panels/ProjectBar.js';
 import { RigPanel } from './panels/RigPanel.js';
+import { StereoLivePanel } from './panels/StereoLivePanel.js';
 import { Viewer } from './scene/Viewer.js';
 import { LandmarkPicker } from './tools/LandmarkPicker.js';
 
@@ -64,6 +65,7 @@ app.setPanels( {
 	muscles: new MusclesPanel( app ),
 	blendshapes: new BlendshapesPanel( app ),
 	sources: new PerformancePanel( app ),
+	stereo: new StereoLivePanel( app ),
 	live: new LivePanel( app ),
 	exports: new ExportPanel( app ),
 } );
