@@ -14,7 +14,7 @@ measured finely: the median is weighted by how near (Gaussian, `across` mm) each
 position across the ray is to this frame's (a bilateral filter in the across-ray
 coordinates), so frames where the sticker was elsewhere hardly count and a longer window
 can quiet the still stretches (issue 17's material, with the pose of `anchored_poses(...,
-sight_ratio=6)`, median over 3 seeds of the median / p95 shape error: plain median over
+sight_ratio=6)`, 2 passes, median over 3 seeds of the median / p95 shape error: plain median over
 25 frames 1.00 / 3.59 mm, over 45 frames 0.90 / 3.59; weighted over 45 frames with
 `across` 2 mm 0.84 / 2.91, 1 mm 0.87 / 3.19, 3 mm 0.86 / 3.07). The 3-frame temporal
 mean of §5 smooths every direction alike and so also blurs fast lip motion across the ray.
