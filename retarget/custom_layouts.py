@@ -34,11 +34,13 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from retarget.errors import RetargetError
-from retarget.layouts import REGIONS, SIDES, SPEC_FORMAT, Layout, register_layout
+from retarget.layouts import REGIONS, SIDES, SPEC_FORMAT, Layout, get_layout, register_layout
 
 __all__ = ["MAX_POINTS", "MAX_NAME", "MAX_DESCRIPTION", "MAX_SPEC_BYTES", "layout_from_spec",
-           "load_layout_file", "spec_of_names"]
+           "load_layout_file", "spec_of_names", "take_reference"]
 
 MAX_POINTS = 1000
 """Most points a custom layout may have (the dense built-in one has 468)."""
@@ -134,6 +136,35 @@ def spec_of_names(names: list[str], regions: list[str], sides: list[str] | None 
             point["mirror"] = mirrors[i]
         points.append(point)
     return {"format": SPEC_FORMAT, "description": description, "points": points}
+
+
+def take_reference(points) -> list[list[float]] | None:
+    """Each marker's ``reference`` for a layout made from a 2D marker take, so later takes
+    of the same markers are named by where they sit, not by the order a tracker met them.
+
+    points : (F, M, 2) float, the take's pixels (x right, y up; NaN where lost).
+    Returns (M, 3) rows, each marker's first position seen, centred and scaled to the
+    built-in face's size (the layouts' reference convention: cm, +x the subject's left as
+    the camera sees it, +y up, z 0 on this picture plane), or None when a marker is never
+    seen or the take is not 2D. The markers are named against them by a similarity and
+    then affine fit (`retarget.sources.markers.assign_markers`), so any camera distance or
+    roll that the first take had works.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 3 or p.shape[2] != 2 or len(p) == 0:
+        return None
+    seen = np.isfinite(p).all(axis=2)
+    if not seen.any(axis=0).all():
+        return None
+    first = p[seen.argmax(axis=0), np.arange(p.shape[1])]
+    centred = first - first.mean(axis=0)
+    spread = np.sqrt((centred ** 2).sum(axis=1).mean())
+    if not spread > 0:
+        return None
+    face = get_layout("ibug68").reference_points()[:, :2]
+    size = np.sqrt(((face - face.mean(axis=0)) ** 2).sum(axis=1).mean())
+    xy = centred * (size / spread)
+    return np.round(np.column_stack([xy, np.zeros(len(xy))]), 4).tolist()
 
 
 def _point(i: int, point) -> dict:

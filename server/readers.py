@@ -23,7 +23,7 @@ from retarget.errors import RetargetError
 from retarget.facemesh.placement import CHECK_BELOW, find_face_mesh, layout_landmarks
 from retarget.gltf import export_mesh_gltf, read_gltf
 from retarget.landmarks import SurfacePoints
-from retarget.layouts import get_layout
+from retarget.layouts import Layout, get_layout
 from retarget.lips import opened_mouth
 from retarget.mesh import Mesh, load_mesh
 from retarget.skin import SkinWeights
@@ -236,7 +236,8 @@ class TrackedMarkers:
     preview: bytes
 
 
-def marker_take(path: Path, layout: str | None, names: dict[Path, str], progress) -> TrackedMarkers:
+def marker_take(path: Path, layout: str | Layout | None, names: dict[Path, str],
+                progress) -> TrackedMarkers:
     """Ring markers tracked through a video (Dutreve §5, `track_marker_video`; layout None:
     every marker in view, columns m01..mM), with the first frame's preview. The take's
     ``meta["first_frame"]`` is ``[[x, y] | null per column]``: where each column is on the

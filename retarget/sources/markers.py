@@ -198,11 +198,13 @@ def assign_markers(detected: np.ndarray, reference: np.ndarray, *, gate: float =
     spread_ref = np.median(np.linalg.norm(ref - mid_ref, axis=1))
     scale = spread_det / spread_ref if spread_det > 0 else 1.0
     best_cost, best = np.inf, out
-    starts = [(a, f) for a in (0.0, -20.0, 20.0, -40.0, 40.0) for f in (1.0, 0.8, 1.25)]
-    for angle, factor in starts:
+    starts = []
+    for angle, factor in [(a, f) for a in (0.0, -20.0, 20.0, -40.0, 40.0) for f in (1.0, 0.8, 1.25)]:
         c, s = np.cos(np.radians(angle)), np.sin(np.radians(angle))
         A = factor * scale * np.array([[c, -s], [s, c]])
-        b = mid_det - mid_ref @ A.T
+        starts.append((A, mid_det - mid_ref @ A.T))
+    starts += _pair_starts(ref, det, gate * spacing, scale)
+    for A, b in starts:
         match = out
         for it in range(30):
             moved = ref @ A.T + b
@@ -212,7 +214,9 @@ def assign_markers(detected: np.ndarray, reference: np.ndarray, *, gate: float =
             new = np.full(len(ref), -1, dtype=np.int64)
             hit = cols < len(det)
             new[rows[hit]] = cols[hit]
-            total = cost[rows, cols].sum()
+            # in the reference's units: in pixels, an affine fit that shrinks the face
+            # would shrink every "none" cost with it and win with a handful of matches
+            total = cost[rows, cols].sum() / np.sqrt(abs(np.linalg.det(A)))
             if (new >= 0).sum() < 3:
                 break
             settled = np.array_equal(new, match)
@@ -223,9 +227,49 @@ def assign_markers(detected: np.ndarray, reference: np.ndarray, *, gate: float =
                 break
         if (match >= 0).sum() >= 3 and total < best_cost:
             best_cost, best = total, match
-        if (match >= 0).all() and total < 0.2 * limit * len(ref):
+        if (match >= 0).all() and total < 0.2 * gate * spacing * len(ref):
             break                       # every point matched closely: no need to look on
     return best
+
+
+def _pair_starts(ref: np.ndarray, det: np.ndarray, limit: float, scale: float,
+                 n_pairs: int = 8, keep: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The `keep` similarity transforms (A (2, 2), b (2,)) that best lay the reference
+    (N, 2) on the detections (M, 2), among those mapping one of `n_pairs` long reference
+    pairs onto a detected pair (rotation within 60 degrees, scale within 4x of `scale`).
+
+    `assign_markers`' median alignment misses when the two sets differ by more than a few
+    points (markers the first take never saw, or hidden now): the medians then sit a
+    marker's spacing apart and the fit locks one row off. A pair of points fixes a
+    similarity whatever the others do; each is scored by the reference's points' distance
+    to their nearest detection, capped at `limit` (reference units).
+    """
+    from scipy.spatial import cKDTree
+
+    if len(ref) < 2 or len(det) < 2:
+        return []
+    i, j = np.triu_indices(len(ref), 1)
+    length = np.linalg.norm(ref[j] - ref[i], axis=1)
+    long = np.flatnonzero(length >= np.median(length))
+    picked = long[np.linspace(0, len(long) - 1, min(n_pairs, len(long))).astype(int)]
+    c, d = np.nonzero(~np.eye(len(det), dtype=bool))
+    v_ref = ref[j[picked]] - ref[i[picked]]                            # (P, 2)
+    v_det = det[d] - det[c]                                            # (Q, 2)
+    z = (v_det[None, :, 0] + 1j * v_det[None, :, 1]) / (v_ref[:, None, 0] + 1j * v_ref[:, None, 1])
+    ok = (np.abs(np.angle(z)) <= np.radians(60)) & (np.abs(z) > scale / 4) & (np.abs(z) < scale * 4)
+    pp, qq = np.nonzero(ok)
+    if len(pp) == 0:
+        return []
+    z = z[pp, qq]
+    shift = (det[c[qq], 0] + 1j * det[c[qq], 1]) - z * (ref[i[picked[pp]], 0] + 1j * ref[i[picked[pp]], 1])
+    moved = z[:, None] * (ref[None, :, 0] + 1j * ref[None, :, 1]) + shift[:, None]   # (T, N)
+    gap = cKDTree(det).query(np.stack([moved.real.ravel(), moved.imag.ravel()], 1))[0]
+    cost = np.minimum(gap.reshape(moved.shape) / np.abs(z)[:, None], limit).sum(axis=1)
+    out = []
+    for t in np.argsort(cost)[:keep]:
+        A = np.array([[z[t].real, -z[t].imag], [z[t].imag, z[t].real]])
+        out.append((A, np.array([shift[t].real, shift[t].imag])))
+    return out
 
 
 class MarkerTracker:

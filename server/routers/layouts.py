@@ -28,7 +28,7 @@ from typing import Any
 
 from fastapi import APIRouter, Body, File, Form, HTTPException, Response, UploadFile, status
 
-from retarget.custom_layouts import layout_from_spec
+from retarget.custom_layouts import layout_from_spec, take_reference
 from retarget.errors import RetargetError
 from retarget.layouts import GROUPS, LAYOUTS, REGIONS, Layout
 from server.deps import IsolationDep, LimitsDep, ProjectDep, StoreDep
@@ -95,9 +95,10 @@ def list_project_layouts(project: ProjectDep, store: StoreDep) -> list[dict]:
 @router.get("/api/projects/{project_id}/layouts/from-take/{take_id}", responses=responses(404))
 def get_take_markers(project: ProjectDep, store: StoreDep, take_id: str) -> dict:
     """The names of a take's points (its markers, in its order), for making a custom layout
-    of them: ``{take, names}``; 404 for no such take."""
+    of them: ``{take, names, reference}``, the reference (`take_reference`) null unless the
+    take is 2D with every marker seen; 404 for no such take."""
     take = store.take(project["id"], take_id, trimmed=False)
-    return {"take": take_id, "names": list(take.names)}
+    return {"take": take_id, "names": list(take.names), "reference": take_reference(take.points)}
 
 
 @router.post("/api/projects/{project_id}/layouts/from-take", responses=responses(404, 415, 503))
@@ -107,7 +108,8 @@ def post_take_markers(project: ProjectDep, limits: LimitsDep, isolation: Isolati
                       fps: float | None = Form(default=None, gt=0, le=1000,
                                                description="frame rate when the file has none")) -> dict:
     """The names of the points of a take file, read as ``POST .../takes`` reads one (in a
-    child process) but not stored: ``{take: null, names}``; 422 for a file that is no take."""
+    child process) but not stored: ``{take: null, names, reference}`` (as the GET's); 422
+    for a file that is no take."""
     ext = upload_extension(file.filename, TAKE_EXTENSIONS)
     data = read_capped(file, limits.max_upload_bytes)
     if not data:
@@ -115,7 +117,7 @@ def post_take_markers(project: ProjectDep, limits: LimitsDep, isolation: Isolati
     take = isolation.call(take_from_upload, data, f"take.{ext}", file.filename,
                           {"layout": None, "fps": fps}, {}, None,
                           what=f"take file {file.filename!r} refused: not a readable {ext.upper()} file")
-    return {"take": None, "names": list(take.names)}
+    return {"take": None, "names": list(take.names), "reference": take_reference(take.points)}
 
 
 @router.get("/api/projects/{project_id}/layouts/{name}", responses=responses(404))

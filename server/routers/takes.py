@@ -51,6 +51,7 @@ from fastapi import APIRouter, File, Form, HTTPException, Response, UploadFile, 
 from pydantic import BaseModel, Field
 
 from retarget.errors import RetargetError
+from retarget.layouts import Layout
 from retarget.sources.calibration import StereoCalibration, pattern_points
 from retarget.sources.take import Take
 from server.deps import IsolationDep, JobsDep, LimitsDep, Number, ProjectDep, StoreDep, UploadKeyDep
@@ -203,6 +204,8 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
             raise RetargetError(f"layout {layout!r} has points that are no face-mesh vertex: "
                                 "markerless tracking cannot follow them; track markers, or upload "
                                 "a take of them")
+        if chosen.is_custom:
+            layout = chosen  # pickled with its spec: the tracking child registers it
     scratch = _Scratch(store, limits.max_upload_bytes)
     try:
         if method == "stereo":
@@ -270,7 +273,7 @@ class _Scratch:
             path.unlink(missing_ok=True)
 
 
-def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str | None):
+def _marker_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: str | Layout | None):
     """The marker job's work, ``run(progress) -> (take, first-frame JPEG)``, once the
     video opens (layout None: every marker in view). Videos are decoded by FFmpeg, and
     the preview encoded by OpenCV, so both run in a child process (`server.isolation`)."""

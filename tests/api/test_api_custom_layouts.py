@@ -176,7 +176,7 @@ def test_a_take_named_by_the_markers_exports_with_partial_retargeting_and_condit
     take = r.json()
     assert take["n_points"] == len(NAMES)
     r = client.get(f"/api/projects/{project}/layouts/from-take/{take['id']}")
-    assert r.json() == {"take": take["id"], "names": NAMES}  # what the page makes a layout of
+    assert r.json() == {"take": take["id"], "names": NAMES, "reference": None}  # 3D: no picture-plane reference
     assert client.get(f"/api/projects/{project}/layouts/from-take/AAAAAAAAAAAAAAAA").status_code == 404
     assert client.get(f"/api/projects/{project}/layouts/from-take/..%2F..").status_code == 404
     settings = json.dumps({"head_pose": "remove", "filter": "none",
@@ -221,7 +221,7 @@ def test_a_take_file_s_marker_names_are_read_without_storing_it(client, project)
     data = json.dumps({"names": names, "frames": [[[0, 0, 0], [1, 0, 0], [0, 1, 0]]] * 3}).encode()
     r = client.post(f"/api/projects/{project}/layouts/from-take", files={"file": ("x.json", data)},
                     data={"fps": "30"})
-    assert r.status_code == 200 and r.json() == {"take": None, "names": names}, r.text
+    assert r.status_code == 200 and r.json() == {"take": None, "names": names, "reference": None}, r.text
     r = client.post(f"/api/projects/{project}/layouts/from-take", files={"file": ("x.json", b"{")})
     assert r.status_code == 422 and "x.json" in r.json()["detail"]
     r = client.post(f"/api/projects/{project}/layouts/from-take", files={"file": ("x.exe", data)})

@@ -112,6 +112,37 @@ def test_a_wide_video_s_preview_is_scaled_to_640_px(client, project, video, own_
     assert client.delete(f"/api/projects/{project}/takes/{take}").status_code == 204
 
 
+def _followed(points, truth) -> np.ndarray:
+    """(M,) the rendered marker each column of a take (y up) follows: the nearest in the
+    first frame where the column is seen."""
+    seen = np.isfinite(points[..., 0])
+    first = seen.argmax(axis=0)
+    xy = points[first, np.arange(points.shape[1])] * [1, -1] + [0, 480]
+    return np.linalg.norm(xy[:, None] - truth.points2d[first, 0], axis=2).argmin(axis=1)
+
+
+def test_a_layout_made_of_the_markers_names_them_in_the_next_video(client, project, video, own_take, tmp_path):
+    """The layout made from the take keeps where each marker sat (the from-take answer's
+    reference); a second video of the same markers, other head motion, tracked in that
+    layout, has each point follow the marker it followed in the first."""
+    made = client.get(f"/api/projects/{project}/layouts/from-take/{own_take}").json()
+    assert len(made["reference"]) == len(made["names"]) and all(len(r) == 3 for r in made["reference"])
+    spec = {"points": [{"name": n, "region": "cheeks", "side": "center", "reference": r}
+                       for n, r in zip(made["names"], made["reference"])]}
+    r = client.put(f"/api/projects/{project}/layouts/rings", json=spec)
+    assert r.status_code in (200, 201), r.text
+    path = tmp_path / "again.mkv"
+    truth = render_marker_video(path, n_frames=FRAMES, seed=7, start=2.0)
+    again = track(client, project, "again.mkv", path.read_bytes(), layout="rings")
+    info = client.get(f"/api/projects/{project}/takes/{again}").json()
+    assert info["layout"] == r.json()["name"] and info["n_points"] == len(made["names"])
+
+    def points(take):
+        return np.load(io.BytesIO(client.get(f"/api/projects/{project}/takes/{take}/points").content))
+
+    np.testing.assert_array_equal(_followed(points(again), truth), _followed(points(own_take), video[1]))
+
+
 def test_every_marker_is_for_ring_markers_only(client, project):
     for method in ("markerless", "stereo"):
         r = client.post(f"/api/projects/{project}/takes/track", files={"file": ("v.mkv", b"x")},

@@ -197,3 +197,40 @@ def test_the_registry_keeps_the_most_recently_used_layouts(monkeypatch):
     assert len(layouts._REGISTERED) == 3
     assert made[1].name not in layouts._REGISTERED
     assert get_layout(made[0].name) == made[0] and get_layout(made[2].name) == made[2]
+
+
+def _truth_markers(points, truth) -> np.ndarray:
+    """(M,) the rendered marker each column of a 2D marker take (y up) follows: the nearest
+    in the first frame where the column is seen."""
+    height = truth.cameras[0].size[1]
+    seen = np.isfinite(points[..., 0])
+    first = seen.argmax(axis=0)
+    xy = points[first, np.arange(points.shape[1])] * [1, -1] + [0, height]
+    return np.linalg.norm(xy[:, None] - truth.points2d[first, 0], axis=2).argmin(axis=1)
+
+
+def test_a_layout_made_from_one_marker_take_names_the_markers_of_the_next(tmp_path):
+    """Made from a take tracked with every marker in view (columns m01.. in the order the
+    tracker met them), the layout keeps where each marker sat (`take_reference`); a later
+    clip of the same markers, with other head motion, is tracked in that layout and each
+    of its points follows the same marker."""
+    from retarget.custom_layouts import take_reference
+    from retarget.sources.markers import track_marker_video
+    from retarget.testing.marker_video import render_marker_video
+
+    clips = []
+    for seed, start in ((3, 0.55), (7, 2.0)):
+        path = tmp_path / f"clip{seed}.mkv"
+        clips.append((path, render_marker_video(path, n_frames=20, seed=seed, start=start)))
+    first = track_marker_video(clips[0][0], layout=None)
+    reference = take_reference(first.points)
+    assert reference is not None and len(reference) == first.n_points
+    spec = {"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
+                       for name, xyz in zip(first.names, reference)]}
+    layout = layout_from_spec(spec)
+    assert layout.reference_points().shape == (first.n_points, 3)
+    later = track_marker_video(clips[1][0], layout=layout.name)
+    assert later.names == first.names and later.layout == layout.name
+    np.testing.assert_array_equal(_truth_markers(later.points, clips[1][1]),
+                                  _truth_markers(first.points, clips[0][1]))
+    assert take_reference(np.full((3, 4, 2), np.nan)) is None  # a marker never seen: no reference

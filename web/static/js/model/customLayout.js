@@ -49,7 +49,10 @@ export function withGuidePositions( layout ) {
 /**
  * A layout spec (what PUT /api/projects/{id}/layouts/{name} takes) from the rows the user
  * filled in: a partner is named on both rows (the last choice wins for the pair).
- * @param {Array<{name: string, region: string, side: string, mirror: string, anchor: boolean}>} rows
+ * Rows that all carry a `reference` (where each marker sat on the take's frames, from the
+ * server) keep it, so later videos of the same markers are named by place.
+ * @param {Array<{name: string, region: string, side: string, mirror: string, anchor: boolean,
+ *   reference: number[]|null}>} rows
  * @param {string} description
  * @returns {{description: string, points: object[]}}
  */
@@ -67,11 +70,13 @@ export function layoutSpec( rows, description ) {
 
 	}
 
+	const placed = rows.every( ( row ) => Array.isArray( row.reference ) );
 	const points = rows.map( ( row ) => {
 
 		const point = { name: row.name, region: row.region, side: row.side };
 		if ( partner.has( row.name ) ) point.mirror = partner.get( row.name );
 		if ( row.anchor ) point.anchor = true;
+		if ( placed ) point.reference = row.reference;
 		return point;
 
 	} );

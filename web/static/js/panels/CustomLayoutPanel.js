@@ -103,9 +103,9 @@ export class CustomLayoutPanel {
 
 		const id = this.app.projectId;
 		if ( ! id || ! takeId ) throw new ApiError( 0, 'Choose a take whose markers make the layout.' );
-		const [ { names }, frame ] = await Promise.all( [ api.takeMarkers( id, takeId ), firstFrame( id, takeId ) ] );
+		const [ { names, reference }, frame ] = await Promise.all( [ api.takeMarkers( id, takeId ), firstFrame( id, takeId ) ] );
 		if ( id !== this.app.projectId ) return;
-		this._useNames( names );
+		this._useNames( names, reference );
 		this.frame.show( frame );
 		this._mark();
 		if ( ! frame ) return;
@@ -123,17 +123,22 @@ export class CustomLayoutPanel {
 
 		const id = this.app.projectId;
 		if ( ! id || ! file ) return;
-		const { names } = await api.takeFileMarkers( id, file );
+		const { names, reference } = await api.takeFileMarkers( id, file );
 		$( 'custom-file' ).value = '';
 		if ( id !== this.app.projectId ) return;
-		this._useNames( names );
+		this._useNames( names, reference );
 		this.frame.show( null ); // a file has no frame to show
 
 	}
 
-	_useNames( names ) {
+	/**
+	 * @param {string[]} names - the take's markers.
+	 * @param {number[][]|null} reference - where each sat on the take's frames (2D takes
+	 *   with every marker seen), kept in the saved layout.
+	 */
+	_useNames( names, reference ) {
 
-		this._showRows( names.map( ( name ) => ( { name, region: guessRegion( name ), side: guessSide( name ), mirror: '', anchor: false } ) ) );
+		this._showRows( names.map( ( name, i ) => ( { name, region: guessRegion( name ), side: guessSide( name ), mirror: '', anchor: false, reference: reference?.[ i ] ?? null } ) ) );
 		$( 'custom-note' ).textContent = `${ names.length } markers: set each one's region and side, pair left with right, tick 3 that move with the head only (or none), then save.`;
 
 	}
