@@ -1,0 +1,138 @@
+"""Live stereo (issue 17 §3, Woodward et al.'s two live webcams) through the server's path.
+
+    python bench/stereo_live.py [--frames 45] [--views 12] [--qualities 60,80,90] [--fps 30]
+
+The synthetic rig (`retarget.testing.stereo_rig.stereo_cameras`: two 640 x 480 cameras 1 m
+from the built-in face, 150 mm apart; 8 mm coloured stickers on the ``dutreve21`` points)
+and an app in this process (`server.app.create_app`, a project of the sample face with
+those 21 points). Everything goes over ``WS /api/projects/{id}/stereo/live`` as the page
+sends it: the calibration from `--views` checkerboard view pairs, then a `--frames` take
+with expressions and head motion, once per JPEG quality, paced as a `--fps` camera
+delivers it and each pair sent once the last was answered (the page keeps at most two in
+flight; the server refuses more than 60 pairs a second). A second socket watches the
+project's stream and records the live source. Prints medians:
+
+- calibration: good views counted, reprojection RMS (px), baseline (mm, truth 150);
+- per quality: JPEG kB per pair and kB/s at the measured rate, the server's time per pair
+  (decode and tracking in the session's child, ms; 1000 / it is the pairs a second one
+  session could take), pairs per second end to end at the camera's pace, the
+  latency from the pair's capture time (taken before JPEG encoding) to the retargeted
+  frame reaching the stream's viewer (ms; in a browser add the camera's own delay and
+  one drawn frame), and the 3D error (mm) of the recorded head-frame points against the
+  truth with the head held at the first frame's pose (median and p95); pairs the live
+  source refused (a neutral frame with a point lost) are named.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+
+def main() -> None:
+    from fastapi.testclient import TestClient
+
+    from retarget.layouts import get_layout
+    from retarget.sources.video import VideoReader
+    from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
+    from server.app import create_app
+    from server.wire import decode_frame, encode_stereo_pair
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--frames", type=int, default=45)
+    parser.add_argument("--views", type=int, default=12)
+    parser.add_argument("--qualities", default="60,80,90")
+    parser.add_argument("--fps", type=float, default=30.0)
+    args = parser.parse_args()
+    qualities = [int(q) for q in args.qualities.split(",")]
+
+    folder = Path(tempfile.mkdtemp(prefix="stereo-live-bench-"))
+    rig = stereo_cameras()
+    lefts, rights, _ = checkerboard_views(*rig, n_views=args.views, seed=4)
+    truth = render_stereo_video(folder / "take.mkv", n_frames=args.frames, cameras=rig, start=3.6, seed=2)
+    with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
+        frames = [(left, right) for (_, left), (_, right) in zip(a, b)]
+    rot, trans = truth.head_rotation, truth.head_translation
+    posed = np.einsum("fji,fnj->fni", rot, truth.points3d - trans[:, None])
+    held = rig[0].to_camera(posed @ rot[0].T + trans[0])
+
+    def jpeg(image, quality):
+        return cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])[1].tobytes()
+
+    app = create_app(folder / "data")
+    with TestClient(app) as client:
+        sample = next(p for p in client.get("/api/projects").json() if p["settings"].get("sample"))["id"]
+        layout = get_layout("dutreve21")
+        indices = client.get(f"/api/projects/{sample}/landmarks").json()["vertex_indices"]
+        pid = client.post("/api/projects", json={"name": "bench"}).json()["id"]
+        client.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", client.get(f"/api/projects/{sample}/mesh").content)})
+        client.put(f"/api/projects/{pid}/landmarks",
+                   json={"layout": "dutreve21", "vertex_indices": [indices[i] for i in layout.ibug68]})
+        url = f"/api/projects/{pid}/stereo/live"
+        with client.websocket_connect(url) as ws:
+            ws.receive_json()
+            ws.send_json({"type": "calibrate", "pattern": {"cols": 9, "rows": 6, "square": 25}, "size": [640, 480]})
+            ws.receive_json()
+            for i, (left, right) in enumerate(zip(lefts, rights)):
+                ws.send_bytes(encode_stereo_pair(jpeg(left, 90), jpeg(right, 90), frame_index=i, capture_time=i))
+                count = ws.receive_json()["count"]
+            ws.send_json({"type": "calibration_save"})
+            calibration = ws.receive_json()["calibration"]
+        print(f"calibration: {count} good views of {args.views}; RMS {calibration['rms']:.3f} px, "
+              f"baseline {calibration['baseline']:.2f} mm (truth 150)")
+        print("quality  kB/pair  kB/s  server ms  pairs/s  latency ms  error mm (median / p95)")
+        for quality in qualities:
+            with client.websocket_connect(f"/api/projects/{pid}/stream") as viewer, \
+                    client.websocket_connect(url) as ws:
+                viewer.receive_json()
+                ws.receive_json()
+                ws.send_json({"type": "start", "settings": {"neutral": {"mode": "frame", "frame": 0}}})
+                ws.receive_json()
+                viewer.send_json({"type": "record"})
+                while viewer.receive().get("text") is None:
+                    pass
+                sizes, server_ms, latency, refused = [], [], [], []
+                began = time.perf_counter()
+                for i, (left, right) in enumerate(frames):
+                    time.sleep(max(0.0, began + i / args.fps - time.perf_counter()))
+                    captured = time.time()
+                    data = encode_stereo_pair(jpeg(left, quality), jpeg(right, quality), frame_index=i,
+                                              capture_time=captured)
+                    ws.send_bytes(data)
+                    reply = ws.receive_json()
+                    if reply["type"] != "tracked":  # e.g. the neutral frame lacks a point: the next one is
+                        refused.append(reply["detail"])
+                        continue
+                    sizes.append(len(data))
+                    server_ms.append(reply["ms"])
+                    if reply["found"]:
+                        while (message := viewer.receive()).get("bytes") is None:
+                            pass
+                        frame = decode_frame(message["bytes"])
+                        latency.append(1000 * (time.time() - captured))
+                        assert frame.frame_index == i
+                rate = len(frames) / (time.perf_counter() - began)
+                viewer.send_json({"type": "record_stop", "name": f"q{quality}"})
+                while (message := viewer.receive()).get("text") is None or json.loads(message["text"])["type"] != "recorded":
+                    pass
+                take = json.loads(message["text"])["take"]["id"]
+                ws.send_json({"type": "stop"})
+                ws.receive_json()
+            points = np.load(io.BytesIO(client.get(f"/api/projects/{pid}/takes/{take}/points").content))
+            err = np.linalg.norm(points - held[:len(points)], axis=2)
+            print(f"{quality:7d}  {np.median(sizes) / 1000:7.1f}  {np.median(sizes) / 1000 * rate:4.0f}  "
+                  f"{np.median(server_ms):9.1f}  {rate:7.1f}  {np.median(latency):10.1f}  "
+                  f"{np.nanmedian(err):.2f} / {np.nanpercentile(err, 95):.2f}"
+                  f"{'' if np.isfinite(err).all() else f'  ({np.isnan(err).mean():.1%} lost)'}"
+                  f"{f'  {len(refused)} refused: {refused[0]}' if refused else ''}")
+
+
+if __name__ == "__main__":  # the server's child processes re-import this module
+    main()
