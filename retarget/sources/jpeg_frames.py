@@ -57,6 +57,8 @@ def jpeg_size(data: bytes) -> tuple[int, int]:
                 raise RetargetError(f"JPEG header: the image is {width}x{height}")
             return int(width), int(height)
         at += 2 + length
+    else:
+        raise RetargetError("JPEG header: the data ends before the frame header (SOF)")
     raise RetargetError("JPEG header: no frame header (SOF) before the image data")
 
 
