@@ -1,6 +1,7 @@
 """Live stereo (issue 17 §3, Woodward et al.'s two live webcams) through the server's path.
 
     python bench/stereo_live.py [--frames 45] [--views 12] [--qualities 60,80,90] [--fps 30]
+                                [--browser-frames 150]
 
 The synthetic rig (`retarget.testing.stereo_rig.stereo_cameras`: two 640 x 480 cameras 1 m
 from the built-in face, 150 mm apart; 8 mm coloured stickers on the ``dutreve21`` points)
@@ -21,6 +22,15 @@ project's stream and records the live source. Prints medians:
   one drawn frame), and the 3D error (mm) of the recorded head-frame points against the
   truth with the head held at the first frame's pose (median and p95); pairs the live
   source refused (a neutral frame with a point lost) are named.
+
+Then camera to screen in the real app (`retarget serve` in a subprocess, bench/stream.py's
+`ServerProcess`, and Debian's Chromium through Playwright, WebGL on SwiftShader): the
+fake camera plays the take's pairs side by side (the panel's "one camera, side by side"),
+the Live stereo panel grabs, JPEG-encodes (quality 0.8) and sends them, and the page
+records, for `--browser-frames` retargeted frames, the time from the pair's grab (the
+frame's source time, the page's clock) to the frame applied to the face and to the next
+animation frame (drawn); and the panel's own readout of pairs per second and kB/s. The
+camera's own delay (sensor to the page) comes on top. 0 skips it.
 """
 
 from __future__ import annotations
@@ -50,6 +60,7 @@ def main() -> None:
     parser.add_argument("--views", type=int, default=12)
     parser.add_argument("--qualities", default="60,80,90")
     parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--browser-frames", type=int, default=150)
     args = parser.parse_args()
     qualities = [int(q) for q in args.qualities.split(",")]
 
@@ -132,6 +143,81 @@ def main() -> None:
                   f"{np.nanmedian(err):.2f} / {np.nanpercentile(err, 95):.2f}"
                   f"{'' if np.isfinite(err).all() else f'  ({np.isnan(err).mean():.1%} lost)'}"
                   f"{f'  {len(refused)} refused: {refused[0]}' if refused else ''}")
+
+
+    if args.browser_frames:
+        browser_run(frames, (lefts, rights), args.browser_frames, folder)
+
+
+_RECORDER = """() => {
+    window.bench = { applied: [], drawn: [] };
+    window.app.stream.addEventListener('frame', (e) => {
+        const source = e.detail.sourceTime;
+        window.bench.applied.push(Date.now() / 1000 - source);
+        requestAnimationFrame(() => window.bench.drawn.push(Date.now() / 1000 - source));
+    });
+}"""
+
+
+def browser_run(frames, boards, n_frames: int, folder: Path) -> None:
+    """Camera to screen in Chromium (module docstring)."""
+    import sys
+
+    import httpx
+    from playwright.sync_api import sync_playwright
+    from websockets.sync.client import connect
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from bench.latency import CHROMIUM, SWIFTSHADER
+    from bench.stream import ServerProcess, machine
+    from retarget.layouts import get_layout
+    from server.wire import encode_stereo_pair
+    from tests.e2e.fake_camera import write_y4m
+
+    pairs = [np.hstack(pair) for pair in frames]
+    camera = write_y4m(folder / "pair.y4m", pairs + pairs[-2:0:-1], 30)  # forth and back: no jump
+    with ServerProcess() as server:
+        http = httpx.Client(base_url=server.url, timeout=120)
+        sample = next(p for p in http.get("/api/projects").json() if p["rig"])["id"]
+        indices = http.get(f"/api/projects/{sample}/landmarks").json()["vertex_indices"]
+        pid = http.post("/api/projects", json={"name": "bench"}).json()["id"]
+        http.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", http.get(f"/api/projects/{sample}/mesh").content)})
+        http.put(f"/api/projects/{pid}/landmarks", json={
+            "layout": "dutreve21", "vertex_indices": [indices[i] for i in get_layout("dutreve21").ibug68]})
+        job = http.post(f"/api/projects/{pid}/rig", json={"method": "ellipsoid"}).json()
+        while http.get(f"/api/jobs/{job['id']}").json()["state"] not in ("done", "failed"):
+            time.sleep(0.2)
+        with connect(f"{server.ws_url}/api/projects/{pid}/stereo/live") as ws:
+            ws.recv()
+            ws.send(json.dumps({"type": "calibrate", "pattern": {"cols": 9, "rows": 6, "square": 25},
+                                "size": [640, 480]}))
+            ws.recv()
+            for i, (left, right) in enumerate(zip(*boards)):
+                ws.send(encode_stereo_pair(cv2.imencode(".jpg", left)[1].tobytes(),
+                                           cv2.imencode(".jpg", right)[1].tobytes(), frame_index=i, capture_time=i))
+                ws.recv()
+            ws.send(json.dumps({"type": "calibration_save"}))
+            ws.recv()
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM, args=[
+                *SWIFTSHADER, "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
+                f"--use-file-for-fake-video-capture={camera}"])
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.goto(f"{server.url}/#p={pid}")
+            page.wait_for_function("() => window.app?.face?.nJoints === 21 && window.app.stream?.state === 'open'",
+                                   timeout=120_000)
+            page.evaluate(_RECORDER)
+            page.select_option("#stereo-split", "side")
+            page.click("#stereo-open")
+            page.wait_for_function("() => document.querySelector('#stereo-status').textContent.startsWith('Calibrated')")
+            page.click("#stereo-start")
+            page.wait_for_function(f"() => window.bench.drawn.length >= {n_frames}", timeout=300_000, polling=500)
+            status = page.inner_text("#stereo-status")
+            got = page.evaluate("() => window.bench")
+            browser.close()
+    applied, drawn = (1000 * np.array(got[k][5:]) for k in ("applied", "drawn"))  # past the neutral's start
+    print(f"browser ({machine()}): grab to applied {np.median(applied):.0f} ms (p90 {np.percentile(applied, 90):.0f}), "
+          f"to drawn {np.median(drawn):.0f} ms (p90 {np.percentile(drawn, 90):.0f}); panel: {status}")
 
 
 if __name__ == "__main__":  # the server's child processes re-import this module
