@@ -157,7 +157,7 @@ class SourceConditioner:
         self.removes_head = dims == 3 and s.head_pose == "remove"
         if self.removes_head and self.layout is None:
             raise RetargetError("head pose removal needs a layout (it works on the stable points)")
-        self._stable = _anchors(self.layout) if self.removes_head else None
+        self._stable = stable_indices(self.layout) if self.removes_head else None
         self._n = None if self.layout is None else self.layout.n_points
         self._given = None
         if s.neutral["mode"] == "given":
@@ -305,10 +305,6 @@ class SourceConditioner:
         names = [self.layout.point_names[i] if self.layout else f"point {i}" for i in idx[:12]]
         return ", ".join(names) + (f" and {len(idx) - 12} more" if len(idx) > 12 else "")
 
-
-def _anchors(layout: Layout) -> np.ndarray:
-    """The head-pose anchors: the ones a custom layout's user marked, else by name."""
-    return np.asarray(layout.anchors) if layout.anchors else stable_indices(layout)
 
 
 def eye_distance(points, layout: Layout | None) -> float:

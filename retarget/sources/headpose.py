@@ -78,11 +78,14 @@ _COLLINEAR_TOL = 1e-3
 def stable_indices(layout: Layout | str) -> np.ndarray:
     """(K,) int64 indices of the layout's anchor points, in the layout's order.
 
-    The layout's points named in `STABLE_POINT_NAMES`; with `STABLE_FALLBACK_NAMES` added
-    when fewer than `MIN_STABLE` are present. `RetargetError` if the result has fewer
-    than 3 points.
+    A layout that names its own anchors (a custom layout's, marked by the user) has those.
+    Otherwise the layout's points named in `STABLE_POINT_NAMES`; with
+    `STABLE_FALLBACK_NAMES` added when fewer than `MIN_STABLE` are present. `RetargetError`
+    if the result has fewer than 3 points.
     """
     layout = layout if isinstance(layout, Layout) else get_layout(layout)
+    if layout.anchors:
+        return np.asarray(layout.anchors, dtype=np.int64)
     names = np.asarray(layout.point_names)
     keep = np.isin(names, STABLE_POINT_NAMES)
     if keep.sum() < MIN_STABLE:
