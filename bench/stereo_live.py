@@ -207,12 +207,12 @@ def browser_run(frames, boards, n_frames: int, folder: Path) -> None:
             page.wait_for_function("() => window.app?.face?.nJoints === 21 && window.app.stream?.state === 'open'",
                                    timeout=120_000)
             page.evaluate(_RECORDER)
-            page.select_option("#stereo-split", "side")
-            page.click("#stereo-open")
-            page.wait_for_function("() => document.querySelector('#stereo-status').textContent.startsWith('Calibrated')")
-            page.click("#stereo-start")
+            page.select_option("#live-stereo-split", "side")
+            page.click("#live-stereo-open")
+            page.wait_for_function("() => document.querySelector('#live-stereo-status').textContent.startsWith('Calibrated')")
+            page.click("#live-stereo-start")
             page.wait_for_function(f"() => window.bench.drawn.length >= {n_frames}", timeout=300_000, polling=500)
-            status = page.inner_text("#stereo-status")
+            status = page.inner_text("#live-stereo-status")
             got = page.evaluate("() => window.bench")
             browser.close()
     applied, drawn = (1000 * np.array(got[k][5:]) for k in ("applied", "drawn"))  # past the neutral's start

@@ -110,19 +110,19 @@ def test_two_views_of_one_fake_camera_drive_the_face(server, material, page):
     open_project(page, server, pid)
     page.wait_for_function("() => window.app.face && window.app.face.nJoints === 21", timeout=scaled_ms(30_000))
     page.wait_for_function("() => window.app.stream && window.app.stream.state === 'open'", timeout=scaled_ms(10_000))
-    page.select_option("#stereo-split", "side")
-    page.click("#stereo-open")
-    page.wait_for_function("() => document.querySelector('#stereo-status').textContent.startsWith('Calibrated: 10 views')",
+    page.select_option("#live-stereo-split", "side")
+    page.click("#live-stereo-open")
+    page.wait_for_function("() => document.querySelector('#live-stereo-status').textContent.startsWith('Calibrated: 10 views')",
                            timeout=scaled_ms(20_000))
     assert page.evaluate("() => window.app.stereo.capture.size") == [640, 480]
-    page.click("#stereo-start")
+    page.click("#live-stereo-start")
     # the server tracks the 21 markers in the pairs the page sends
     page.wait_for_function("() => window.app.stereo.last?.type === 'tracked' && window.app.stereo.last.found >= 19",
                            timeout=scaled_ms(20_000))
     wait_face_moves(page, 0.05, timeout_ms=20_000)
-    status = page.inner_text("#stereo-status")
+    status = page.inner_text("#live-stereo-status")
     assert "/21 points" in status and "fps" in status and "kB/s" in status
     assert page.inner_text("#error").strip() == ""
-    page.click("#stereo-start")  # Stop
+    page.click("#live-stereo-start")  # Stop
     page.wait_for_function("() => window.app.stereo.last?.type === 'stopped'", timeout=scaled_ms(10_000))
     page.evaluate("() => window.app.stereo.close()")

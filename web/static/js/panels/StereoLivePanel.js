@@ -9,35 +9,35 @@ const IN_FLIGHT = 2;
 const HTML = `
 	<h2>Live stereo</h2>
 	<div class="row">
-		<label for="stereo-split">Cameras</label>
-		<select id="stereo-split" title="Two cameras, or one whose frame holds both views">
+		<label for="live-stereo-split">Cameras</label>
+		<select id="live-stereo-split" title="Two cameras, or one whose frame holds both views">
 			<option value="none">two cameras</option>
 			<option value="side">one, views side by side</option>
 			<option value="top">one, views top and bottom</option>
 		</select>
 	</div>
 	<div class="row">
-		<label for="stereo-left">Left</label><select id="stereo-left"></select>
-		<label for="stereo-right">Right</label><select id="stereo-right"></select>
-		<button id="stereo-open" type="button">Open</button>
+		<label for="live-stereo-left">Left</label><select id="live-stereo-left"></select>
+		<label for="live-stereo-right">Right</label><select id="live-stereo-right"></select>
+		<button id="live-stereo-open" type="button">Open</button>
 	</div>
 	<div class="row stereo-previews">
-		<video id="stereo-video-left" width="160" muted playsinline></video>
-		<video id="stereo-video-right" width="160" muted playsinline></video>
+		<video id="live-stereo-video-left" width="160" muted playsinline></video>
+		<video id="live-stereo-video-right" width="160" muted playsinline></video>
 	</div>
 	<div class="row">
-		<label for="stereo-board" title="Inner corners across x down, and the square's side in mm">Board</label>
-		<input id="stereo-board" value="9x6" size="4">
-		<input id="stereo-square" type="number" min="1" max="500" value="25" title="square, mm">
-		<button id="stereo-calibrate" type="button" disabled>Calibrate</button>
-		<button id="stereo-save" type="button" disabled>Save calibration</button>
+		<label for="live-stereo-board" title="Inner corners across x down, and the square's side in mm">Board</label>
+		<input id="live-stereo-board" value="9x6" size="4">
+		<input id="live-stereo-square" type="number" min="1" max="500" value="25" title="square, mm">
+		<button id="live-stereo-calibrate" type="button" disabled>Calibrate</button>
+		<button id="live-stereo-save" type="button" disabled>Save calibration</button>
 	</div>
 	<div class="row">
-		<label for="stereo-quality">JPEG</label>
-		<input id="stereo-quality" type="number" min="0.3" max="0.95" step="0.05" value="0.8">
-		<button id="stereo-start" type="button" disabled>Start</button>
+		<label for="live-stereo-quality">JPEG</label>
+		<input id="live-stereo-quality" type="number" min="0.3" max="0.95" step="0.05" value="0.8">
+		<button id="live-stereo-start" type="button" disabled>Start</button>
 	</div>
-	<div id="stereo-status" class="note"></div>`;
+	<div id="live-stereo-status" class="note"></div>`;
 
 /**
  * Live stereo from two cameras (Woodward et al.): pick the cameras (or one split in two),
@@ -53,7 +53,7 @@ export class StereoLivePanel {
 
 		this.app = app;
 		this.element = document.createElement( 'section' );
-		this.element.id = 'stereo-panel';
+		this.element.id = 'live-stereo-panel';
 		this.element.innerHTML = HTML;
 		document.getElementById( 'source-panel' ).after( this.element );
 		const el = ( id ) => this.element.querySelector( `#${ id }` );
@@ -68,11 +68,11 @@ export class StereoLivePanel {
 		this.pumping = false;
 		this.last = null; // the server's last answer (tests read it)
 		const run = ( fn ) => guarded( app.errors, fn );
-		el( 'stereo-open' ).addEventListener( 'click', run( () => this.open() ) );
-		el( 'stereo-calibrate' ).addEventListener( 'click', run( () => this.calibrate() ) );
-		el( 'stereo-save' ).addEventListener( 'click', run( () => this.request( { type: 'calibration_save' } ) ) );
-		el( 'stereo-start' ).addEventListener( 'click', run( () => ( this.mode === 'track' ? this.stop() : this.start() ) ) );
-		el( 'stereo-split' ).addEventListener( 'change', () => ( el( 'stereo-right' ).disabled = el( 'stereo-split' ).value !== 'none' ) );
+		el( 'live-stereo-open' ).addEventListener( 'click', run( () => this.open() ) );
+		el( 'live-stereo-calibrate' ).addEventListener( 'click', run( () => this.calibrate() ) );
+		el( 'live-stereo-save' ).addEventListener( 'click', run( () => this.request( { type: 'calibration_save' } ) ) );
+		el( 'live-stereo-start' ).addEventListener( 'click', run( () => ( this.mode === 'track' ? this.stop() : this.start() ) ) );
+		el( 'live-stereo-split' ).addEventListener( 'change', () => ( el( 'live-stereo-right' ).disabled = el( 'live-stereo-split' ).value !== 'none' ) );
 		this.listCameras().catch( ( error ) => app.errors.show( error ) );
 
 	}
@@ -80,7 +80,7 @@ export class StereoLivePanel {
 	async listCameras() {
 
 		const cameras = await videoInputs();
-		for ( const [ side, id ] of [ [ 0, 'stereo-left' ], [ 1, 'stereo-right' ] ] ) {
+		for ( const [ side, id ] of [ [ 0, 'live-stereo-left' ], [ 1, 'live-stereo-right' ] ] ) {
 
 			const select = this.el( id );
 			select.replaceChildren( ...cameras.map( ( c, i ) => option( c.deviceId, c.label || `camera ${ i + 1 }` ) ) );
@@ -94,17 +94,17 @@ export class StereoLivePanel {
 	async open() {
 
 		this.close();
-		const split = this.el( 'stereo-split' ).value;
-		this.capture = new StereoCapture( [ this.el( 'stereo-video-left' ), this.el( 'stereo-video-right' ) ],
-			{ left: this.el( 'stereo-left' ).value, right: this.el( 'stereo-right' ).value, split } );
+		const split = this.el( 'live-stereo-split' ).value;
+		this.capture = new StereoCapture( [ this.el( 'live-stereo-video-left' ), this.el( 'live-stereo-video-right' ) ],
+			{ left: this.el( 'live-stereo-left' ).value, right: this.el( 'live-stereo-right' ).value, split } );
 		await this.capture.open();
 		await this.listCameras(); // labels once a camera is allowed
 		const hello = await this.connect( this.app.projectId );
 		this.status( hello.calibration
 			? `Calibrated: ${ hello.calibration.views } views, ${ hello.calibration.rms.toFixed( 2 ) } px, baseline ${ hello.calibration.baseline.toFixed( 0 ) } mm`
 			: 'Not calibrated yet: show a checkerboard to both cameras and press Calibrate' );
-		this.el( 'stereo-calibrate' ).disabled = false;
-		this.el( 'stereo-start' ).disabled = ! hello.calibration;
+		this.el( 'live-stereo-calibrate' ).disabled = false;
+		this.el( 'live-stereo-start' ).disabled = ! hello.calibration;
 
 	}
 
@@ -135,8 +135,8 @@ export class StereoLivePanel {
 
 	async calibrate() {
 
-		const [ cols, rows ] = this.el( 'stereo-board' ).value.split( 'x' ).map( Number );
-		const square = Number( this.el( 'stereo-square' ).value );
+		const [ cols, rows ] = this.el( 'live-stereo-board' ).value.split( 'x' ).map( Number );
+		const square = Number( this.el( 'live-stereo-square' ).value );
 		this.request( { type: 'calibrate', pattern: { cols, rows, square }, size: this.capture.size } );
 		this.mode = 'calibrate';
 		this.pump();
@@ -147,7 +147,7 @@ export class StereoLivePanel {
 
 		this.request( { type: 'start', settings: this.app.conditioning.toJSON() } );
 		this.mode = 'track';
-		this.el( 'stereo-start' ).textContent = 'Stop';
+		this.el( 'live-stereo-start' ).textContent = 'Stop';
 		this.pump();
 
 	}
@@ -156,7 +156,7 @@ export class StereoLivePanel {
 
 		this.request( { type: 'stop' } );
 		this.mode = null;
-		this.el( 'stereo-start' ).textContent = 'Start';
+		this.el( 'live-stereo-start' ).textContent = 'Start';
 
 	}
 
@@ -175,7 +175,7 @@ export class StereoLivePanel {
 
 			while ( this.mode && this.inFlight < IN_FLIGHT && this.socket?.readyState === WebSocket.OPEN ) {
 
-				const { left, right, time } = await this.capture.grab( Number( this.el( 'stereo-quality' ).value ) );
+				const { left, right, time } = await this.capture.grab( Number( this.el( 'live-stereo-quality' ).value ) );
 				if ( ! this.mode || this.socket?.readyState !== WebSocket.OPEN ) return;
 				const buffer = new StereoPairEncoder().encode( left, right, this.frame ++, time );
 				this.socket.send( buffer );
@@ -205,7 +205,7 @@ export class StereoLivePanel {
 
 		if ( message.type === 'views' ) {
 
-			this.el( 'stereo-save' ).disabled = message.count < message.needed;
+			this.el( 'live-stereo-save' ).disabled = message.count < message.needed;
 			this.status( `Good views: ${ message.count } of ${ message.needed } needed${ message.good ? ' (+1)' : '' } · ${ this.rates() }` );
 
 		} else if ( message.type === 'tracked' ) {
@@ -217,7 +217,7 @@ export class StereoLivePanel {
 			this.mode = null;
 			const c = message.calibration;
 			this.status( `Calibrated: ${ c.views } views, ${ c.rms.toFixed( 2 ) } px, baseline ${ c.baseline.toFixed( 0 ) } mm` );
-			this.el( 'stereo-start' ).disabled = false;
+			this.el( 'live-stereo-start' ).disabled = false;
 
 		} else if ( message.type === 'error' ) {
 
@@ -248,15 +248,15 @@ export class StereoLivePanel {
 		this.mode = null;
 		this.inFlight = 0;
 		this.socket = null;
-		this.el( 'stereo-start' ).textContent = 'Start';
-		this.el( 'stereo-start' ).disabled = this.el( 'stereo-calibrate' ).disabled = true;
+		this.el( 'live-stereo-start' ).textContent = 'Start';
+		this.el( 'live-stereo-start' ).disabled = this.el( 'live-stereo-calibrate' ).disabled = true;
 		this.status( `Disconnected${ reason ? `: ${ reason }` : '' }; Open again` );
 
 	}
 
 	status( text ) {
 
-		this.el( 'stereo-status' ).textContent = text;
+		this.el( 'live-stereo-status' ).textContent = text;
 
 	}
 
