@@ -43,12 +43,17 @@ from retarget.rbf import as_points
 from retarget.sources.conditioning import ConditionSettings, SourceConditioner, condition_take
 from retarget.sources.take import Take
 
-__all__ = ["LIVE_NEUTRAL_MOTION", "MAX_RECORD_SECONDS", "Cue", "Performance", "PerformanceFrame", "take_clip"]
+__all__ = ["LIVE_LOST_WAIT", "LIVE_NEUTRAL_MOTION", "MAX_RECORD_SECONDS", "Cue", "Performance", "PerformanceFrame", "take_clip"]
 
 LIVE_NEUTRAL_MOTION = 0.1
 """The most a point of pushed frames may move during their neutral capture, in eye distances
 (`SourceConditioner`'s ``max_neutral_motion``): a tracker's jitter on a still face is a few
 hundredths, a puffed cheek or a spoken word several tenths."""
+
+LIVE_LOST_WAIT = 2.0
+"""Seconds a live neutral capture goes on past its span for points not yet seen in it
+(`SourceConditioner`'s ``lost_wait``): a tracker may find the last markers a few frames in,
+and a loaded machine may deliver only a frame or two in the span."""
 
 MAX_RECORD_SECONDS = 600.0
 """A recording keeps its first ten minutes; what comes later is not kept (rather than failing
@@ -202,7 +207,8 @@ class Performance:
         self._record(points, t)
         if self._conditioner is None:
             self._conditioner = SourceConditioner(self.layout, self.dims, self.settings,
-                                                  max_neutral_motion=LIVE_NEUTRAL_MOTION)
+                                                  max_neutral_motion=LIVE_NEUTRAL_MOTION,
+                                                  lost_wait=LIVE_LOST_WAIT)
         conditioned = self._conditioner.push(points, t)
         if conditioned is None:
             return None

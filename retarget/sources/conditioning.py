@@ -136,6 +136,10 @@ class SourceConditioner:
         Woodward §5.1 has it). A capture that moved more raises `NeutralMoved`, and no
         neutral is taken (`push` gives None) until `reset()`: a live performer is asked
         to capture again rather than have a grimace become the rest pose.
+    lost_wait : None, or seconds a "first_seconds" capture goes on past its span while a
+        point has been lost in every frame of it (a live tracker that finds the last
+        markers a few frames in, or a stalled camera that gave only a frame or two);
+        after that the capture is refused for those points as it is at once without it.
 
     `push(points (N, D), t seconds) -> (N, D) float32 | None`: None while the neutral is
     being captured; lost points (NaN rows) stay NaN. After the capture, ``neutral_``
@@ -146,7 +150,7 @@ class SourceConditioner:
     """
 
     def __init__(self, layout, dims: int, settings=None, neutral=None, *,
-                 max_neutral_motion: float | None = None):
+                 max_neutral_motion: float | None = None, lost_wait: float | None = None):
         self.layout = None if layout is None else layout if isinstance(layout, Layout) else get_layout(layout)
         if dims not in (2, 3):
             raise RetargetError(f"dims must be 2 or 3; got {dims!r}")
@@ -171,6 +175,9 @@ class SourceConditioner:
         if max_neutral_motion is not None and not (math.isfinite(max_neutral_motion) and max_neutral_motion > 0):
             raise RetargetError(f"max_neutral_motion must be a positive number of eye distances; got {max_neutral_motion!r}")
         self.max_neutral_motion = max_neutral_motion
+        if lost_wait is not None and not (math.isfinite(lost_wait) and lost_wait >= 0):
+            raise RetargetError(f"lost_wait must be a number of seconds >= 0; got {lost_wait!r}")
+        self.lost_wait = lost_wait
         self.reset()
 
     def reset(self) -> None:
@@ -209,11 +216,19 @@ class SourceConditioner:
                     if np.isnan(p[:, 0]).all():
                         return None  # nothing tracked yet (a live camera without a face)
                     self._t0 = t
-                if t <= self._t0 + mode["seconds"]:
+                if t <= self._t0 + mode["seconds"] or self._waits_for_lost(t):
                     self._captured.append(p)
                     return None
                 self._start(self._captured_neutral())
         return self._conditioned(p, t)
+
+    def _waits_for_lost(self, t: float) -> bool:
+        """Whether a capture past its span goes on (`lost_wait`): a point is lost in every
+        frame so far and the wait has not run out."""
+        if self.lost_wait is None or not self._captured:
+            return False
+        end = self._t0 + self.settings.neutral["seconds"] + self.lost_wait
+        return t <= end and bool(np.isnan(np.stack(self._captured)[..., 0]).all(axis=0).any())
 
     def _captured_neutral(self) -> np.ndarray:
         frames = np.stack(self._captured)

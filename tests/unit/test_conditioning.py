@@ -206,6 +206,30 @@ def test_capture_errors_name_points_and_spans():
         SourceConditioner("ibug68", 4)
 
 
+def test_a_live_capture_waits_for_points_its_span_missed():
+    """With `lost_wait`, a "first_seconds" capture whose span never saw a point goes on
+    until it does (its neutral then holds the point where it was first seen); without
+    it, or past the wait, the capture is refused naming the point."""
+    chin = IBUG.index("chin")
+    frames = np.repeat(NEUTRAL[None], 12, axis=0)
+    frames[:5, chin] = np.nan  # seen from the sixth frame, 0.5 s in at 10 fps
+    settings = {"neutral": {"mode": "first_seconds", "seconds": 0.2}, "head_pose": "keep"}
+    waiting = SourceConditioner("ibug68", 3, settings, lost_wait=1.0)
+    out = [waiting.push(f, i / 10) for i, f in enumerate(frames)]
+    assert all(o is None for o in out[:6]) and out[6] is not None
+    np.testing.assert_allclose(waiting.neutral_, NEUTRAL, atol=1e-5)
+    with pytest.raises(RetargetError, match="lost throughout the first 0.2 s: chin"):
+        at_once = SourceConditioner("ibug68", 3, settings)
+        for i, f in enumerate(frames):
+            at_once.push(f, i / 10)
+    short = SourceConditioner("ibug68", 3, settings, lost_wait=0.2)
+    with pytest.raises(RetargetError, match="lost throughout the first 0.2 s: chin"):
+        for i, f in enumerate(frames):
+            short.push(f, i / 10)
+    with pytest.raises(RetargetError, match="lost_wait must be"):
+        SourceConditioner("ibug68", 3, settings, lost_wait=-1.0)
+
+
 def test_settings_round_trip_through_json_and_defaults():
     settings = ConditionSettings(neutral={"mode": "frame", "frame": 4}, head_pose="keep", apply_rotation=True,
                                  filter="one_euro", one_euro={"mouth": {"min_cutoff": 2, "beta": 1}, "d_cutoff": 2},
