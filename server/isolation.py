@@ -142,7 +142,7 @@ class Isolation:
                     kind, value = receive.recv()
                 except (EOFError, OSError):
                     child.join(5)
-                    raise RetargetError(f"{what}: {_death(child.exitcode, limits)}") from None
+                    raise RetargetError(f"{what}: {death_reason(child.exitcode, limits)}") from None
                 if kind == "progress":
                     progress(*value)
                     continue
@@ -161,7 +161,7 @@ class Isolation:
                 child.join(5)
 
 
-def _death(exitcode: int | None, limits: IsolationLimits) -> str:
+def death_reason(exitcode: int | None, limits: IsolationLimits) -> str:
     """Why a child that sent no answer ended, in words."""
     if exitcode is not None and exitcode < 0:
         number = -exitcode
@@ -181,8 +181,7 @@ def _child(send: Connection, fn, args, kwargs, with_progress: bool, memory_bytes
            cpu_seconds: int) -> None:
     """The child's body: limits, then fn, then one ("ok" | "refused" | "memory" |
     "error", value) message (after any number of ("progress", fraction))."""
-    _limit(resource.RLIMIT_AS, _address_space() + memory_bytes)
-    _limit(resource.RLIMIT_CPU, cpu_seconds)
+    limit_resources(memory_bytes, cpu_seconds)
     if with_progress:
         kwargs = {**kwargs, "progress": lambda *values: send.send(("progress", values))}
     try:
@@ -194,13 +193,25 @@ def _child(send: Connection, fn, args, kwargs, with_progress: bool, memory_bytes
     except RecursionError:
         message = ("error", "it is nested too deeply to read")
     except Exception as exc:  # noqa: BLE001 - every failure of untrusted input is a refusal
-        where = traceback.extract_tb(exc.__traceback__)[-1]
-        message = ("error", f"{type(exc).__name__}: {str(exc)[:300]} "
-                            f"(in {where.filename.rsplit('/', 1)[-1]}:{where.lineno})")
+        message = ("error", error_message(exc))
     try:
         send.send(message)
     except MemoryError:
         send.send(("memory", None))
+
+
+def limit_resources(memory_bytes: int, cpu_seconds: int) -> None:
+    """In a child: its address space capped at what it has now plus `memory_bytes`, its
+    CPU time at `cpu_seconds` (then SIGXCPU)."""
+    _limit(resource.RLIMIT_AS, _address_space() + memory_bytes)
+    _limit(resource.RLIMIT_CPU, cpu_seconds)
+
+
+def error_message(exc: Exception) -> str:
+    """An unexpected exception of a child in words: its type, message and where it rose."""
+    where = traceback.extract_tb(exc.__traceback__)[-1]
+    return (f"{type(exc).__name__}: {str(exc)[:300]} "
+            f"(in {where.filename.rsplit('/', 1)[-1]}:{where.lineno})")
 
 
 def _limit(kind: int, value: int) -> None:

@@ -18,8 +18,6 @@ the session ends.
 from __future__ import annotations
 
 import multiprocessing
-import resource
-import traceback
 
 import cv2
 
@@ -27,7 +25,7 @@ from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
 from retarget.sources.jpeg_frames import decoded_jpeg
 from retarget.sources.stereo_live import LiveCalibration, LiveStereoTracker
-from server.isolation import IsolationLimits, _address_space, _death, _limit
+from server.isolation import IsolationLimits, death_reason, error_message, limit_resources
 
 __all__ = ["StereoWorker", "WorkerDied"]
 
@@ -69,7 +67,7 @@ class StereoWorker:
         except (EOFError, OSError, BrokenPipeError):
             self.process.join(5)
             limits = IsolationLimits(memory_bytes=self.memory_bytes, cpu_seconds=self.cpu_seconds)
-            raise WorkerDied(f"the stereo tracker stopped: {_death(self.process.exitcode, limits)}") from None
+            raise WorkerDied(f"the stereo tracker stopped: {death_reason(self.process.exitcode, limits)}") from None
         if status == "refused":
             raise RetargetError(value)
         if status == "error":
@@ -131,8 +129,7 @@ dict, layout) starts a tracker; pair(left, right, time) tracks a pair of JPEGs, 
 
 def _serve(conn, memory_bytes: int, cpu_seconds: int) -> None:
     """The child's body: limits, then one answer per request until the pipe closes."""
-    _limit(resource.RLIMIT_AS, _address_space() + memory_bytes)
-    _limit(resource.RLIMIT_CPU, cpu_seconds)
+    limit_resources(memory_bytes, cpu_seconds)
     cv2.setNumThreads(1)  # one session, one core: the server's other work keeps the rest
     state: dict = {}
     while True:
@@ -147,7 +144,5 @@ def _serve(conn, memory_bytes: int, cpu_seconds: int) -> None:
         except MemoryError:
             answer = ("error", f"it needed more than {memory_bytes / 2**20:.0f} MiB of memory, the server's limit")
         except Exception as exc:  # noqa: BLE001 - the parent ends the session with the reason
-            where = traceback.extract_tb(exc.__traceback__)[-1]
-            answer = ("error", f"{type(exc).__name__}: {str(exc)[:300]} "
-                               f"(in {where.filename.rsplit('/', 1)[-1]}:{where.lineno})")
+            answer = ("error", error_message(exc))
         conn.send(answer)

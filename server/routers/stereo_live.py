@@ -51,7 +51,7 @@ from server.deps import HubDep, StoreDep
 from server.hub import StreamHub
 from server.players import LivePlayer
 from server.project_layouts import resolve_layout
-from server.routers.stream import _GONE, POLICY_VIOLATION, _start, _target_points
+from server.routers.stream import GONE, POLICY_VIOLATION, source_from_message, target_points_of
 from server.stereo_worker import StereoWorker, WorkerDied
 from server.store import ProjectNotFound, write_atomic
 from server.wire import MAX_STEREO_JPEG, decode_stereo_pair
@@ -73,7 +73,7 @@ INTERNAL_ERROR = 1011
 async def stereo_live(websocket: WebSocket, project_id: str, store: StoreDep, hub: HubDep) -> None:
     try:
         await _serve(websocket, project_id, store, hub)
-    except _GONE:
+    except GONE:
         return  # the page left
 
 
@@ -155,7 +155,7 @@ class _Session:
         layout = await asyncio.to_thread(resolve_layout, self.store, self.project_id, self.layout or "ibug68")
         await self._call("track", calibration.to_dict(), layout)
         settings = msg.get("settings") or {}
-        player = await _start({"source": "live", "dims": 3, "fps": 30.0, "settings": settings}, self.hub,
+        player = await source_from_message({"source": "live", "dims": 3, "fps": 30.0, "settings": settings}, self.hub,
                               self.store, self.project_id, self.target_points, self.layout)
         self.hub.start_source(self.project_id, player)
         self.player, self.mode = player, "track"
@@ -217,7 +217,7 @@ async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -
     await websocket.accept()
     try:
         project = store.get(project_id)
-        target_points, layout = await asyncio.to_thread(_target_points, store, project)
+        target_points, layout = await asyncio.to_thread(target_points_of, store, project)
         calibration = await asyncio.to_thread(saved_calibration, store, project_id)
     except (ProjectNotFound, RetargetError) as exc:
         await websocket.close(code=POLICY_VIOLATION, reason=str(exc)[:120])

@@ -88,11 +88,11 @@ FORMATS = ("binary", "json")
 async def stream(websocket: WebSocket, project_id: str, store: StoreDep, hub: HubDep) -> None:
     try:
         await _serve(websocket, project_id, store, hub)
-    except _GONE:
+    except GONE:
         return  # the viewer left (even before the hello): nothing to answer, nothing to log
 
 
-_GONE = (WebSocketDisconnect, ConnectionClosed, ClientDisconnected)
+GONE = (WebSocketDisconnect, ConnectionClosed, ClientDisconnected)
 """What sending or receiving raises once the viewer has gone (uvicorn's websockets or
 wsproto implementation)."""
 
@@ -101,7 +101,7 @@ async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -
     await websocket.accept()
     try:
         project = store.get(project_id)
-        target_points, layout = await asyncio.to_thread(_target_points, store, project)
+        target_points, layout = await asyncio.to_thread(target_points_of, store, project)
     except (ProjectNotFound, RetargetError) as exc:
         await websocket.close(code=POLICY_VIOLATION, reason=str(exc)[:120])
         return
@@ -116,13 +116,13 @@ async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -
             sender = group.create_task(_send_frames(websocket, box, sending, viewer))
             group.create_task(_receive_controls(websocket, sending, hub, store, project_id,
                                                 target_points, layout, viewer, on_disconnect=sender.cancel))
-    except* _GONE:
+    except* GONE:
         pass
     finally:
         hub.unsubscribe(project_id, box)
 
 
-def _target_points(store, project: dict):
+def target_points_of(store, project: dict):
     """(N, 3) landmark positions on the project's mesh and the layout name."""
     landmarks = store.landmarks(project["id"])
     mesh = store.mesh(project["id"])
@@ -141,7 +141,7 @@ async def _send_frames(websocket: WebSocket, box: Mailbox, sending: asyncio.Lock
                     await websocket.send_text(json.dumps(weights_json(frame, ARKIT_NAMES)))
                 else:
                     await websocket.send_bytes(frame)
-    except (*_GONE, RuntimeError):
+    except (*GONE, RuntimeError):
         return  # the receiver sees the disconnect and ends the task group
 
 
@@ -211,7 +211,7 @@ def _drive(store, project_id, drive: str):
     return None
 
 
-async def _start(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
+async def source_from_message(msg: dict, hub: StreamHub, store, project_id, target_points, layout):
     """The player `msg` asks for, driven as the project's drive says."""
     player = await _player(msg, store, project_id, target_points, layout)
     if hub.drive(project_id) != "points":
@@ -255,7 +255,7 @@ async def _control(text, hub: StreamHub, store, project_id, target_points, layou
     if kind == "ping":
         return {"type": "pong", "t": msg.get("t"), "server_time": time.time()}
     if kind == "start":
-        source = await _start(msg, hub, store, project_id, target_points, layout)
+        source = await source_from_message(msg, hub, store, project_id, target_points, layout)
         hub.start_source(project_id, source)
         return {"type": "started", **source.describe()}
     source = hub.source(project_id)
