@@ -29,7 +29,7 @@ from retarget.sources.calibration import (
     find_pattern,
     pattern_points,
 )
-from retarget.sources.color_markers import Blobs, MarkerTemplate, color_blobs, layout_marker_colors
+from retarget.sources.color_markers import MarkerTemplate, color_blobs, layout_marker_colors
 from retarget.sources.filters import TemporalMean
 from retarget.sources.headpose import HeadMotionRemover, stable_indices
 from retarget.sources.stereo import identified_markers

@@ -26,7 +26,7 @@ from retarget.layouts import get_layout
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
 from server.wire import encode_stereo_pair
-from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS, Server, open_project, sample_copy, wait_face_moves
+from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS, Server, open_project, wait_face_moves
 from tests.e2e.fake_camera import write_y4m
 from tests.waits import scaled, scaled_ms, wait_job
 
@@ -53,10 +53,9 @@ def material(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory, sample_data_dir):
-    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("stereo") / "data")).start()
-    yield srv
-    srv.stop()
+def server(module_server):
+    """One server for the module (with the sample project)."""
+    return module_server
 
 
 @pytest.fixture(scope="module")

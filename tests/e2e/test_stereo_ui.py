@@ -18,7 +18,7 @@ import pytest
 
 from retarget.sources.calibration import StereoCalibration
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
-from tests.e2e.conftest import Server, open_project, sample_copy
+from tests.e2e.conftest import open_project
 from tests.waits import scaled_ms
 
 N_FRAMES = 6
@@ -43,11 +43,9 @@ _RECORD = """() => {
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory, sample_data_dir):
+def server(module_server):
     """One server for the module (with the sample project)."""
-    srv = Server(sample_copy(sample_data_dir, tmp_path_factory.mktemp("stereo") / "data")).start()
-    yield srv
-    srv.stop()
+    return module_server
 
 
 @pytest.fixture(scope="module")
