@@ -40,21 +40,22 @@ built-in face (scaled to mm), 150 mm apart, verged; 8 mm coloured stickers on th
   head held still; median and p95), identity switches and stereo pairs per second.
   Targets: every sticker in >= 95 % of frames, median <= 1 mm, p95 <= 3 mm, 0 switches.
   On this 2-core machine (``--only-stickers``, 3 seeds x 150 frames): worst sticker found
-  in 0.963 of its clear frames (worst seed 0.927; 0.75 over every frame it is visible in,
-  edge-on ones included), shape error median 0.74 mm / p95 2.81 mm with named anchors
-  (per seed 0.65 / 2.81, 0.98 / 3.23, 0.74 / 2.76; 0.97 / 4.30 automatic, worst seed 1.59
-  / 7.75 where the chin is taken for an anchor), 0 identity switches, 13 tracks for 13
-  stickers, 55-85 pairs/s with the machine shared (load 4-5 on 2 cores; the first cut
-  measured 52-106 alongside): every target met in the median over seeds, the p95 not on
+  in 0.971 of its clear frames (worst seed 0.963; 0.81 over every frame it is visible in,
+  edge-on ones included), shape error median 0.73 mm / p95 2.77 mm with named anchors
+  (per seed 0.65 / 2.77, 0.85 / 3.22, 0.73 / 2.68; 0.98 / 4.18 automatic, worst seed 1.21
+  / 5.80 where the chin is taken for an anchor), 0 identity switches, 13 tracks for 13
+  stickers, 76-87 pairs/s: every target met in the median over seeds, the p95 not on
   seed 1 (mouth corners and chin in the fast jaw moves and the pucker, which move them
   along the line of sight, where the depth smoothing still trails them; the temples, seen
   at grazing angles, keep a bias of 1.5-2 mm). Before the luma-refined centres, the
   sight-weighted head pose, the across-ray weighted depth median and 5 smoothing passes
   (issue 17's first cut): 1.44 / 4.20 mm named (per seed 1.26 / 3.99, 1.71 / 4.61, 1.44 /
-  4.20), 1.71 / 4.55 automatic (worst seed 1.72 / 5.91). The worst seed's found share is
-  a temple missed in 3 of its 41 clear frames, all 58-60 degrees from the second camera,
-  where JPEG leaves its 2 px of blue at saturation 44-50 (the faint search's floor is 60;
-  lower floors let skin in: 0.6 of them breaks the tracking).
+  4.20), 1.71 / 4.55 automatic (worst seed 1.72 / 5.91). Before the dark candidates
+  (`stereo_tracks._dark_candidate`): found 0.963 (worst seed 0.927: a temple missed in 3
+  of its 41 clear frames, all 58-60 degrees from the second camera, where JPEG leaves its
+  2 px of blue at saturation 44-50 under the faint search's floor of 60, but its luma,
+  grey ~71, well below the skin's ~105), named 0.74 / 2.81 mm (per seed 0.65 / 2.81,
+  0.98 / 3.23, 0.74 / 2.76), automatic 0.97 / 4.30 (worst seed 1.59 / 7.75).
 """
 
 from __future__ import annotations

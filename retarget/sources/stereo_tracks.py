@@ -6,7 +6,11 @@ other) the upper and lower lip stickers lie on one epipolar line, and pairing th
 one in one image with the lower one in the other passes the check 130-160 mm off in depth.
 Identity here comes from time instead (the "marker template" of §5, Algorithm 1, in 3D):
 
-1. every sticker candidate in both images (`color_blobs`);
+1. every sticker candidate in both images (`color_blobs`); near a track's prediction with
+   none, a fainter one (lower colour floors), else a small dark blob with a weak tint of
+   the colour (`_dark_candidate`: a sticker nearly edge-on whose chroma JPEG took), which
+   only continues a track seen last frame, lands within `_DARK_3D` of it, and takes its
+   depth from the prediction along the other image's line of sight;
 2. each track's position is predicted: constant image velocity while it is seen; a lost
    one moves with its neighbours since it was last seen (the image motion of the nearest
    tracks seen then and now: rigid head motion plus the local expression);
@@ -47,6 +51,12 @@ _BIG = 1e6   # cost of a forbidden pairing in the assignments
 _FAINT = 0.85   # floors of the colour predicate near a prediction, times the usual ones
 _DAMPING = 0.6   # share of last frame's image velocity carried into the prediction
 _STRAY = 1.0   # px, furthest a refined centre may move from its blob's centre
+_DARK_GATE = 4.0   # px, furthest a dark faint candidate may lie from its prediction
+_DARK = 0.78   # a dark candidate's pixels are below this share of the local skin's luma
+_DARK_AREA = 30   # px, largest dark region that may be a sticker (brows, nostrils are more)
+_TINT_SAT = 20.0   # saturation floor of a dark candidate's tint (skin's hue is far off)
+_DARK_3D = 12.0   # mm, furthest a pairing with a dark candidate may land from its track
+_TINT_HUE = 25.0   # hue window widened by this much for a dark candidate's tint
 
 
 def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
@@ -123,18 +133,22 @@ def split_blobs(image: np.ndarray, blobs: Blobs, color, predicted: np.ndarray,
 
 
 def _with_faint(image: np.ndarray, blobs: Blobs, faint: MarkerColor, predicted: np.ndarray,
-                gate: float) -> Blobs:
+                gate: float, color: MarkerColor | None = None) -> tuple[Blobs, np.ndarray]:
     """`blobs` plus the faint candidates (colour predicate `faint`) found within `gate` px of
     each prediction (T, 2) that has no candidate there (Woodward §5, Algorithm 1: once the
-    template is set up, only the regions round the markers are searched)."""
+    template is set up, only the regions round the markers are searched). Where even the
+    faint colour finds nothing and `color` is given, a small dark blob with a tint of it
+    within `_DARK_GATE` px (`_dark_candidate`) is the candidate. Returns the blobs and a
+    (len,) bool flag of the dark ones."""
     ok = np.isfinite(predicted).all(axis=1)
     if len(blobs):
         d = np.linalg.norm(predicted[:, None] - blobs.centroids[None], axis=2)
         ok &= ~(np.nan_to_num(d, nan=np.inf) <= gate).any(axis=1)
     if not ok.any():
-        return blobs
+        return blobs, np.zeros(len(blobs), bool)
     h, w = image.shape[:2]
     cents, areas = [blobs.centroids], [blobs.areas]
+    darks = [np.zeros(len(blobs), bool)]
     r = int(np.ceil(gate)) + 3
     for x, y in np.rint(predicted[ok]).astype(int):
         x0, y0, x1, y1 = max(x - r, 0), max(y - r, 0), min(x + r + 1, w), min(y + r + 1, h)
@@ -147,10 +161,66 @@ def _with_faint(image: np.ndarray, blobs: Blobs, faint: MarkerColor, predicted: 
         if len(blobs) and near.any():
             # Not a part of a candidate found already (the window overlaps it).
             near &= np.linalg.norm(c[:, None] - blobs.centroids[None], axis=2).min(axis=1) > 3.0
+        if not near.any() and color is not None:
+            dark = _dark_candidate(image, x, y, color)
+            if dark is not None and not (len(blobs) and np.linalg.norm(
+                    blobs.centroids - dark[0], axis=1).min() <= 3.0):
+                cents.append(np.array([dark[0]], np.float32))
+                areas.append(np.array([dark[1]], np.int32))
+                darks.append(np.ones(1, bool))
+                continue
         cents.append(c[near])
         areas.append(found.areas[near])
+        darks.append(np.zeros(int(near.sum()), bool))
     c = np.concatenate(cents).astype(np.float32)
-    return Blobs(c, np.zeros(len(c), np.int64), np.concatenate(areas).astype(np.int32), blobs.names)
+    return (Blobs(c, np.zeros(len(c), np.int64), np.concatenate(areas).astype(np.int32), blobs.names),
+            np.concatenate(darks))
+
+
+def _dark_candidate(image: np.ndarray, x: int, y: int, color: MarkerColor):
+    """((x, y), area) of a small dark blob with a weak tint of `color` within `_DARK_GATE`
+    px of (x, y), or None. A sticker nearly edge-on to a camera is a pixel or two whose
+    chroma JPEG has mostly taken (saturation 40-50, hue drifting) but whose luma is still
+    well below the skin round it (grey ~70 against ~105): pixels below `_DARK` times the
+    window's median luma, in a region no bigger than a sticker and clear of the window's
+    edge (a brow, a nostril or hair is bigger), holding a pixel of the colour's hue at a
+    low saturation floor. Its centre is weighted by the darkness."""
+    h, w = image.shape[:2]
+    r_out, r_in = 10, int(np.ceil(_DARK_GATE)) + 4
+    x0, y0, x1, y1 = max(x - r_out, 0), max(y - r_out, 0), min(x + r_out + 1, w), min(y + r_out + 1, h)
+    if x1 - x0 < 2 * r_in + 1 or y1 - y0 < 2 * r_in + 1:
+        return None
+    patch = np.ascontiguousarray(image[y0:y1, x0:x1])
+    grey = cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY).astype(np.float64)
+    level = float(np.median(grey))
+    ix0, iy0 = max(x - r_in - x0, 0), max(y - r_in - y0, 0)
+    ix1, iy1 = min(x + r_in + 1 - x0, x1 - x0), min(y + r_in + 1 - y0, y1 - y0)
+    g = grey[iy0:iy1, ix0:ix1]
+    dark = (g < _DARK * level).astype(np.uint8)
+    if not dark.any():
+        return None
+    hsv = cv2.cvtColor(np.ascontiguousarray(patch[iy0:iy1, ix0:ix1]), cv2.COLOR_BGR2HSV).astype(np.float64)
+    dh = np.abs((hsv[..., 0] - color.hue + 90.0) % 180.0 - 90.0)
+    tint = (dh <= color.hue_tol + _TINT_HUE) & (hsv[..., 1] >= _TINT_SAT)
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(dark, connectivity=8)
+    best, best_d = None, np.inf
+    hh, ww = g.shape
+    for k in range(1, n):
+        bx, by, bw, bh, area = stats[k]
+        if area > _DARK_AREA or bx == 0 or by == 0 or bx + bw >= ww or by + bh >= hh:
+            continue
+        if max(bw, bh) > 2.0 * np.sqrt(area) + 2.0:   # not compact: a line, an edge
+            continue
+        member = labels == k
+        if not (member & tint).any():
+            continue
+        wgt = np.where(member, level - g, 0.0)
+        ys, xs = np.mgrid[0:hh, 0:ww]
+        c = np.array([(wgt * xs).sum(), (wgt * ys).sum()]) / wgt.sum() + [x0 + ix0, y0 + iy0]
+        d = float(np.hypot(c[0] - x, c[1] - y))
+        if d <= _DARK_GATE and d < best_d:
+            best, best_d = (c, int(area)), d
+    return best
 
 
 class StickerTracks:
@@ -203,13 +273,15 @@ class StickerTracks:
         n = len(self._born)
         pred, both_px = self._predicted(frame)
         pred_px = [both_px[:, :2], both_px[:, 2:]]
-        blobs, counts = [], []
+        blobs, counts, darks = [], [], []
         for cam, img in enumerate((left, right)):
             # Only touching components are one blob: stickers 2-4 px apart stay apart.
             b = color_blobs(img, self.color, merge_distance=1.5)
             b = split_blobs(img, b, self.color, pred_px[cam], self._area)
             counts.append(len(b))
-            blobs.append(_with_faint(img, b, self._faint, pred_px[cam], self.gate))
+            b, dark = _with_faint(img, b, self._faint, pred_px[cam], self.gate, self.color)
+            blobs.append(b)
+            darks.append(dark)
         bl, br = blobs
         xyz = np.full((n, 3), np.nan)
         px = np.full((n, 4), np.nan)
@@ -219,6 +291,14 @@ class StickerTracks:
         ii, jj, hyp = self._hypotheses(bl.centroids, br.centroids)
         if n and len(ii):
             track, h = self._assigned(pred, pred_px, bl.centroids[ii], br.centroids[jj], ii, jj, hyp)
+            # A dark candidate only continues a track seen last frame, and lands near its
+            # 3D prediction (a pixel of shadow elsewhere triangulates centimetres off).
+            dark = darks[0][ii[h]] | darks[1][jj[h]]
+            if dark.any():
+                was = np.isfinite(self._xyz[-1][track, 0]) if self._xyz else np.zeros(len(track), bool)
+                near3 = np.linalg.norm(hyp[h] - pred[track], axis=1) <= _DARK_3D
+                keep = ~dark | (was & near3)
+                track, h = track[keep], h[keep]
             px[track] = np.concatenate([bl.centroids[ii[h]], br.centroids[jj[h]]], axis=1)
             # The blobs' centres follow identities; the depth needs finer ones (a tenth of
             # a pixel of disparity is millimetres): refined with the luma, unless that
@@ -230,6 +310,9 @@ class StickerTracks:
             fine[~near] = coarse[~near]
             fine_px[track] = fine.reshape(-1, 4)
             xyz[track] = self.calibration.triangulate(fine[:, 0], fine[:, 1])
+            dark_l, dark_r = darks[0][ii[h]], darks[1][jj[h]]
+            if (dark_l | dark_r).any():
+                xyz[track] = self._held_depth(xyz[track], pred[track], fine, dark_l, dark_r)
             used_l[ii[h]] = used_r[jj[h]] = True
             area = np.minimum(bl.areas[ii[h]], br.areas[jj[h]]).astype(np.float64)
             fresh = ~np.isfinite(self._area[track])
@@ -252,6 +335,27 @@ class StickerTracks:
         used_l[counts[0]:] = True
         used_r[counts[1]:] = True
         self._spawn(frame, bl, br, used_l, used_r)
+
+    def _held_depth(self, xyz, pred, fine, dark_l, dark_r):
+        """`xyz` with each pairing that has a dark candidate in one image moved to the other
+        image's line of sight at its prediction's depth: a dark blob's centre is a pixel
+        or two of shadowed luma, good enough to say the sticker is there but not for the
+        tenth of a pixel of disparity the depth needs; the colour blob's ray is sure."""
+        cal = self.calibration
+        out = xyz.copy()
+        for cam, use in ((0, dark_r & ~dark_l), (1, dark_l & ~dark_r)):
+            k = np.flatnonzero(use & np.isfinite(pred).all(axis=1))
+            if k.size == 0:
+                continue
+            K, d = (cal.K1, cal.d1) if cam == 0 else (cal.K2, cal.d2)
+            ray = cv2.undistortPoints(fine[k, cam].reshape(-1, 1, 2).astype(np.float64), K, d).reshape(-1, 2)
+            ray = np.concatenate([ray, np.ones((len(k), 1))], axis=1)
+            if cam == 0:
+                out[k] = ray * pred[k, 2:3]
+            else:
+                z = (pred[k] @ cal.R.T + cal.T)[:, 2:3]
+                out[k] = (ray * z - cal.T) @ cal.R
+        return out
 
     def _hypotheses(self, left: np.ndarray, right: np.ndarray):
         """(ii, jj, xyz): candidate pairs within the epipolar tolerance, in depth range."""

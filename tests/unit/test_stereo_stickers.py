@@ -240,3 +240,29 @@ def test_depth_smoothing_follows_a_move_along_the_ray_that_shows_across_it():
            for a in (2.0, np.inf)]
     raw = np.linalg.norm(noisy - points, axis=2)
     assert np.median(err[0]) < 0.6 * np.median(raw) and np.percentile(err[1], 90) > 5.0
+
+
+def _skin(h=40, w=40):
+    img = np.empty((h, w, 3), np.uint8)
+    img[:] = (88, 102, 125)     # BGR skin, luma ~105
+    return img
+
+
+def test_a_small_dark_bluish_blob_near_the_prediction_is_a_faint_candidate():
+    from retarget.sources.stereo_tracks import _dark_candidate
+
+    blue = sticker_color("blue")
+    img = _skin()
+    img[21:23, 22:24] = (80, 68, 72)          # 2x2 px, luma ~71, saturation ~38, hue ~130
+    found = _dark_candidate(img, 20, 20, blue)
+    assert found is not None
+    (x, y), area = found
+    assert abs(x - 22.5) < 0.3 and abs(y - 21.5) < 0.3 and area == 4
+    # Too far from the prediction, no tint, or too big (a brow): none.
+    assert _dark_candidate(img, 13, 13, blue) is None
+    grey = _skin()
+    grey[21:23, 22:24] = (68, 68, 68)
+    assert _dark_candidate(grey, 20, 20, blue) is None
+    brow = _skin()
+    brow[19:23, 12:30] = (85, 62, 70)
+    assert _dark_candidate(brow, 20, 20, blue) is None
