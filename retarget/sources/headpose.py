@@ -261,10 +261,21 @@ class HeadMotionRemover:
     """
 
     def __init__(self, neutral, stable):
-        n = np.asarray(neutral, dtype=np.float64)
+        n = np.array(neutral, dtype=np.float64)  # a copy: `place` writes into it
         _, self.neutral, self.stable = _check_frames(n[None], n, stable)
+        self._anchors = _check_stable(stable, len(n))
         self._target = self.neutral[self.stable][None]
         self.reset()
+
+    def place(self, indices, positions) -> None:
+        """Anchors the neutral lacked (unseen when it was taken: a live source) join it at
+        `positions` (K, 3), their places in the head frame; the pose held so far stays."""
+        idx = np.asarray(indices, dtype=np.int64)
+        if not np.isin(idx, self._anchors).all():
+            raise RetargetError(f"place: {idx.tolist()} are not all anchors of {self._anchors.tolist()}")
+        self.neutral[idx] = positions
+        self.stable = np.union1d(self.stable, idx)
+        self._target = self.neutral[self.stable][None]
 
     def reset(self) -> None:
         """Forget the held pose, as at construction."""

@@ -89,7 +89,6 @@ class LiveStereoTracker:
         self.frames_ = 0
         self._time = -np.inf
         self._head: HeadMotionRemover | None = None
-        self._neutral = np.full((self.layout.n_points, 3), np.nan)
         self.setup_error_ = ""
 
     def push(self, left: np.ndarray, right: np.ndarray, time: float) -> np.ndarray:
@@ -142,20 +141,18 @@ class LiveStereoTracker:
         if self._head is None:
             if seen.sum() < 3:
                 return None
-            self._neutral[self.anchors[seen]] = xyz[self.anchors[seen]]
-            self._head = HeadMotionRemover(self._neutral, self.anchors)
+            neutral = np.full(xyz.shape, np.nan)
+            neutral[self.anchors[seen]] = xyz[self.anchors[seen]]
+            self._head = HeadMotionRemover(neutral, self.anchors)
             self.anchored_ = True
             return xyz.astype(np.float32)
         out = self._head(xyz)
         if not np.isfinite(self._head.rotation_).all():
             return None
         # an anchor seen for the first time joins at its place in the head frame
-        new = self.anchors[seen & ~np.isfinite(self._neutral[self.anchors]).all(axis=1)]
+        new = self.anchors[seen & ~np.isin(self.anchors, self._head.stable)]
         if new.size and not self._head.held_:
-            self._neutral[new] = out[new]
-            rotation, translation = self._head.rotation_, self._head.translation_
-            self._head = HeadMotionRemover(self._neutral, self.anchors)
-            self._head.rotation_, self._head.translation_ = rotation, translation
+            self._head.place(new, out[new])
         return out
 
 

@@ -184,3 +184,27 @@ def test_remove_head_motion_validates_its_input(performance):
     bad[[27, 28, 29, 30, 36, 39]] = np.nan
     with pytest.raises(RetargetError, match="2 finite stable points"):
         remove_head_motion(moving, bad, stable_indices("ibug68"))
+
+
+def test_an_anchor_placed_later_anchors_the_next_frames():
+    """`HeadMotionRemover.place`: an anchor the neutral lacked joins at its head-frame
+    place, and then pins the pose with the others (here it alone sees a turn the three
+    first anchors share an offset of one of them among fewer points)."""
+    rng = np.random.default_rng(4)
+    rest = rng.normal(size=(6, 3)) * 5
+    partial = rest.copy()
+    partial[3] = np.nan
+    remover = HeadMotionRemover(partial, [0, 1, 2, 3])
+    assert remover.stable.tolist() == [0, 1, 2]
+    turn = Rotation.from_rotvec([0.0, 0.3, 0.0]).as_matrix()
+    np.testing.assert_allclose(remover(rest @ turn.T), rest, atol=1e-4)
+    remover.place([3], rest[[3]])
+    assert remover.stable.tolist() == [0, 1, 2, 3]
+    noisy = rest @ turn.T
+    noisy[0] += 0.5  # one anchor off: with four, the fit shares it out
+    with_four = remover(noisy)
+    three = HeadMotionRemover(partial, [0, 1, 2, 3])(noisy)
+    others = [1, 2, 3, 4, 5]  # point 0 carries its own offset either way
+    assert np.abs(with_four - rest)[others].max() < np.abs(three - rest)[others].max()
+    with pytest.raises(RetargetError, match="not all anchors"):
+        remover.place([5], rest[[5]])
