@@ -47,7 +47,7 @@ import numpy as np
 
 from retarget.errors import RetargetError
 from retarget.layouts import get_layout
-from retarget.sources.take import Take
+from retarget.sources.take import Take, marker_names
 from retarget.sources.video import VideoReader
 
 if TYPE_CHECKING:
@@ -505,7 +505,7 @@ def track_marker_video(
         tracks = RingTracks() if tracks is None else tracks
         points = tracks.fit(grays).points_
         if lay is None:
-            names = tuple(f"m{k + 1:0{max(2, len(str(points.shape[1])))}d}" for k in range(points.shape[1]))
+            names = marker_names(points.shape[1])
         else:
             points = points[:, _named_tracks(points, lay, len(blobs.centres), path)]
             names = lay.point_names

@@ -35,7 +35,7 @@ from retarget.sources.headpose import (
 )
 from retarget.sources.stereo_depth import sight_smoothed
 from retarget.sources.stereo_tracks import StickerTracks
-from retarget.sources.take import Take
+from retarget.sources.take import Take, marker_names
 from retarget.sources.video import VideoReader
 
 __all__ = [
@@ -316,7 +316,7 @@ def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, ancho
         raise RetargetError("track_stereo: no stereo frames to track")
     points = tracks.points()
     m = points.shape[1]
-    names = tuple(f"m{k + 1:0{max(2, len(str(m)))}d}" for k in range(m))
+    names = marker_names(m)
     if m < 3:
         raise RetargetError(f"track_stereo: {m} stickers found in both cameras; at least 3 are "
                             f"needed for the head pose (colour {tracks.color.name!r})")
@@ -470,14 +470,7 @@ def _check_first_markers(left, right, calibration: StereoCalibration, layout: La
         first = (next(iter(a))[1], next(iter(b))[1])
     name = layout.name if isinstance(layout, Layout) else layout
     try:
-        if layout is None:
-            tracks = StickerTracks(calibration)
-            tracks(*first)
-            if tracks.points().shape[1] < 3:
-                raise RetargetError(f"{tracks.points().shape[1]} stickers matched between the "
-                                    "two first frames; at least 3 are needed")
-        else:
-            track_stereo_frames([first], calibration, layout=layout, head_motion="keep")
+        track_stereo_frames([first], calibration, layout=layout, head_motion="keep")
     except RetargetError as exc:
         raise RetargetError(f"the colour markers of {name!r} in the first frames of "
                             f"{str(left)!r} and {str(right)!r}: {exc}") from exc

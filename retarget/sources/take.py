@@ -37,7 +37,7 @@ refuse a file that declares more before they make its arrays. 30 million are 240
 float64 (120 MB as the take's float32): a 478-point MediaPipe mesh in 3D for 20,000
 frames, 11 minutes at 30 fps."""
 
-__all__ = ["MAX_TAKE_VALUES", "Take", "npy_array"]
+__all__ = ["MAX_TAKE_VALUES", "Take", "marker_names", "npy_array"]
 
 _FORMAT = "retarget-take-1"
 _MEMBERS = ("points", "times", "names", "info")
@@ -316,6 +316,13 @@ class Take:
         return cls(points=arrays["points"], names=tuple(arrays["names"].tolist()),
                    fps=info.get("fps"), times=arrays["times"], layout=info.get("layout"),
                    source=info.get("source", ""), meta=meta)
+
+
+def marker_names(m: int) -> tuple[str, ...]:
+    """The columns of `m` markers tracked without a layout: m01..mM (wider past 99), in
+    the order the tracker gives them."""
+    width = max(2, len(str(m)))
+    return tuple(f"m{k + 1:0{width}d}" for k in range(m))
 
 
 def npy_array(source, where: str, size: int, max_values: int | None = None) -> np.ndarray:
