@@ -18,6 +18,21 @@ sight_ratio=6)`, 2 passes, median over 3 seeds of the median / p95 shape error: 
 25 frames 1.00 / 3.59 mm, over 45 frames 0.90 / 3.59; weighted over 45 frames with
 `across` 2 mm 0.84 / 2.91, 1 mm 0.87 / 3.19, 3 mm 0.86 / 3.07). The 3-frame temporal
 mean of §5 smooths every direction alike and so also blurs fast lip motion across the ray.
+
+The weights alone still lag a move that is mostly along the ray: a jaw dropping at double
+pace takes the chin or a mouth corner 5-10 mm back while it moves only 1-3 mm across, so
+within a weight's width the frames before and after the move count alike and the median
+sits between them. But within a window an expression moves a sticker along one path, so
+its depth changes in step with its across-ray position, which is measured finely: the
+window's depth is fitted by weighted least squares as a linear function of the across-ray
+offset (its slope, ridge-regularised, is the depth change per mm of image-plane motion),
+and the weighted median is taken of the depths with that trend removed, i.e. of each
+frame's depth carried to this frame's across-ray position. A still sticker has no
+across-ray spread, the ridge keeps its slope near 0 and the median is the old one. (Issue
+17's material, 5 passes, named anchors, median / p95 shape error per seed 0, 1, 2: plain
+weighted median 0.65 / 2.77, 0.85 / 3.22, 0.73 / 2.68 mm; with the trend 0.63 / 2.61, 0.86
+/ 2.82, 0.69 / 2.54; held-out seeds 3-6 0.73 / 2.87, 1.57 / 4.33, 0.78 / 3.30, 0.91 / 3.47
+-> 0.76 / 2.98, 1.70 / 4.46, 0.73 / 2.95, 0.86 / 2.91.)
 """
 
 from __future__ import annotations
@@ -30,7 +45,8 @@ __all__ = ["sight_smoothed"]
 _CHUNK = 1024   # frames per block: the windows are (frames, stickers, 3, window) floats
 
 
-def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0) -> np.ndarray:
+def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0,
+                   ridge: float = 10.0) -> np.ndarray:
     """(F, M, 3) float64 left-camera-frame points with their depth noise smoothed.
 
     points : (F, M, 3) float in the left camera's frame (camera at the origin), NaN where
@@ -40,9 +56,15 @@ def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0)
     across : calibration units (mm), the Gaussian width of the weight on the distance
         across the ray between a window frame's head-frame position and this frame's
         (inf: a plain running median).
+    ridge : mm^2 (weight x squared distance), the regularisation of the slope of depth
+        against across-ray position: the slope is shrunk toward 0 unless the window's
+        weighted across-ray spread well exceeds it (inf: no trend, the plain weighted
+        median of the depths).
     In the head frame each point moves along the ray from the camera through it to the
     weighted median of the window frames' positions along that ray (over those that see
-    it); the result is mapped back into the camera frame.
+    it), each first carried to this frame's across-ray position by the window's fitted
+    trend of depth against across-ray position; the result is mapped back into the
+    camera frame.
     """
     p = np.asarray(points, dtype=np.float64)
     if window <= 1 or len(p) < 3:
@@ -57,7 +79,8 @@ def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0)
     shift = np.full(p.shape[:2], np.nan)
     for f0 in range(0, len(p), _CHUNK):
         part = slice(f0, f0 + _CHUNK)
-        shift[part] = _weighted_median_along(windows[part] - stab[part, ..., None], ray[part], across)
+        shift[part] = _weighted_median_along(windows[part] - stab[part, ..., None], ray[part], across,
+                                             ridge)
     steady = stab + shift[..., None] * ray
     # Back into the camera frame: p = R^T (s - t).
     out = np.einsum("fni,fij->fnj", steady - trans[:, None], rot)
@@ -65,14 +88,20 @@ def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0)
     return np.where(ok[..., None], out, p)
 
 
-def _weighted_median_along(diff: np.ndarray, ray: np.ndarray, across: float) -> np.ndarray:
+def _weighted_median_along(diff: np.ndarray, ray: np.ndarray, across: float,
+                           ridge: float = np.inf) -> np.ndarray:
     """(F, M) the weighted median over the window of the offsets `diff` (F, M, 3, W) along
-    `ray` (F, M, 3), each weighted by exp(-d^2 / 2 across^2), d its length across the ray;
-    NaN where no window frame sees the point."""
+    `ray` (F, M, 3), each weighted by exp(-d^2 / 2 across^2), d its length across the ray,
+    and first carried to across-ray offset 0 along the window's weighted least-squares
+    trend of offset along against offset across (slope ridge-regularised by `ridge`, mm^2;
+    inf: none); NaN where no window frame sees the point."""
     along = np.einsum("fniw,fni->fnw", diff, ray)
-    off = np.linalg.norm(diff - along[:, :, None, :] * ray[..., None], axis=2)
+    side = diff - along[:, :, None, :] * ray[..., None]              # (F, M, 3, W) across
+    off = np.linalg.norm(side, axis=2)
     seen = np.isfinite(along)
     weight = np.where(seen, np.exp(-0.5 * (np.nan_to_num(off) / across) ** 2), 0.0)
+    if np.isfinite(ridge):
+        along = along - _trend(np.nan_to_num(along), np.nan_to_num(side), weight, ridge)
     order = np.argsort(np.where(seen, along, np.inf), axis=-1)
     along = np.take_along_axis(along, order, axis=-1)
     cum = np.cumsum(np.take_along_axis(weight, order, axis=-1), axis=-1)
@@ -80,3 +109,16 @@ def _weighted_median_along(diff: np.ndarray, ray: np.ndarray, across: float) -> 
     at = (cum < 0.5 * cum[..., -1:]).sum(axis=-1, keepdims=True)
     at = np.minimum(at, along.shape[-1] - 1)
     return np.where(seen.any(axis=-1), np.take_along_axis(along, at, axis=-1)[..., 0], np.nan)
+
+
+def _trend(along: np.ndarray, side: np.ndarray, weight: np.ndarray, ridge: float) -> np.ndarray:
+    """(F, M, W) the depth each window frame owes to its across-ray offset: b . side, with
+    b (F, M, 3) the ridge-regularised weighted least-squares slope of `along` (F, M, W)
+    against `side` (F, M, 3, W) (intercept free; zero weight where unseen). The across-ray
+    offsets span a plane, so the ridge also keeps the slope along the ray itself at 0."""
+    total = np.maximum(weight.sum(axis=-1), 1e-12)
+    x = side - np.einsum("fniw,fnw->fni", side, weight)[..., None] / total[..., None, None]
+    y = along - (weight * along).sum(axis=-1, keepdims=True) / total[..., None]
+    cov = np.einsum("fnw,fniw,fnjw->fnij", weight, x, x) + ridge * np.eye(3)
+    slope = np.linalg.solve(cov, np.einsum("fnw,fniw,fnw->fni", weight, x, y)[..., None])[..., 0]
+    return np.einsum("fni,fniw->fnw", slope, side)
