@@ -34,7 +34,7 @@ from retarget.sources.filters import TemporalMean
 from retarget.sources.headpose import HeadMotionRemover, stable_indices
 from retarget.sources.stereo import identified_markers
 
-__all__ = ["LiveStereoTracker", "LiveCalibration", "MIN_CALIBRATION_VIEWS"]
+__all__ = ["LiveStereoTracker", "LiveCalibration", "MIN_CALIBRATION_VIEWS", "checked_pair"]
 
 MIN_CALIBRATION_VIEWS = 10
 """Good view pairs `LiveCalibration.calibrate` asks for by default: fewer leave the
@@ -105,17 +105,7 @@ class LiveStereoTracker:
         return lost if stabilised is None else self._mean(stabilised)
 
     def _check(self, left, right, time) -> None:
-        want = tuple(self.calibration.size)
-        for name, img in (("left", left), ("right", right)):
-            if not (isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.ndim == 3
-                    and img.shape[2] == 3):
-                raise RetargetError(f"live stereo: the {name} image must be (H, W, 3) uint8 BGR")
-            if img.shape[1::-1] != want:
-                raise RetargetError(f"live stereo: the {name} image is {img.shape[1]}x{img.shape[0]}, "
-                                    f"the calibration is for {want[0]}x{want[1]}")
-        if not np.isfinite(time) or time <= self._time:
-            raise RetargetError(f"live stereo: capture times must increase; got {time!r} after {self._time!r}")
-        self._time = float(time)
+        self._time = checked_pair(self.calibration, left, right, time, self._time)
 
     def _pixels(self, left, right):
         """(left (N, 2), right (N, 2)) marker pixels, None while not yet identified."""
@@ -154,6 +144,22 @@ class LiveStereoTracker:
         if new.size and not self._head.held_:
             self._head.place(new, out[new])
         return out
+
+
+def checked_pair(calibration: StereoCalibration, left, right, time, last: float) -> float:
+    """`time` as a float once the pair is fit to track: both images (H, W, 3) uint8 BGR of
+    the calibration's size, and `time` (s) finite and after `last`; else `RetargetError`."""
+    want = tuple(calibration.size)
+    for name, img in (("left", left), ("right", right)):
+        if not (isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.ndim == 3
+                and img.shape[2] == 3):
+            raise RetargetError(f"live stereo: the {name} image must be (H, W, 3) uint8 BGR")
+        if img.shape[1::-1] != want:
+            raise RetargetError(f"live stereo: the {name} image is {img.shape[1]}x{img.shape[0]}, "
+                                f"the calibration is for {want[0]}x{want[1]}")
+    if not np.isfinite(time) or time <= last:
+        raise RetargetError(f"live stereo: capture times must increase; got {time!r} after {last!r}")
+    return float(time)
 
 
 class LiveCalibration:

@@ -1,0 +1,370 @@
+"""Live stereo capture of unnamed stickers of one colour (issue 17 §3, Woodward §5).
+
+Woodward et al. film 13 blue stickers with two webcams, live. Offline,
+`retarget.sources.stereo` follows such stickers through a take (`StickerTracks`), then
+fits the head pose over the whole take (`anchored_poses`) and smooths each sticker's
+depth along its line of sight over a centred window (`sight_smoothed`). Here every step
+is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`):
+
+1. the stickers are followed frame by frame by the same `StickerTracks`; each confirmed
+   track is a column, m01..mM in the offline order (by the frame first seen, then top to
+   bottom, then left to right), so a sticker that appears later gets a new column at the
+   end and M only grows;
+2. a **set-up span** (`setup_seconds` of capture time from the first pair showing 3
+   stickers) fixes the head frame. The anchors are the named ones (1 s is enough), or
+   else the 4 most mutually rigid stickers of the span (`rigid_anchors`), which needs the
+   face to move in it (talk, smile, raise the brows: 3 s by default; on a still span any
+   sticker looks rigid: on issue 17's take, 1 s of mostly neutral face chose mouth
+   stickers, 3.1 / 15 mm median / p95 shape error, 3 s the forehead, nose bridge and a
+   temple, 0.9 / 2.5 mm). The head may move. The head frame is that of the span's first
+   pair seeing 3 anchors (`anchored_poses`). Every pair of the span comes out NaN;
+3. after it, each pair's head pose is the rigid fit of the anchors it sees onto their
+   places, each column's place being the median of its first `_KEEP` registrations in the
+   head frame (the span's, then those of pairs whose pose 3 anchors fixed): a median,
+   since a temple's first sightings, half hidden at a grazing angle, are millimetres off
+   (on issue 17's take, pose error 2.2 -> 1.9 mm against a running mean), and frozen
+   once full, so the head frame cannot drift in a long session. An anchor not seen in
+   the span (or a named column not tracked yet) joins with its first registration,
+   weighted by its count until its place is steady: the pose never jumps when the
+   visible set changes. A pair short of placed anchors (a temple turned away) is fitted
+   to every column it sees, weighted by 1 / its spread squared (as `anchored_poses`
+   offline), and a pair with no fit holds the last pose;
+4. the depth is steadied causally: in the head frame, each sticker's component along
+   its line of sight moves to the weighted median of its last `depth_window` positions
+   (and this one) along that line, each weighted by how near it lay across the line
+   (Gaussian, `across` mm) to this pair's position: the one-sided form of
+   `sight_smoothed` (a triangulated sticker's error lies along its line of sight; across
+   it the position is a tenth of a pixel sure, and an expression's move shows there).
+   Measured on issue 17's take (named anchors, median / p95 mm): window 15 1.51 / 3.93,
+   30 1.33 / 3.59, 45 1.17 / 3.33, 60 1.17 / 3.11. Fitting the pose again to the steadied
+   anchors, or weighing the anchors' depth less in it (`anchored_poses`' sight ratio),
+   gained nothing live (1.18 / 3.28 and 1.31 / 3.48 at 45), so neither is done;
+5. Woodward's causal 3-frame mean (`temporal_window`).
+
+A live player needs points in its target's layout order: `by_name` picks the columns of
+a layout's points named m01..mM (NaN for a point no column has yet). 3D points are in the
+calibration's units (mm), in the left camera's frame at the head pose of the span's first
+anchored pair.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.sources.calibration import StereoCalibration
+from retarget.sources.filters import temporal_mean
+from retarget.sources.headpose import anchored_poses, rigid_anchors, rigid_transform
+from retarget.sources.stereo_live import checked_pair
+from retarget.sources.stereo_tracks import StickerTracks
+from retarget.sources.take import marker_names
+
+__all__ = ["LiveStickerTracker", "by_name", "MAX_STICKERS", "sticker_index"]
+
+MAX_STICKERS = 99
+"""Most columns a live sticker tracker gives (m01..m99): the names keep two digits, so
+a column's name never changes while the session runs; later stickers are not followed."""
+
+_SIGHT_RATIO = 6.0   # depth noise over cross-ray noise of the set-up span's anchors, as offline
+_STEADY = 0.5   # mm, spreads below this count as this in the fit short of anchors
+_PRIOR_SPREAD, _PRIOR_HITS = 5.0, 10
+_KEEP=30   # registrations kept per column for its place (3 s at 30 fps)
+_JOIN = 10   # registrations at which a late anchor's place counts half   # mm: a sticker seen in few posed pairs counts as this loose
+_NAME = re.compile(r"m(\d{2,3})")
+
+
+def sticker_index(anchor: int | str) -> int:
+    """The column of an anchor given as a name m01..m99 or a 0-based index."""
+    if isinstance(anchor, str):
+        match = _NAME.fullmatch(anchor)
+        if match is None or not 1 <= int(match.group(1)) <= MAX_STICKERS:
+            raise RetargetError(f"a sticker anchor is named m01..m{MAX_STICKERS} (or is a column "
+                                f"index); got {anchor!r:.40}")
+        return int(match.group(1)) - 1
+    if isinstance(anchor, bool) or not isinstance(anchor, (int, np.integer)) or not 0 <= anchor < MAX_STICKERS:
+        raise RetargetError(f"a sticker anchor index is 0..{MAX_STICKERS - 1}; got {anchor!r:.40}")
+    return int(anchor)
+
+
+def by_name(points: np.ndarray, names: Sequence[str], wanted: Sequence[str]) -> np.ndarray:
+    """(len(wanted), D) rows of `points` (M, D) picked by name, NaN for a wanted name that
+    `names` (M,) lacks (a sticker not yet tracked, or a layout point no sticker carries)."""
+    column = {name: k for k, name in enumerate(names)}
+    out = np.full((len(wanted), points.shape[1]), np.nan, np.float32)
+    rows = [(i, column[w]) for i, w in enumerate(wanted) if w in column]
+    if rows:
+        i, k = np.array(rows).T
+        out[i] = points[k]
+    return out
+
+
+class LiveStickerTracker:
+    """Unnamed stickers of one colour followed live by a calibrated camera pair (module doc).
+
+    calibration : the pair's `StereoCalibration`; frames must be its size.
+    color : the stickers' colour as `sticker_color` takes it (a name, (B, G, R), "hsv:H,S,V").
+    anchors : >= 3 columns (m01..m99 or 0-based indices) that move with the head only
+        (temples, forehead, nose bridge); None: the 4 most rigid of the set-up span.
+    setup_seconds : capture time of the set-up span (module doc, step 2); default 1 s
+        with named anchors, 3 s to choose them.
+    depth_window : pairs of the causal depth median (1: none); across : its weight's
+        width across the line of sight (calibration units).
+    temporal_window : pairs of the causal mean (Woodward §5: 3; 1 = none).
+    max_epipolar : px, as `StickerTracks`.
+    setup_frames : pairs the set-up may take (performer not in view, too few stickers,
+        named anchors not seen) before `push` raises.
+    history : pairs of `StickerTracks`' history kept (a lost sticker is predicted from
+        where it was last seen: one hidden longer than this comes back as a new column);
+        the session's memory and time per pair stay bounded however long it runs.
+
+    ``push(left, right, time)`` takes (H, W, 3) uint8 BGR images and the capture time (s,
+    increasing) and returns (M, 3) float32 head-frame points, NaN where lost and through
+    the set-up span. After a call: ``names_`` (M,) the columns' names, ``camera_`` (M, 3)
+    float64 this pair's triangulated points in the left camera's frame (head motion
+    kept), ``anchors_`` (K,) the anchor columns (None during the set-up),
+    ``identified_`` (stickers are tracked), ``anchored_`` (the head frame is set up),
+    ``frames_`` (pairs pushed), ``setup_error_`` (why the set-up waits).
+    """
+
+    def __init__(self, calibration: StereoCalibration, color="blue", *,
+                 anchors: Sequence[int | str] | None = None, setup_seconds: float | None = None,
+                 depth_window: int = 45, across: float = 2.0,
+                 temporal_window: int = 3, max_epipolar: float = 3.0, setup_frames: int = 300,
+                 history: int = 900):
+        self.calibration = calibration
+        self.tracks = StickerTracks(calibration, color, max_epipolar=max_epipolar)
+        if anchors is not None:
+            items = [anchors] if isinstance(anchors, (str, int)) else list(anchors)
+            idx = [sticker_index(a) for a in items]
+            if len(set(idx)) < 3:
+                raise RetargetError(f"anchors must name at least 3 different stickers; got {anchors!r:.80}")
+            anchors = np.array(sorted(set(idx)), np.int64)
+        self.named_anchors = anchors
+        if setup_seconds is None:
+            setup_seconds = 1.0 if anchors is not None else 3.0
+        if not setup_seconds >= 0 or depth_window < 1 or temporal_window < 1 or history < 30:
+            raise RetargetError("setup_seconds must be >= 0, depth_window and temporal_window >= 1, "
+                                "history >= 30")
+        self.setup_seconds, self.depth_window, self.across = float(setup_seconds), int(depth_window), float(across)
+        self.temporal_window = int(temporal_window)
+        self.setup_frames, self.history = int(setup_frames), int(history)
+        self._rows = np.zeros(0, np.int64)      # the tracks' row of each column
+        self._time = -np.inf
+        self._setup: list[np.ndarray] = []       # camera-frame points of the set-up span
+        self._setup_start: float | None = None
+        self._pose_: tuple[np.ndarray, np.ndarray] | None = None
+        self._steady: list[np.ndarray] = []      # head-frame positions, last depth_window pairs
+        self._out: list[np.ndarray] = []         # steadied points, last temporal_window pairs
+        self.anchors_: np.ndarray | None = None
+        self._places = None   # cache of `_place_all`
+        self.camera_ = np.zeros((0, 3))
+        self.frames_ = 0
+        self.identified_ = self.anchored_ = False
+        self.setup_error_ = "waiting for 3 stickers seen by both cameras"
+
+    @property
+    def names_(self) -> tuple[str, ...]:
+        return marker_names(len(self._rows))
+
+    def push(self, left: np.ndarray, right: np.ndarray, time: float) -> np.ndarray:
+        """(M, 3) float32 head-frame points of this pair, after the temporal mean."""
+        self._time = checked_pair(self.calibration, left, right, time, self._time)
+        self.frames_ += 1
+        self.tracks(left, right)
+        self._forget()
+        xyz = self._columns()
+        self.camera_ = xyz
+        if not self.anchored_ and not self._set_up(xyz):
+            if self.frames_ >= self.setup_frames:
+                raise RetargetError(f"live stickers: no head frame after {self.frames_} frame pairs: "
+                                    f"{self.setup_error_}")
+            return np.full(xyz.shape, np.nan, np.float32)
+        return self._mean(self._stabilised(xyz))
+
+    # -- columns -------------------------------------------------------------------------
+
+    def _columns(self) -> np.ndarray:
+        """(M, 3) float64 this pair's confirmed stickers in column order (camera frame).
+
+        `StickerTracks` keeps its tracks in the order they were born and confirms them in
+        that order (a new track after `confirm` pairs in a row, or dropped), so confirmed
+        tracks are the first rows and keep their rows; the ones confirmed this pair (born
+        together) are ordered top to bottom, then left to right, as offline."""
+        tracks = self.tracks
+        confirmed = np.flatnonzero(tracks._confirmed)
+        new = confirmed[len(self._rows):][: MAX_STICKERS - len(self._rows)]
+        if new.size:
+            px = tracks._px[-1][new]
+            self._rows = np.concatenate([self._rows, new[np.lexsort((px[:, 0], px[:, 1]))]])
+            self.identified_ = True
+        return tracks._xyz[-1][self._rows].astype(np.float64)
+
+    def _forget(self) -> None:
+        """Keep `history` pairs of the tracks' per-pair lists (they serve the prediction of
+        a lost sticker from where it was last seen; the live columns never read them)."""
+        tracks = self.tracks
+        extra = len(tracks._xyz) - self.history
+        if extra >= self.history // 4:   # in steps: trimming a list copies it
+            for name in ("_xyz", "_px", "_fine"):
+                del getattr(tracks, name)[:extra]
+
+    # -- head frame ----------------------------------------------------------------------
+
+    def _set_up(self, xyz: np.ndarray) -> bool:
+        """Collect the set-up span; at its end choose the anchors and place them."""
+        if self._setup_start is None:
+            if np.isfinite(xyz[:, 0]).sum() < 3:
+                return False
+            self._setup_start = self._time
+        self._setup.append(xyz)
+        if self._time - self._setup_start < self.setup_seconds:
+            self.setup_error_ = "set-up span: hold the head still"
+            return False
+        m = len(xyz)
+        span = np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in self._setup])
+        try:
+            anchors = rigid_anchors(span, min(4, m)) if self.named_anchors is None else self.named_anchors
+            tracked = anchors[anchors < m]
+            if tracked.size < 3:
+                raise RetargetError(f"{tracked.size} of the anchors {', '.join(f'm{a + 1:02d}' for a in anchors)} "
+                                    f"are tracked ({m} stickers so far); 3 are needed")
+            rot, trans, ref = anchored_poses(span, tracked, sight_ratio=_SIGHT_RATIO)
+        except RetargetError as exc:
+            self.setup_error_ = str(exc)
+            self._setup, self._setup_start = [], None   # a new span
+            return False
+        # A named anchor not tracked yet has no place: it joins when first seen (`_learn`).
+        if np.isfinite(ref[tracked]).all(axis=1).sum() < 3:
+            self.setup_error_ = "fewer than 3 anchors were seen with a head pose in the set-up span"
+            self._setup, self._setup_start = [], None
+            return False
+        self.anchors_ = anchors
+        # Every column's head-frame place and spread, for pairs short of anchors.
+        registered = np.einsum("fnj,fij->fni", span, rot) + trans[:, None]
+        seen = np.isfinite(registered).all(axis=2)
+        self._reg = np.full((_KEEP, m, 3), np.nan)
+        self._hits = np.zeros(m)
+        for head in registered[seen.any(axis=1)]:
+            self._register(head)
+        self._setup = []
+        self.anchored_ = True
+        self.setup_error_ = ""
+        return True
+
+    def _register(self, head: np.ndarray) -> None:
+        """Keep this pair's head-frame positions (M, 3) of the columns it sees, each
+        column's last `_KEEP`."""
+        grow = len(head) - self._reg.shape[1]
+        if grow > 0:
+            self._reg = np.concatenate([self._reg, np.full((_KEEP, grow, 3), np.nan)], axis=1)
+            self._hits = np.concatenate([self._hits, np.zeros(grow)])
+        seen = np.flatnonzero(np.isfinite(head).all(axis=1) & (self._hits < _KEEP))
+        if seen.size == 0:
+            return
+        self._reg[self._hits[seen].astype(np.int64), seen] = head[seen]
+        self._hits[seen] += 1
+        self._places = None
+
+    def _place_all(self) -> tuple[np.ndarray, np.ndarray]:
+        """(M, 3) every column's head-frame place: the median of its kept registrations
+        (robust to a temple's first, half-hidden sightings; NaN for one never registered),
+        and (M,) the squared spread round it (median squared distance)."""
+        if self._places is None:
+            with warnings.catch_warnings():   # a column never registered: NaN
+                warnings.simplefilter("ignore", RuntimeWarning)
+                place = np.nanmedian(self._reg, axis=0)
+                spread2 = np.nanmedian(((self._reg - place) ** 2).sum(axis=2), axis=0)
+            self._places = place, spread2
+        return self._places
+
+    def _fit(self, xyz: np.ndarray):
+        """(R, t, full) of this pair (``head = p @ R.T + t``), full when 3 placed anchors
+        fixed it; None when nothing does. Short of anchors (a temple turned away while
+        another is not yet placed), every column seen is fitted to its place, weighted by
+        its steadiness (1 / its spread squared, spreads under `_STEADY` mm counting as
+        that and a sticker seen little as `_PRIOR_SPREAD`: the anchors weigh most, the
+        lips least), as `anchored_poses` does offline."""
+        m = len(xyz)
+        places, spread2 = self._place_all()
+        n = len(places)
+        k = self.anchors_[self.anchors_ < min(m, n)]
+        ok = np.isfinite(xyz[k]).all(axis=1) & np.isfinite(places[k]).all(axis=1)
+        k = k[ok]
+        try:
+            if k.size >= 3:
+                # A place is the mean of the anchor's registrations: one that joined a few
+                # pairs ago has a noisy place, and counts less until it has more.
+                weight = self._hits[k] / (self._hits[k] + _JOIN)
+                return (*rigid_transform(xyz[k], places[k], weight), True)
+            # A sticker seen in few posed pairs counts as loose.
+            hits = np.minimum(self._hits, _KEEP)
+            spread2 = (np.nan_to_num(spread2) * hits + _PRIOR_HITS * _PRIOR_SPREAD**2) / (hits + _PRIOR_HITS)
+            weight = 1.0 / np.maximum(spread2, _STEADY**2)
+            use = np.isfinite(xyz[:n]).all(axis=1) & np.isfinite(places).all(axis=1)
+            if use.sum() < 3:
+                return None
+            return (*rigid_transform(xyz[:n][use], places[use], weight[use]), False)
+        except RetargetError:   # collinear
+            return None
+
+    def _learn(self, xyz: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> None:
+        """After a pair whose pose 3 anchors fixed, every column's place and spread take
+        it in: an anchor seen for the first time joins at its place in the head frame (no
+        jump: the pose did not use it), and the anchors' places, the mean of their
+        registrations, grow steadier."""
+        self._register(xyz @ rot.T + trans)
+
+    def _stabilised(self, xyz: np.ndarray) -> np.ndarray:
+        """(M, 3) head-frame points with their depth steadied (module doc, steps 3-4)."""
+        fit = self._fit(xyz)
+        if fit is None:
+            if self._pose_ is None:
+                return np.full(xyz.shape, np.nan)
+            fit = (*self._pose_, False)   # held
+        rot, trans, full = fit
+        head = xyz @ rot.T + trans
+        ray = xyz / np.linalg.norm(xyz, axis=1, keepdims=True) @ rot.T
+        past = self._past(len(xyz))
+        steady = _sight_median(past, head, ray, self.across) if len(past) else head
+        self._pose_ = (rot, trans)
+        if full:
+            self._learn(xyz, rot, trans)
+        self._steady = [*self._steady[-(self.depth_window - 1):], head] if self.depth_window > 1 else []
+        return steady
+
+    def _past(self, m: int) -> np.ndarray:
+        """(W, M, 3) the last head-frame positions, NaN for columns born since."""
+        if not self._steady:
+            return np.zeros((0, m, 3))
+        return np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in self._steady])
+
+    def _mean(self, points: np.ndarray) -> np.ndarray:
+        """Woodward's causal mean over the last `temporal_window` pairs (columns born since
+        a pair count as lost in it)."""
+        m = len(points)
+        self._out = [*self._out[-(self.temporal_window - 1):], points] if self.temporal_window > 1 else [points]
+        stack = np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in self._out])
+        return temporal_mean(stack, self.temporal_window)[-1]
+
+
+def _sight_median(past: np.ndarray, head: np.ndarray, ray: np.ndarray, across: float) -> np.ndarray:
+    """(M, 3) `head` (M, 3) moved along `ray` (M, 3, unit) to the weighted median of the
+    window `past` (W, M, 3) and itself along the ray, each weighted by exp(-d^2 / 2
+    across^2), d its distance across the ray from `head` (the causal `sight_smoothed`)."""
+    window = np.concatenate([past, head[None]])                       # (W + 1, M, 3)
+    diff = window - head
+    along = np.einsum("wmi,mi->wm", diff, ray)
+    off = np.linalg.norm(diff - along[..., None] * ray, axis=2)
+    seen = np.isfinite(along)
+    weight = np.where(seen, np.exp(-0.5 * (np.nan_to_num(off) / across) ** 2), 0.0)
+    order = np.argsort(np.where(seen, along, np.inf), axis=0)
+    along = np.take_along_axis(along, order, axis=0)
+    cum = np.cumsum(np.take_along_axis(weight, order, axis=0), axis=0)
+    at = np.minimum((cum < 0.5 * cum[-1:]).sum(axis=0), len(window) - 1)
+    shift = np.take_along_axis(along, at[None], axis=0)[0]
+    # A point not seen this pair stays lost (NaN): the window only steadies a seen one.
+    return head + np.nan_to_num(shift)[:, None] * ray
