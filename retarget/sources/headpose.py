@@ -28,6 +28,8 @@ NaN everywhere in `retarget.sources`.
 from __future__ import annotations
 
 import warnings
+from itertools import combinations
+from math import comb
 
 import numpy as np
 
@@ -295,48 +297,102 @@ class HeadMotionRemover:
         return (p @ self.rotation_.T + self.translation_).astype(np.float32)
 
 
-def rigid_anchors(points, count: int = 4, window: int = 7) -> np.ndarray:
+def rigid_anchors(points, count: int = 4, window: int = 1, *, modes: int = 3) -> np.ndarray:
     """(count,) int64 indices of the most mutually rigid markers of a take, ascending.
 
-    points : (F, M, 3) float, NaN where a marker is unseen. Rigidity is the spread (median
-    absolute deviation over the frames both are seen in, at least 5) of each pair's
-    distance, on positions first averaged over `window` frames (a stereo pair's depth
-    noise, millimetres at 1 m, would hide the expressions' motion). The stiffest pair
-    starts the set and markers are added greedily by their mean spread to those already
-    chosen that they are seen with (on a face: nose, forehead, temples, Woodward §5.1's
-    anchors, which expressions barely move; two temples need not be seen together).
-    Markers seen in under a quarter of the frames are no candidates. `RetargetError` if
-    fewer than `count` markers are ever seen.
+    points : (F, M, 3) float, NaN where a marker is unseen (stereo: millimetres of depth
+    noise along each line of sight). A pair's rigidity is how far its distance moves with
+    the expression: the pair's distance over the frames both are seen in (at least 5 and
+    a fifth of the take; `window` > 1: first a running median over that many frames) is
+    fitted by least squares to the take's first `modes` modes of deformation, and the
+    spread (90th percentile of the absolute deviation from the median) of the fitted part
+    is the pair's. The modes are the principal components of the distances between the
+    markers seen in nearly every frame (95 %; on a face the mouth, chin and nose, whose
+    distances change with the jaw, the lips and the smile), so a marker that moves with
+    the jaw moves with them and is penalised even where it is seen only in the frames
+    of a little motion, while a rigid pair's depth noise, uncorrelated with them, is not
+    fitted. The set is the `count` markers seen in a quarter of the frames or more whose
+    measured pairs have the least mean spread, searched exhaustively (greedily beyond
+    `_EXHAUSTIVE` sets): two markers never seen together (the two temples, hidden in turn)
+    need not be, while the stiffest pair alone does not pick the set (the lower lip and
+    the chin move together and so are mutually rigid). On a face: nose, forehead,
+    temples, Woodward §5.1's anchors. (Issue 17's 13 stickers, 7 seeds: the named
+    anchors on 5, a brow for a temple on 2; the position-averaged median spread with a
+    greedy set before took the chin, a lip or a cheek on every seed.) Without two markers
+    seen throughout there are no modes and the pair's own spread counts. `RetargetError`
+    if fewer than `count` markers are ever seen.
     """
     p = np.asarray(points, dtype=np.float64)
-    m = p.shape[1]
+    n_frames, m = p.shape[:2]
     if m < count or count < 3:
         raise RetargetError(f"rigid_anchors: {m} markers, {count} anchors asked (at least 3)")
     seen = np.isfinite(p).all(axis=2)
-    # Moving nan-mean over `window` frames.
-    kernel = np.ones(max(1, window))
-    total = np.apply_along_axis(np.convolve, 0, np.where(seen[..., None], p, 0.0), kernel, "same")
-    hits = np.apply_along_axis(np.convolve, 0, seen.astype(np.float64), kernel, "same")
-    smooth = np.where(seen[..., None], total / np.maximum(hits, 1)[..., None], np.nan)
-    d = np.linalg.norm(smooth[:, :, None] - smooth[:, None], axis=3)          # (F, M, M)
-    with warnings.catch_warnings():   # pairs never seen together: NaN, then inf below
+    dist = np.linalg.norm(p[:, :, None] - p[:, None], axis=3)                 # (F, M, M)
+    with warnings.catch_warnings():   # pairs never seen together: NaN throughout
         warnings.simplefilter("ignore", RuntimeWarning)
-        spread = np.nanmedian(np.abs(d - np.nanmedian(d, axis=0)), axis=0)
-    often = seen.mean(axis=0) >= 0.25
-    spread[(np.isfinite(d).sum(axis=0) < 5) | ~np.isfinite(spread)] = np.inf
-    spread[~often] = np.inf
-    spread[:, ~often] = np.inf
-    np.fill_diagonal(spread, np.inf)
-    i, j = np.unravel_index(np.argmin(spread), spread.shape)
-    chosen = [int(i), int(j)]
+        if window > 1:
+            half = window // 2
+            padded = np.pad(dist, ((half, half), (0, 0), (0, 0)), constant_values=np.nan)
+            runs = np.nanmedian(np.lib.stride_tricks.sliding_window_view(padded, window, axis=0), axis=-1)
+            dist = np.where(np.isfinite(dist), runs, np.nan)
+        dev = dist - np.nanmedian(dist, axis=0)
+    both = np.isfinite(dev)
+    y = np.where(both, dev, 0.0)
+    core = np.flatnonzero(seen.mean(axis=0) >= 0.95)
+    i, j = np.triu_indices(len(core), 1)
+    signals = y[:, core[i], core[j]]
+    if signals.shape[1] and modes > 0:
+        u, _, _ = np.linalg.svd(signals - signals.mean(axis=0), full_matrices=False)
+        basis = np.concatenate([np.ones((n_frames, 1)), u[:, :modes]], axis=1)   # (F, B)
+        # Each pair's least squares over its own frames (normal equations, batched).
+        gram = np.einsum("fmn,fa,fb->mnab", both.astype(np.float64), basis, basis)
+        rhs = np.einsum("fmn,fa->mna", y, basis)
+        sol = np.linalg.solve(gram + 1e-9 * np.eye(basis.shape[1]), rhs[..., None])[..., 0]
+        moved = np.einsum("fa,mna->fmn", basis[:, 1:], sol[..., 1:])
+        moved = np.where(both, moved, np.nan)
+    else:
+        moved = dev
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        spread = np.nanpercentile(np.abs(moved - np.nanmedian(moved, axis=0)), 90, axis=0)
+    spread[both.sum(axis=0) < max(5, 0.2 * n_frames)] = np.nan
+    np.fill_diagonal(spread, np.nan)
+    often = np.flatnonzero(seen.mean(axis=0) >= 0.25)
+    if len(often) < count:
+        often = np.argsort(-seen.sum(axis=0), kind="stable")[:count]
+    return np.sort(_stiffest_set(spread, often, count))
+
+
+# Candidate sets scored at once by `rigid_anchors`; beyond, the set grows greedily.
+_EXHAUSTIVE = 20000
+
+
+def _set_scores(spread: np.ndarray, sets: np.ndarray) -> np.ndarray:
+    """(S,) the mean spread of the measured pairs of each set (S, K); inf where fewer
+    than K of its pairs are measured (a set must hang together)."""
+    k = sets.shape[1]
+    i, j = np.triu_indices(k, 1)
+    pairs = spread[sets[:, i], sets[:, j]]
+    measured = np.isfinite(pairs).sum(axis=1)
+    total = np.where(np.isfinite(pairs), pairs, 0.0).sum(axis=1)
+    return np.where(measured >= min(k, len(i)), total / np.maximum(measured, 1), np.inf)
+
+
+def _stiffest_set(spread: np.ndarray, candidates: np.ndarray, count: int) -> np.ndarray:
+    """(count,) indices among `candidates` whose pairs have the least mean `spread` (M, M)."""
+    if comb(len(candidates), count) <= _EXHAUSTIVE:
+        sets = candidates[np.array(list(combinations(range(len(candidates)), count)))]
+        scores = _set_scores(spread, sets)
+        return sets[int(np.argmin(scores))]
+    # Greedy: the best third for the stiffest pair, then one at a time.
+    sub = np.where(np.isfinite(spread), spread, np.inf)[np.ix_(candidates, candidates)]
+    a, b = np.unravel_index(np.argmin(sub), sub.shape)
+    chosen = [int(candidates[a]), int(candidates[b])]
     while len(chosen) < count:
-        to = spread[:, chosen]
-        finite = np.isfinite(to)
-        score = np.where(finite.any(axis=1), np.where(finite, to, 0).sum(axis=1)
-                         / np.maximum(finite.sum(axis=1), 1), np.inf)
-        score[chosen] = np.inf
-        chosen.append(int(np.argmin(score)))
-    return np.sort(np.array(chosen, dtype=np.int64))
+        rest = np.setdiff1d(candidates, chosen)
+        grown = np.concatenate([np.tile(chosen, (len(rest), 1)), rest[:, None]], axis=1)
+        chosen.append(int(rest[int(np.argmin(_set_scores(spread, grown)))]))
+    return np.array(chosen, dtype=np.int64)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:

@@ -293,3 +293,43 @@ def test_a_small_dark_bluish_blob_near_the_prediction_is_a_faint_candidate():
     brow = _skin()
     brow[19:23, 12:30] = (85, 62, 70)
     assert _dark_candidate(brow, 20, 20, blue) is None
+
+
+def _jaw_take(seed: int, n: int = 150) -> np.ndarray:
+    """(n, 13, 3) mm stereo stickers in the camera frame: temples (hidden in turn as the
+    head turns 30 degrees), forehead, nose bridge, brows, cheeks, mouth corners, upper and
+    lower lip, chin; short jaw drops carry the lower lip and chin together (mutually rigid),
+    smiles move the cheeks and mouth corners; depth noise 1.5 mm along each ray."""
+    rng = np.random.default_rng(seed)
+    face = np.array([[-65, 20, -50], [65, 20, -50], [0, 70, 0], [0, 30, 20],
+                     [-30, 45, 5], [30, 45, 5], [-40, -10, 0], [40, -10, 0],
+                     [-25, -30, 5], [25, -30, 5], [0, -22, 12], [0, -38, 10], [0, -60, 0]], float)
+    t = np.arange(n)
+    jaw = np.clip(np.sin(2 * np.pi * t / 25), 0, None) ** 2 * (t % 50 < 25)
+    smile = np.clip(np.sin(2 * np.pi * t / 40 + 1), 0, None) ** 3
+    expr = np.zeros((n, 13, 3))
+    expr[:, [11, 12]] += jaw[:, None, None] * np.array([0, -12, -8])
+    expr[:, 10] += jaw[:, None] * np.array([0, -2, -2]) + smile[:, None] * np.array([0, 1, -2])
+    expr[:, [8, 9]] += jaw[:, None, None] * np.array([0, -4, -3])
+    expr[:, 8] += smile[:, None] * np.array([-5, 3, -3])
+    expr[:, 9] += smile[:, None] * np.array([5, 3, -3])
+    expr[:, 6] += smile[:, None] * np.array([-3, 4, 2])
+    expr[:, 7] += smile[:, None] * np.array([3, 4, 2])
+    expr[:, [4, 5]] += (np.sin(t / 9) > 0.8)[:, None, None] * np.array([0, 2, 0])
+    yaw = np.radians(30) * np.sin(2 * np.pi * t / 120)
+    rot = Rotation.from_euler("y", yaw[:, None]).as_matrix() @ np.diag([1.0, -1.0, -1.0])
+    cam = np.einsum("fij,fnj->fni", rot, face + expr) + np.array([0, 0, 1000.0])
+    ray = cam / np.linalg.norm(cam, axis=2, keepdims=True)
+    points = cam + rng.normal(0, 1.5, (n, 13, 1)) * ray + rng.normal(0, 0.1, cam.shape)
+    points[yaw > 0.05, 0] = np.nan
+    points[yaw < -0.05, 1] = np.nan
+    return points
+
+
+def test_automatic_anchors_leave_the_jaw_out():
+    # The lower lip and chin keep their distance (they drop together), and the drops are
+    # short, so a median spread, or a set grown from the stiffest pair, took them (the old
+    # choice did on 7 of 8 seeds); their distances to the rest change with the mouth's
+    # other distances, which the expression-fitted spread sees.
+    for seed in range(4):
+        assert rigid_anchors(_jaw_take(seed), 4).tolist() == [0, 1, 2, 3]
