@@ -7,7 +7,17 @@
  * by side (the left half is the left camera) or one above the other (the top half is the
  * left camera), as a stereo webcam delivers them, or a test's fake camera playing a
  * rendered pair.
+ *
+ * The JPEGs are encoded in a module worker (jpegWorker.js: the frames travel as
+ * ImageBitmaps, drawn to an OffscreenCanvas there), not on the page's main thread, where
+ * a canvas's toBlob encodes in the idle time the page's rendering leaves (Chromium), so
+ * the rendering and the pairs slowed each other. No main-thread fallback: every browser the app runs in has
+ * OffscreenCanvas with a 2D context and module workers (Chrome 80, Firefox 114, Safari
+ * 16.4), and a fallback would be code no test runs.
  */
+
+/** Frame pairs the worker encodes at once at most; `grab` refuses more (drop, don't queue). */
+export const MAX_ENCODING = 2;
 
 /**
  * The video inputs the browser offers, [{deviceId, label}] (labels are empty until the
@@ -42,12 +52,20 @@ export class StereoCapture {
 		this.width = width;
 		this.height = height;
 		this.streams = [];
-		this.canvas = document.createElement( 'canvas' );
+		this.worker = null;
+		this.pending = new Map(); // the worker's jobs: id -> {resolve, reject}
+		this.jobs = 0;
 
 	}
 
 	/** Open the camera(s) and play them; rejects with getUserMedia's error. */
 	async open() {
+
+		if ( typeof OffscreenCanvas === 'undefined' || ! OffscreenCanvas.prototype.convertToBlob ) {
+
+			throw new Error( 'This browser cannot encode camera frames in a worker (no OffscreenCanvas): live stereo needs a current Chrome, Edge, Firefox or Safari.' );
+
+		}
 
 		for ( const [ i, deviceId ] of this.devices.entries() ) {
 
@@ -71,6 +89,9 @@ export class StereoCapture {
 		for ( const stream of this.streams ) stream.getTracks().forEach( ( track ) => track.stop() );
 		this.streams = [];
 		for ( const video of this.videos ) video.srcObject = null;
+		this.worker?.terminate();
+		this.worker = null;
+		this._failAll( new Error( 'The cameras were closed.' ) );
 
 	}
 
@@ -84,30 +105,86 @@ export class StereoCapture {
 	}
 
 	/**
-	 * The current frame pair as JPEGs.
+	 * The current frame pair as JPEGs, encoded in the worker. At most `MAX_ENCODING` pairs
+	 * encode at once: a call beyond rejects at once (the frame is dropped, not queued, so
+	 * no backlog builds up; the panel asks for one pair at a time).
 	 * @param {number} quality - JPEG quality, 0 to 1.
 	 * @returns {Promise<{left: Uint8Array, right: Uint8Array, time: number}>} time: seconds
 	 *   since the Unix epoch, when the frames were read.
 	 */
 	async grab( quality ) {
 
-		const time = Date.now() / 1000;
-		const [ w, h ] = this.size;
-		const views = this.split === 'none'
-			? [ [ this.videos[ 0 ], 0, 0 ], [ this.videos[ 1 ], 0, 0 ] ]
-			: [ [ this.videos[ 0 ], 0, 0 ], [ this.videos[ 0 ], this.split === 'side' ? w : 0, this.split === 'top' ? h : 0 ] ];
-		const [ left, right ] = [ await this._jpeg( ...views[ 0 ], w, h, quality ), await this._jpeg( ...views[ 1 ], w, h, quality ) ];
-		return { left, right, time };
+		if ( this.pending.size >= MAX_ENCODING ) throw new Error( `${ MAX_ENCODING } frame pairs are being encoded already; this one was dropped` );
+		const id = ++ this.jobs;
+		const job = new Promise( ( resolve, reject ) => this.pending.set( id, { resolve, reject } ) );
+		job.catch( () => {} ); // awaited below; not "unhandled" if it fails before that
+		try {
+
+			const time = Date.now() / 1000;
+			const [ w, h ] = this.size;
+			let views;
+			if ( this.split === 'none' ) {
+
+				const bitmaps = await Promise.all( this.videos.map( ( video ) => createImageBitmap( video ) ) );
+				views = bitmaps.map( ( bitmap ) => ( { bitmap, x: 0, y: 0 } ) );
+
+			} else {
+
+				const bitmap = await createImageBitmap( this.videos[ 0 ] ); // both views, cut in the worker
+				views = [ { bitmap, x: 0, y: 0 }, { bitmap, x: this.split === 'side' ? w : 0, y: this.split === 'top' ? h : 0 } ];
+
+			}
+
+			if ( ! this.pending.has( id ) ) {
+
+				views.forEach( ( view ) => view.bitmap.close() ); // closed meanwhile
+				return await job;
+
+			}
+
+			this._worker().postMessage( { id, quality, width: w, height: h, views }, [ ...new Set( views.map( ( view ) => view.bitmap ) ) ] );
+			const [ left, right ] = await job;
+			return { left: new Uint8Array( left ), right: new Uint8Array( right ), time };
+
+		} finally {
+
+			this.pending.delete( id );
+
+		}
 
 	}
 
-	async _jpeg( video, x, y, w, h, quality ) {
+	_worker() {
 
-		this.canvas.width = w;
-		this.canvas.height = h;
-		this.canvas.getContext( '2d' ).drawImage( video, x, y, w, h, 0, 0, w, h );
-		const blob = await new Promise( ( resolve ) => this.canvas.toBlob( resolve, 'image/jpeg', quality ) );
-		return new Uint8Array( await blob.arrayBuffer() );
+		if ( ! this.worker ) {
+
+			this.worker = new Worker( new URL( './jpegWorker.js', import.meta.url ), { type: 'module' } );
+			this.worker.addEventListener( 'message', ( { data } ) => {
+
+				const job = this.pending.get( data.id );
+				if ( data.error !== undefined ) job?.reject( new Error( `JPEG encoding failed: ${ data.error }` ) );
+				else job?.resolve( data.jpegs );
+
+			} );
+			this.worker.addEventListener( 'error', ( event ) => {
+
+				event.preventDefault();
+				this.worker?.terminate();
+				this.worker = null; // the next grab starts another
+				this._failAll( new Error( `The JPEG encoder stopped: ${ event.message || 'its script did not load' }` ) );
+
+			} );
+
+		}
+
+		return this.worker;
+
+	}
+
+	_failAll( error ) {
+
+		for ( const { reject } of this.pending.values() ) reject( error );
+		this.pending.clear();
 
 	}
 
