@@ -1,6 +1,7 @@
 """Accuracy of cross-identity retargeting on the ICT face model, for every deformer.
 
     python bench/accuracy.py [--seed 0] [--random 24] [--methods ...] [--kernel linear]
+    python bench/accuracy.py --dense-only --seed 0     (the 468-point rows alone)
 
 Source identity A and target identity B are random ICT identities; expressions are the six
 universal ones plus random sparse ARKit combinations; the truth is B with the same
@@ -202,11 +203,14 @@ def main(argv=None) -> int:
     p.add_argument("--dense", action="store_true",
                    help="also the dense-source rows: 468 face-mesh points found on A and B (deformer: --dense-method)")
     p.add_argument("--dense-method", default=DEFAULT_METHOD, choices=list(METHODS))
+    p.add_argument("--dense-only", action="store_true", help="only the dense-source rows (implies --dense)")
     args = p.parse_args(argv)
     if not DATA.exists():
         print(f"ICT data not found at {DATA}", file=sys.stderr)
         return 2
-    rows = run(args.seed, args.random, args.methods, args.kernel, args.smoothing, not args.no_true)
+    args.dense |= args.dense_only
+    rows = [] if args.dense_only else run(args.seed, args.random, args.methods, args.kernel, args.smoothing,
+                                          not args.no_true)
     print(f"ICT cross-identity retargeting, seed {args.seed}, {6 + args.random} expressions, "
           f"58 feature points; transfer: kernel {args.kernel!r}, smoothing "
           f"{args.smoothing if args.smoothing is not None else DEFAULT_SMOOTHING} "

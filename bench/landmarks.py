@@ -15,6 +15,16 @@ Faces with known landmarks:
 Prints, per set: faces found / faces tried, seconds a mesh (median), and per region of
 the layout the mean and p95 distance (mm) from the known point, with the per-point
 correction (`layout_landmarks(..., corrected=True)`) and without it.
+
+    python bench/landmarks.py --spread 6 [--ict 3]
+
+instead measures how much of the placement's error is variance: the 468 points are found
+on --spread copies of each of --ict ICT identities, each copy moved by a random
+similarity (scale 0.5-2, a turn of up to 10 degrees in the picture plane and 3 out of it,
+a shift), carried back to the identity's own surface, and their RMS spread about their
+mean (mm) printed per region of the mediapipe468 layout, beside how far the same point
+lands on two different identities (compared on the first one's surface through ICT's
+shared topology): the part that no averaging over pictures removes.
 """
 
 from __future__ import annotations
@@ -74,6 +84,33 @@ def turned(vertices: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return (vertices - centre) @ Rotation.random(random_state=rng).as_matrix().T + centre
 
 
+def spread(model, n_faces: int, copies: int, rng: np.random.Generator, tracker) -> None:
+    """Print the 468 points' spread over moved copies of ICT identities (module docstring)."""
+    from retarget.facemesh.placement import find_face_mesh as find
+
+    regions = np.asarray(get_layout("mediapipe468").regions)
+    rms, first = [], []
+    for _ in tqdm(range(n_faces), desc="spread", leave=False):
+        v = model.identity_face(rng.standard_normal(100))
+        found = []
+        for k in range(copies):
+            turn = Rotation.from_euler("zyx", [rng.uniform(-10, 10), *rng.uniform(-3, 3, 2)], degrees=True)
+            moved = (v - v.mean(0)) @ turn.as_matrix().T * rng.uniform(0.5, 2.0) + rng.uniform(-5, 5, 3)
+            points = find(mesh_from_arrays(moved, model.faces), tracker).points
+            found.append(points.positions(v) * 10.0)                    # on the identity itself, mm
+        found = np.asarray(found)                                         # (copies, 468, 3)
+        rms.append(np.sqrt(((found - found.mean(0)) ** 2).sum(2).mean(0)))
+        first.append((v, points))
+    rms = np.mean(rms, axis=0)
+    (v0, p0), others = first[0], first[1:]
+    between = np.mean([np.linalg.norm(p.positions(v0) - p0.positions(v0), axis=1) * 10.0 for _, p in others], axis=0)
+    print(f"spread over {copies} moved copies of {n_faces} ICT identities, RMS mm per region; "
+          f"and the same point on two identities, mean mm:")
+    for r in dict.fromkeys(regions):
+        print(f"  {r:<14}{rms[regions == r].mean():6.2f}{between[regions == r].mean():8.2f}")
+    print(f"  {'all':<14}{rms.mean():6.2f}{between.mean():8.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ict", type=int, default=10)
@@ -81,8 +118,13 @@ def main() -> None:
     parser.add_argument("--turned", type=int, default=1)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--layout", default="ibug68")
+    parser.add_argument("--spread", type=int, default=0,
+                        help="instead: the points' spread over this many moved copies of --ict identities")
     args = parser.parse_args()
     print(machine())
+    if args.spread:
+        spread(load_model(), max(args.ict, 2), args.spread, np.random.default_rng(args.seed), FaceMeshTracker())
+        return
     layout = get_layout(args.layout)
     rows = np.asarray(layout.ibug68)
     rng = np.random.default_rng(args.seed)
