@@ -66,15 +66,18 @@ each point's ray is followed back onto the surface. In steps:
    model's inner points onto their final places) err differently, and the point halfway
    between the two, snapped to the closest surface point, agrees better from face to face.
    The lips stay on their rays (the closest surface point may be the other lip), and so
-   do the eyes (all the way to the model's point, their error grew on 4 of 14 seeds). The
-   dense benchmark (%, "468 found", `DEPTH_BLEND` 0 -> 0.5), seeds 0-2 and held-out 3-13:
+   do the eyes (moved all the way to the model's points, A's and B's eye points drew apart
+   on 10 of 14 seeds, 2.2 -> 3.8 mm on seed 8; halfway changed nothing). The dense
+   benchmark (%, "468 found", `DEPTH_BLEND` 0 -> 0.5), seeds 0-2 and held-out 3-13:
 
        0-2      23.1 22.2 24.8 -> 22.5 20.9 24.3   (A and B 3.22/2.48/2.46 -> 2.99/2.19/2.01 mm apart)
        3-13     32.4 20.6 18.9 25.1 17.4 24.6 24.5 20.7 20.3 33.3 31.2
              -> 31.2 18.8 18.2 25.4 17.5 23.9 23.3 20.7 19.2 31.2 31.5   (mean 24.5 -> 23.7)
 
    All the way (`DEPTH_BLEND` 1) gave 22.3/20.8/24.7 on seeds 0-2 but a held-out mean no
-   better than the rays'. `bench/landmarks.py` (ICT, corrected, mean/p95 mm): brows
+   better than the rays'; a share growing with the surface's slant (0.25-0.75), or the
+   mean of the hit, the similarity's and an affine map's point, gave means within 0.3 of
+   halfway (22.8 and 22.8 on seeds 0-2, 23.7 and 23.5 on 3-13). `bench/landmarks.py` (ICT, corrected, mean/p95 mm): brows
    2.7/6.1 -> 2.2/4.6, nose 1.5/3.7 -> 1.2/2.9, all 2.0/5.6 -> 1.8/5.3.
 
 Confidence per point (0..1) says which points a user should check: exact hits on a
