@@ -77,8 +77,10 @@ each point's ray is followed back onto the surface. In steps:
    All the way (`DEPTH_BLEND` 1) gave 22.3/20.8/24.7 on seeds 0-2 but a held-out mean no
    better than the rays'; a share growing with the surface's slant (0.25-0.75), or the
    mean of the hit, the similarity's and an affine map's point, gave means within 0.3 of
-   halfway (22.8 and 22.8 on seeds 0-2, 23.7 and 23.5 on 3-13). `bench/landmarks.py` (ICT, corrected, mean/p95 mm): brows
-   2.7/6.1 -> 2.2/4.6, nose 1.5/3.7 -> 1.2/2.9, all 2.0/5.6 -> 1.8/5.3.
+   halfway (22.8 and 22.8 on seeds 0-2, 23.7 and 23.5 on 3-13). `bench/landmarks.py`
+   (ICT, corrected, mean/p95 mm): brows 2.7/6.1 -> 2.2/4.6, nose 1.5/3.7 -> 1.2/2.9, all
+   2.0/5.6 -> 1.8/5.3 (the offset table measured again on the new placement did no
+   better, and was left as it was).
 
 Confidence per point (0..1) says which points a user should check: exact hits on a
 surface that faces the viewer score high; points that had to snap, that sit on grazing
