@@ -310,8 +310,9 @@ def rigid_anchors(points, count: int = 4, window: int = 1, *, modes: int = 3) ->
     markers seen in nearly every frame (95 %; on a face the mouth, chin and nose, whose
     distances change with the jaw, the lips and the smile), so the motion of a marker
     that moves with the jaw or the lips is fitted and counts, while a rigid pair's depth
-    noise, uncorrelated with the modes, is mostly left out. The set is the `count` markers seen in a quarter of the frames or more whose
-    measured pairs have the least mean spread, searched exhaustively (greedily beyond
+    noise, uncorrelated with the modes, is mostly left out. The set is the `count`
+    markers seen in a quarter of the frames or more whose measured pairs have the least
+    mean spread, searched exhaustively (greedily beyond
     `_EXHAUSTIVE` sets): two markers never seen together (the two temples, hidden in turn)
     need not be, while the stiffest pair alone does not pick the set (the lower lip and
     the chin move together and so are mutually rigid). On a face: nose, forehead,

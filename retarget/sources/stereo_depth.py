@@ -170,16 +170,19 @@ def expression_depth(points, rot, trans, modes: int = 8, *, share: float = 0.5,
     eye_k, eye_3k = np.eye(k), np.eye(3 * k)
     for _ in range(iterations):
         # Each frame's weights; the small ridge keeps those a frame cannot see at 0.
-        a = np.einsum("kni,fnij,lnj->fkl", basis, info, basis) + 1e-3 * eye_k
-        w = np.linalg.solve(a, np.einsum("kni,fnij,fnj->fk", basis, info, x)[..., None])[..., 0]
+        a = np.einsum("kni,fnij,lnj->fkl", basis, info, basis, optimize=True) + 1e-3 * eye_k
+        b = np.einsum("kni,fnij,fnj->fk", basis, info, x, optimize=True)
+        w = np.linalg.solve(a, b[..., None])[..., 0]
         # Each sticker's modes (K, 3) over the frames that see it.
-        g = np.einsum("fk,fnij,fl->nkilj", w, info, w).reshape(m, 3 * k, 3 * k) + 1e-9 * eye_3k
-        h = np.einsum("fk,fnij,fnj->nki", w, info, x).reshape(m, 3 * k)
+        g = np.einsum("fk,fnij,fl->nkilj", w, info, w, optimize=True).reshape(m, 3 * k, 3 * k)
+        g += 1e-9 * eye_3k
+        h = np.einsum("fk,fnij,fnj->nki", w, info, x, optimize=True).reshape(m, 3 * k)
         basis = np.linalg.solve(g, h[..., None])[..., 0].reshape(m, k, 3).transpose(1, 0, 2)
         # Unit modes, the scale in the weights: the weights' ridge then means one thing.
         basis /= np.maximum(np.linalg.norm(basis.reshape(k, -1), axis=1), 1e-12)[:, None, None]
-    a = np.einsum("kni,fnij,lnj->fkl", basis, info, basis) + 1e-3 * eye_k
-    w = np.linalg.solve(a, np.einsum("kni,fnij,fnj->fk", basis, info, x)[..., None])[..., 0]
+    a = np.einsum("kni,fnij,lnj->fkl", basis, info, basis, optimize=True) + 1e-3 * eye_k
+    b = np.einsum("kni,fnij,fnj->fk", basis, info, x, optimize=True)
+    w = np.linalg.solve(a, b[..., None])[..., 0]
     model = np.einsum("fk,kni->fni", w, basis)
     move = share * np.einsum("fni,fni->fn", model - x, ray)
     steady = stab + move[..., None] * ray
