@@ -25,6 +25,7 @@ from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
 from retarget.sources.jpeg_frames import decoded_jpeg
 from retarget.sources.stereo_live import LiveCalibration, LiveStereoTracker
+from retarget.sources.stereo_live_stickers import LiveStickerTracker, by_name
 from server.isolation import IsolationLimits, death_reason, error_message, limit_resources
 
 __all__ = ["StereoWorker", "WorkerDied"]
@@ -104,9 +105,13 @@ def _solve(state: dict) -> dict:
     return live.calibrate().to_dict()
 
 
-def _track(state: dict, calibration: dict, layout) -> dict:
+def _track(state: dict, calibration: dict, layout, stickers: dict | None = None) -> dict:
     calibration = StereoCalibration.from_dict(calibration)
-    state["tracker"] = LiveStereoTracker(calibration, layout)
+    if stickers is None:
+        state["tracker"], state["names"] = LiveStereoTracker(calibration, layout), None
+    else:
+        state["tracker"] = LiveStickerTracker(calibration, stickers["color"], anchors=stickers.get("anchors"))
+        state["names"] = layout.point_names   # the columns m01..mM go to these by name
     return {"size": list(calibration.size)}
 
 
@@ -116,15 +121,24 @@ def _pair(state: dict, left: bytes, right: bytes, time: float):
         raise RetargetError('send {"type": "start"} before the frames to track')
     size = tracker.calibration.size
     points = tracker.push(decoded_jpeg(left, size, "left image"), decoded_jpeg(right, size, "right image"), time)
-    return points, {"identified": tracker.identified_, "anchored": tracker.anchored_,
-                    "detail": "" if tracker.identified_ else tracker.setup_error_}
+    stickers = state["names"] is not None
+    info = {"identified": tracker.identified_, "anchored": tracker.anchored_,
+            "detail": "" if (tracker.anchored_ if stickers else tracker.identified_) else tracker.setup_error_}
+    if stickers:
+        anchors = tracker.anchors_
+        info.update(stickers=len(tracker.names_),
+                    anchors=[] if anchors is None else [f"m{a + 1:02d}" for a in anchors.tolist()])
+        points = by_name(points, tracker.names_, state["names"])
+    return points, info
 
 
 _REQUESTS = {"calibrate": _calibrate, "view": _view, "solve": _solve, "track": _track, "pair": _pair}
 """What the child answers: calibrate(pattern, size) starts a calibration; view(left, right)
 adds a pair of JPEGs to it; solve() returns the calibration's dict; track(calibration
-dict, layout) starts a tracker; pair(left, right, time) tracks a pair of JPEGs, returning
-((N, 3) float32 points, info)."""
+dict, layout, stickers=None) starts a tracker of the layout's colour markers, or with
+stickers ``{"color", "anchors"}`` a `LiveStickerTracker` whose columns m01..mM go to the
+layout's points of those names; pair(left, right, time) tracks a pair of JPEGs, returning
+((N, 3) float32 points in the layout's order, info)."""
 
 
 def _serve(conn, memory_bytes: int, cpu_seconds: int) -> None:

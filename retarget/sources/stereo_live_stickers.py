@@ -222,7 +222,9 @@ class LiveStickerTracker:
             self._setup_start = self._time
         self._setup.append(xyz)
         if self._time - self._setup_start < self.setup_seconds:
-            self.setup_error_ = "set-up span: hold the head still"
+            self.setup_error_ = ("set-up span: keep the stickers in view" if self.named_anchors is not None else
+                                 "set-up span: talk, smile and raise the brows, so the stickers that "
+                                 "do not move show")
             return False
         m = len(xyz)
         span = np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in self._setup])

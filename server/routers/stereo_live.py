@@ -6,7 +6,9 @@ messages, `server.wire.decode_stereo_pair`); the session's child process
 (`retarget.sources.stereo_live`). Woodward et al.'s live set-up (§3, §5).
 
 On connect the server sends ``{"type": "hello", "project", "layout", "n_points",
-"calibration": {rms, baseline, size, views} | null, "limits": {...}}``. JSON controls:
+"sticker_points", "calibration": {rms, baseline, size, views} | null, "limits": {...}}``
+(sticker_points: the layout's points named m01..m99, which single-colour stickers can
+drive). JSON controls:
 
 - ``{"type": "calibrate", "pattern": {"cols": 9, "rows": 6, "square": 25}, "size": [w, h]}``:
   calibration mode (a checkerboard of cols x rows inner corners, `square` in mm, shown to
@@ -22,6 +24,20 @@ On connect the server sends ``{"type": "hello", "project", "layout", "n_points",
   every viewer of ``/stream`` sees the retargeted face. Each pair answers ``{"type":
   "tracked", "frame", "found", "n_points", "identified", "anchored", "ms", "detail"}``
   (found: points seen; ms: the server's time on the pair);
+- ``{"type": "start", "markers": "stickers", "color": "blue", "anchors": ["m01", "m02",
+  "m03"] | null, "settings": {...}}``: the same with Woodward's unnamed stickers of one
+  colour (`retarget.sources.stereo_live_stickers.LiveStickerTracker`; color as the CLI's
+  ``--color``: a name, "B,G,R" or "hsv:H,S,V"; anchors: >= 3 columns that move with the
+  head only, or null to choose the most rigid after the set-up span). Stickers have no
+  names, so the tracker numbers them m01..mM as it first sees them (top to bottom at the
+  start, a later one at the end) and column mK drives the landmark named mK: the project's
+  landmarks must be placed with a custom layout whose points are named so (``PUT
+  /api/projects/{id}/layouts/{name}``, then landmarks in it), the same names an offline
+  sticker take (`track_stereo_videos` without a layout) plays by. The live player keeps
+  the landmarks' fixed N: a column not yet seen, or a landmark no sticker carries, is a
+  lost (NaN) row, so M may grow during the session. "tracked" adds "stickers" (M so far)
+  and "anchors" (their names once chosen); until the set-up span ends (the head frame is
+  set up) the points are all lost and "detail" says what the set-up waits for;
 - ``{"type": "stop"}``: stop tracking (and the project's source, if it is still ours).
 
 Bounds before any work: a pair of more than `MAX_PAIR_BYTES`, more than
@@ -40,6 +56,7 @@ import asyncio
 import collections
 import json
 import logging
+import re
 import time
 
 import numpy as np
@@ -47,6 +64,8 @@ from fastapi import APIRouter, WebSocket
 
 from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
+from retarget.sources.color_markers import MARKER_COLORS
+from retarget.sources.stereo_live_stickers import MAX_STICKERS
 from server.deps import HubDep, StoreDep
 from server.hub import StreamHub
 from server.players import LivePlayer
@@ -67,6 +86,7 @@ CALIBRATION_FILE = "stereo-calibration.json"
 """The project's saved live calibration, in its folder (not a store revision file, so the
 store's sweep leaves it)."""
 INTERNAL_ERROR = 1011
+_STICKER_NAME = re.compile(r"m(0[1-9]|[1-9][0-9])")
 
 
 @router.websocket("/api/projects/{project_id}/stereo/live")
@@ -149,11 +169,16 @@ class _Session:
                          "calibration_save, start, stop")
 
     async def _start(self, msg: dict) -> dict:
+        stickers = _stickers(msg)
+        layout = await asyncio.to_thread(resolve_layout, self.store, self.project_id, self.layout or "ibug68")
+        if stickers is not None and not sticker_points(layout):
+            raise ValueError(f"single-colour stickers are unnamed: their columns m01, m02, ... drive the "
+                             f"landmarks of those names, and this project's layout {layout.name!r} has none; "
+                             "place the landmarks with a custom layout whose points are named m01..mM")
         calibration = await asyncio.to_thread(saved_calibration, self.store, self.project_id)
         if calibration is None:
             raise ValueError("this project has no stereo calibration yet: calibrate the cameras first")
-        layout = await asyncio.to_thread(resolve_layout, self.store, self.project_id, self.layout or "ibug68")
-        await self._call("track", calibration.to_dict(), layout)
+        await self._call("track", calibration.to_dict(), layout, stickers)
         settings = msg.get("settings") or {}
         player = await source_from_message({"source": "live", "dims": 3, "fps": 30.0, "settings": settings}, self.hub,
                               self.store, self.project_id, self.target_points, self.layout)
@@ -193,6 +218,72 @@ class _Session:
         return await asyncio.to_thread(self.worker.call, kind, *args, seconds=seconds)
 
 
+def sticker_points(layout) -> list[str]:
+    """The layout's points named as live sticker columns are (m01..m99)."""
+    return [name for name in layout.point_names if _STICKER_NAME.fullmatch(name)]
+
+
+def _sticker_count(store, project_id: str, layout: str) -> int:
+    """How many of the project's landmarks a sticker column can drive (0 if its layout
+    cannot be resolved: "start" then says why)."""
+    try:
+        return len(sticker_points(resolve_layout(store, project_id, layout or "ibug68")))
+    except RetargetError:
+        return 0
+
+
+def _stickers(msg: dict) -> dict | None:
+    """The start message's marker choice: None for the layout's colour markers, else
+    ``{"color", "anchors"}`` for single-colour stickers."""
+    markers = msg.get("markers", "layout")
+    if markers == "layout":
+        for key in ("color", "anchors"):
+            if key in msg:
+                raise ValueError(f'"{key}" is for "markers": "stickers"; the layout\'s markers have their own colours')
+        return None
+    if markers != "stickers":
+        raise ValueError(f'"markers" must be "layout" (the layout\'s colour markers) or "stickers" '
+                         f'(unnamed stickers of one colour); got {markers!r:.40}')
+    return {"color": _sticker_color(msg.get("color", "blue")), "anchors": _anchors(msg.get("anchors"))}
+
+
+def _sticker_color(color):
+    """A colour as `sticker_color` takes it: a name, "B,G,R" (as three numbers) or "hsv:H,S,V"."""
+    if not isinstance(color, str) or len(color) > 40:
+        raise ValueError(f'"color" must be a colour name ({", ".join(MARKER_COLORS)}), "B,G,R" or "hsv:H,S,V"; '
+                         f"got {color!r:.40}")
+    text = color.strip().lower()
+    if text in MARKER_COLORS:
+        return text
+    hsv = text.startswith("hsv:")
+    parts = (text[4:] if hsv else text).split(",")
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise ValueError(f'unknown sticker colour {color!r}: a name ({", ".join(MARKER_COLORS)}), "B,G,R" '
+                         'or "hsv:H,S,V"')
+    tops = (179, 255, 255) if hsv else (255, 255, 255)
+    if not all(0 <= v <= top for v, top in zip(values, tops)):
+        raise ValueError(f"sticker colour {color!r}: " + ("hsv:H,S,V takes H 0-179, S and V 0-255 (OpenCV's 8-bit HSV)"
+                                                           if hsv else "B, G and R are 0-255"))
+    return text if hsv else tuple(values)
+
+
+def _anchors(anchors) -> list[str] | None:
+    if anchors is None:
+        return None
+    if not (isinstance(anchors, list) and all(isinstance(a, str) for a in anchors)):
+        raise ValueError('"anchors" must be a list of sticker names (m01, m02, ...) or null to choose them')
+    bad = [a for a in anchors if not _STICKER_NAME.fullmatch(a)]
+    if bad:
+        raise ValueError(f'"anchors" are sticker columns m01..m{MAX_STICKERS}; {bad[0]!r:.40} is none')
+    if len(set(anchors)) < 3 or len(anchors) > MAX_STICKERS:
+        raise ValueError(f'"anchors" must name at least 3 different stickers (the head frame needs 3); got {anchors!r:.80}')
+    return anchors
+
+
 def _pattern(pattern) -> tuple:
     if not isinstance(pattern, dict):
         raise ValueError('"pattern" must be {"cols", "rows", "square"}: inner corners and the square in mm')
@@ -227,6 +318,7 @@ async def _serve(websocket: WebSocket, project_id: str, store, hub: StreamHub) -
     try:
         await websocket.send_json({
             "type": "hello", "project": project_id, "layout": layout, "n_points": len(target_points),
+            "sticker_points": await asyncio.to_thread(_sticker_count, store, project_id, layout),
             "calibration": _summary(calibration),
             "limits": {"pair_bytes": MAX_PAIR_BYTES, "pairs_per_second": MAX_PAIRS_PER_SECOND,
                        "bytes_per_second": MAX_BYTES_PER_SECOND, "size": list(MAX_SIZE)}})

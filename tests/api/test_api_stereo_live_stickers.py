@@ -1,0 +1,112 @@
+"""Live single-colour stickers over ``WS /api/projects/{id}/stereo/live`` (issue 17 §3):
+the rendered sticker take sent as JPEG pairs to a project whose landmarks are a custom
+layout named m01..m13, tracked into its live source; the start message's refusals."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from retarget.layouts import get_layout
+from retarget.sources.stereo import track_stereo_frames
+from retarget.sources.video import VideoReader
+from retarget.testing.stereo_rig import STICKER_ANCHORS, render_sticker_video, rig_calibration, sticker_scores
+from server.routers.stereo_live import CALIBRATION_FILE
+from server.wire import encode_stereo_pair
+
+N_FRAMES = 40
+IBUG = get_layout("ibug68")
+SPOTS = (17, 26, 27, 28, 19, 24, 2, 14, 48, 54, 51, 57, 8)   # iBUG points near the 13 stickers
+
+
+def pair(left, right, index: int) -> bytes:
+    jpeg = [cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 90])[1].tobytes() for img in (left, right)]
+    return encode_stereo_pair(*jpeg, frame_index=index, capture_time=index / 30)
+
+
+@pytest.fixture(scope="module")
+def material(tmp_path_factory):
+    """The sticker take (seed 1), its calibration, and the named anchors (the columns the
+    temples, forehead and nose bridge have offline)."""
+    truth = render_sticker_video(tmp_path_factory.mktemp("stickers") / "take.mp4", n_frames=N_FRAMES, seed=1)
+    with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
+        frames = [(left, right) for (_, left), (_, right) in zip(a, b)]
+    cal = rig_calibration(*truth.cameras)
+    kept = track_stereo_frames(frames, cal, layout=None, head_motion="keep")
+    owner = sticker_scores(kept.points, kept.points, truth)["owner"]
+    return frames, cal, [kept.names[m] for m in range(kept.n_points) if owner[m] < STICKER_ANCHORS]
+
+
+@pytest.fixture(scope="module")
+def project(app, sample_id, material) -> str:
+    """The sample face with landmarks in a custom layout m01..m13 (the anchors marked: the
+    live source's conditioning removes the head pose on them too), and the rig's calibration."""
+    spec = {"points": [{"name": f"m{k + 1:02d}", "region": IBUG.regions[i], "side": IBUG.sides[i]}
+                       | ({"anchor": True} if f"m{k + 1:02d}" in material[2] else {})
+                       for k, i in enumerate(SPOTS)]}
+    with TestClient(app) as client:
+        sample = client.get(f"/api/projects/{sample_id}/landmarks").json()
+        pid = client.post("/api/projects", json={"name": "stickers live"}).json()["id"]
+        mesh = client.get(f"/api/projects/{sample_id}/mesh").content
+        assert client.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", mesh)}).status_code == 200
+        assert client.put(f"/api/projects/{pid}/layouts/stickers", json=spec).status_code == 201
+        picked = {"layout": "stickers", "vertex_indices": [sample["vertex_indices"][i] for i in SPOTS]}
+        assert client.put(f"/api/projects/{pid}/landmarks", json=picked).status_code == 200
+    (app.state.store.folder(pid) / CALIBRATION_FILE).write_text(json.dumps(material[1].to_dict()))
+    return pid
+
+
+def test_stickers_are_tracked_live_into_the_stream_by_name(app, project, material):
+    frames, _, anchors = material
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{project}/stereo/live") as ws:
+        hello = ws.receive_json()
+        assert (hello["n_points"], hello["sticker_points"]) == (13, 13)
+        ws.send_json({"type": "start", "markers": "stickers", "color": "blue", "anchors": anchors})
+        started = ws.receive_json()
+        assert (started["type"], started["source"]) == ("started", "live"), started
+        tracked = []
+        for i, (left, right) in enumerate(frames):
+            ws.send_bytes(pair(left, right, i))
+            tracked.append(ws.receive_json())
+        assert {t["type"] for t in tracked} == {"tracked"}, [t for t in tracked if t["type"] != "tracked"][:2]
+        # 1 s of set-up (named anchors): nothing found, then the 13 stickers in the head frame.
+        assert all(t["found"] == 0 and not t["anchored"] for t in tracked[:29])
+        assert tracked[5]["detail"] == "set-up span: keep the stickers in view"
+        last = tracked[-1]
+        assert last["anchored"] and last["n_points"] == 13 and last["stickers"] == 13, last
+        assert last["found"] >= 10 and sorted(last["anchors"]) == anchors
+        # The points went to the project's live source (its neutral is captured from them).
+        assert app.state.hub.source(project).describe()["source"] == "live"
+        ws.send_json({"type": "stop"})
+        assert ws.receive_json()["type"] == "stopped"
+
+
+@pytest.mark.parametrize("message, detail", [
+    ({"markers": "dots"}, '"markers" must be "layout"'),
+    ({"markers": "stickers", "color": "teal"}, "unknown sticker colour 'teal'"),
+    ({"markers": "stickers", "color": 3}, '"color" must be a colour name'),
+    ({"markers": "stickers", "color": "300,0,0"}, "B, G and R are 0-255"),
+    ({"markers": "stickers", "color": "hsv:200,90,90"}, "H 0-179"),
+    ({"markers": "stickers", "anchors": ["m01", "m02"]}, "at least 3 different stickers"),
+    ({"markers": "stickers", "anchors": ["m01", "m02", "nose"]}, "'nose' is none"),
+    ({"markers": "stickers", "anchors": "m01,m02,m03"}, '"anchors" must be a list'),
+    ({"color": "blue"}, '"color" is for "markers": "stickers"'),
+])
+def test_a_bad_sticker_start_is_refused_precisely(app, project, message, detail):
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{project}/stereo/live") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "start", **message})
+        reply = ws.receive_json()
+        assert reply["type"] == "error" and detail in reply["detail"], reply
+
+
+def test_stickers_need_landmarks_named_as_their_columns(app, sample_id):
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{sample_id}/stereo/live") as ws:
+        assert ws.receive_json()["sticker_points"] == 0
+        ws.send_json({"type": "start", "markers": "stickers", "color": "40,90,200"})
+        reply = ws.receive_json()
+        assert reply["type"] == "error" and "has none; place the landmarks with a custom layout" in reply["detail"]
