@@ -33,6 +33,17 @@ const HTML = `
 		<button id="live-stereo-save" type="button" disabled>Save calibration</button>
 	</div>
 	<div class="row">
+		<label for="live-stereo-markers">Markers</label>
+		<select id="live-stereo-markers" title="What the face carries: the layout's coloured markers, or unnamed stickers of one colour (Woodward's), numbered m01, m02, ... as first seen">
+			<option value="layout">layout colours</option>
+			<option value="stickers">stickers, one colour</option>
+		</select>
+		<input id="live-stereo-color" value="blue" size="9" disabled
+			title="The stickers' colour: a name (blue, green, ...), B,G,R or hsv:H,S,V">
+		<input id="live-stereo-anchors" value="" size="14" placeholder="anchors: chosen" disabled
+			title="At least 3 stickers that move with the head only (temples, forehead, nose bridge), e.g. m01,m03,m04; empty: the most rigid ones, chosen after 3 s of talking and smiling">
+	</div>
+	<div class="row">
 		<label for="live-stereo-quality">JPEG</label>
 		<input id="live-stereo-quality" type="number" min="0.3" max="0.95" step="0.05" value="0.8">
 		<button id="live-stereo-start" type="button" disabled>Start</button>
@@ -45,6 +56,12 @@ const HTML = `
  * the calibration with the project), then Start: each frame pair goes to the server as
  * two JPEGs (RTSJ, `WS .../stereo/live`), whose tracked points drive the project's stream
  * as the webcam's do. The panel shows frames per second and the bandwidth.
+ *
+ * Markers: the layout's colour markers, or unnamed stickers of one colour (a colour, and
+ * optionally the anchors m01, ...): the server numbers the stickers as it first sees them
+ * and sticker mK drives the landmark named mK, so the project's landmarks must be a custom
+ * layout named m01..mM (the hello's sticker_points counts them; without any the choice is
+ * disabled).
  */
 export class StereoLivePanel {
 
@@ -73,6 +90,7 @@ export class StereoLivePanel {
 		el( 'live-stereo-save' ).addEventListener( 'click', run( () => this.request( { type: 'calibration_save' } ) ) );
 		el( 'live-stereo-start' ).addEventListener( 'click', run( () => ( this.mode === 'track' ? this.stop() : this.start() ) ) );
 		el( 'live-stereo-split' ).addEventListener( 'change', () => ( el( 'live-stereo-right' ).disabled = el( 'live-stereo-split' ).value !== 'none' ) );
+		el( 'live-stereo-markers' ).addEventListener( 'change', () => this.markersChanged() );
 		this.listCameras().catch( ( error ) => app.errors.show( error ) );
 
 	}
@@ -105,6 +123,29 @@ export class StereoLivePanel {
 			: 'Not calibrated yet: show a checkerboard to both cameras and press Calibrate' );
 		this.el( 'live-stereo-calibrate' ).disabled = false;
 		this.el( 'live-stereo-start' ).disabled = ! hello.calibration;
+		const stickers = this.el( 'live-stereo-markers' ).querySelector( 'option[value="stickers"]' );
+		stickers.disabled = ! hello.sticker_points;
+		stickers.title = hello.sticker_points
+			? `${ hello.sticker_points } landmarks are named as stickers (m01, ...)`
+			: 'This project\'s landmarks have no points named m01, m02, ...: place them with a custom layout named so';
+		if ( stickers.disabled ) this.el( 'live-stereo-markers' ).value = 'layout';
+		this.markersChanged();
+
+	}
+
+	markersChanged() {
+
+		const stickers = this.el( 'live-stereo-markers' ).value === 'stickers';
+		this.el( 'live-stereo-color' ).disabled = this.el( 'live-stereo-anchors' ).disabled = ! stickers;
+
+	}
+
+	/** The start message's marker choice: {} for the layout's colours. */
+	markers() {
+
+		if ( this.el( 'live-stereo-markers' ).value !== 'stickers' ) return {};
+		const anchors = this.el( 'live-stereo-anchors' ).value.split( /[\s,;]+/ ).filter( Boolean );
+		return { markers: 'stickers', color: this.el( 'live-stereo-color' ).value.trim(), anchors: anchors.length ? anchors : null };
 
 	}
 
@@ -145,7 +186,7 @@ export class StereoLivePanel {
 
 	start() {
 
-		this.request( { type: 'start', settings: this.app.conditioning.toJSON() } );
+		this.request( { type: 'start', ...this.markers(), settings: this.app.conditioning.toJSON() } );
 		this.mode = 'track';
 		this.el( 'live-stereo-start' ).textContent = 'Stop';
 		this.pump();
@@ -210,7 +251,9 @@ export class StereoLivePanel {
 
 		} else if ( message.type === 'tracked' ) {
 
-			this.status( `${ message.found }/${ message.n_points } points · ${ this.rates() }${ message.detail ? ` · ${ message.detail }` : '' }` );
+			const stickers = message.stickers === undefined ? ''
+				: ` · ${ message.stickers } stickers${ message.anchors.length ? `, anchors ${ message.anchors.join( ' ' ) }` : '' }`;
+			this.status( `${ message.found }/${ message.n_points } points${ stickers } · ${ this.rates() }${ message.detail ? ` · ${ message.detail }` : '' }` );
 
 		} else if ( message.type === 'calibrated' ) {
 
@@ -222,7 +265,7 @@ export class StereoLivePanel {
 		} else if ( message.type === 'error' ) {
 
 			this.app.errors.show( message.detail );
-			if ( /calibrate the cameras first|before the frames/.test( message.detail ) ) this.stop();
+			if ( /calibrate the cameras first|before the frames|"markers"|"color"|"anchors"|sticker colour|stickers are unnamed/.test( message.detail ) ) this.stop();
 
 		} else if ( message.type === 'ended' ) {
 
