@@ -2,6 +2,7 @@
 
     python bench/stereo_live.py [--frames 45] [--views 12] [--qualities 60,80,90] [--fps 30]
                                 [--browser-frames 150]
+    python bench/stereo_live.py --stickers [--sticker-seeds 3] [--sticker-frames 150]
 
 The synthetic rig (`retarget.testing.stereo_rig.stereo_cameras`: two 640 x 480 cameras 1 m
 from the built-in face, 150 mm apart; 8 mm coloured stickers on the ``dutreve21`` points)
@@ -31,6 +32,19 @@ records, for `--browser-frames` retargeted frames, the time from the pair's grab
 frame's source time, the page's clock) to the frame applied to the face and to the next
 animation frame (drawn); and the panel's own readout of pairs per second and kB/s. The
 camera's own delay (sensor to the page) comes on top. 0 skips it.
+
+``--stickers`` (issue 17 §3): Woodward's unnamed single-colour stickers instead, on the
+sticker take of `retarget.testing.stereo_rig.render_sticker_video` (13 blue stickers,
+vertical 80 mm webcam pair at 1 m, head turns, blur, JPEG + MPEG-4; the exact
+calibration), per seed: the shape error (`sticker_scores`: head-frame points against the
+truth held at the first pose, after one rigid alignment) of `LiveStickerTracker` (causal,
+the 3-frame mean) and of the offline `track_stereo_frames` (centred windows over the
+whole take, the 3-frame mean) over the same pairs, those after the live set-up span, with
+the anchors named (temples, forehead, nose bridge: 1 s set-up) and chosen (3 s set-up);
+the library's time per pair on one core; and the server's time per pair (``ms`` of the
+"tracked" answers: JPEG decoding at quality 80 and tracking in the session's child) over
+``WS .../stereo/live`` for a project whose landmarks are a custom layout m01..m13.
+Medians over the seeds are printed last (targets, as offline: median <= 1 mm, p95 <= 3).
 """
 
 from __future__ import annotations
@@ -61,7 +75,13 @@ def main() -> None:
     parser.add_argument("--qualities", default="60,80,90")
     parser.add_argument("--fps", type=float, default=30.0)
     parser.add_argument("--browser-frames", type=int, default=150)
+    parser.add_argument("--stickers", action="store_true", help="the single-colour sticker bench alone")
+    parser.add_argument("--sticker-seeds", type=int, default=3)
+    parser.add_argument("--sticker-frames", type=int, default=150)
     args = parser.parse_args()
+    if args.stickers:
+        sticker_bench(args.sticker_seeds, args.sticker_frames)
+        return
     qualities = [int(q) for q in args.qualities.split(",")]
 
     folder = Path(tempfile.mkdtemp(prefix="stereo-live-bench-"))
@@ -147,6 +167,105 @@ def main() -> None:
 
     if args.browser_frames:
         browser_run(frames, (lefts, rights), args.browser_frames, folder)
+
+
+def sticker_bench(seeds: int, n_frames: int) -> None:
+    """Live single-colour stickers against the offline tracker and the truth (module doc)."""
+    from retarget.sources.video import VideoReader
+
+    cv2.setNumThreads(1)
+    folder = Path(tempfile.mkdtemp(prefix="stereo-live-stickers-"))
+    rows = []
+    for seed in range(seeds):
+        from retarget.testing.stereo_rig import render_sticker_video
+        truth = render_sticker_video(folder / f"stickers{seed}.mp4", n_frames=n_frames, seed=seed)
+        with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
+            frames = [(left, right) for (_, left), (_, right) in zip(a, b)]
+        row = sticker_figures(truth, frames, folder / f"data{seed}")
+        rows.append(row)
+        print(f"seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in row.items()), flush=True)
+    med = {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+    print(f"\nLive single-colour stickers (13 blue, vertical 80 mm webcam pair at 1 m; {n_frames} frames, "
+          f"median over {seeds} seeds), shape error after head removal, mm (median / p95), over the "
+          "pairs after the live set-up:")
+    for label, what in (("named", "anchors named (temples, forehead, nose bridge), 1 s set-up"),
+                        ("auto", "anchors chosen (rigid_anchors), 3 s set-up")):
+        print(f"  {what}: live {med[label + '_live_median']:.2f} / {med[label + '_live_p95']:.2f}, "
+              f"offline {med[label + '_offline_median']:.2f} / {med[label + '_offline_p95']:.2f}   "
+              "(target median <= 1, p95 <= 3)")
+    print(f"  library {med['library_ms']:.1f} ms a pair on one core (p95 {med['library_p95_ms']:.1f}); "
+          f"server {med['server_ms']:.1f} ms a pair (p95 {med['server_p95_ms']:.1f}), JPEG 80 decoding included")
+
+
+def sticker_figures(truth, frames, data: Path) -> dict:
+    """One seed's figures (`sticker_bench`)."""
+    from retarget.sources.stereo import track_stereo_frames
+    from retarget.sources.stereo_live_stickers import LiveStickerTracker
+    from retarget.testing.stereo_rig import STICKER_ANCHORS, rig_calibration, sticker_scores
+
+    cal = rig_calibration(*truth.cameras)
+    kept = track_stereo_frames(frames, cal, layout=None, head_motion="keep")
+    owner = sticker_scores(kept.points, kept.points, truth)["owner"]
+    named = [kept.names[m] for m in range(kept.n_points) if owner[m] < STICKER_ANCHORS]
+    out: dict = {}
+    for label, anchors in (("named", named), ("auto", None)):
+        tracker = LiveStickerTracker(cal, "blue", anchors=anchors)
+        live, ms = [], []
+        for i, (left, right) in enumerate(frames):
+            began = time.perf_counter()
+            live.append(tracker.push(left, right, i / 30))
+            ms.append(1000 * (time.perf_counter() - began))
+        m = kept.n_points
+        live = np.stack([np.pad(p[:m], ((0, m - len(p[:m])), (0, 0)), constant_values=np.nan) for p in live])
+        after = np.isfinite(live).any(axis=(1, 2))
+        after[:int(np.argmax(after))] = False
+        offline = track_stereo_frames(frames, cal, layout=None, anchors=anchors, temporal_window=3)
+        for name, points in (("live", live), ("offline", offline.points)):
+            err = sticker_scores(kept.points, np.where(after[:, None, None], points, np.nan), truth)["error"]
+            err = err[np.isfinite(err)]
+            out[f"{label}_{name}_median"] = float(np.median(err))
+            out[f"{label}_{name}_p95"] = float(np.percentile(err, 95))
+        if label == "named":
+            out["library_ms"], out["library_p95_ms"] = float(np.median(ms)), float(np.percentile(ms, 95))
+    out["server_ms"], out["server_p95_ms"] = server_figures(frames, cal, named, data)
+    return out
+
+
+def server_figures(frames, cal, anchors, data: Path) -> tuple[float, float]:
+    """(median, p95) ms of the server's "tracked" answers for the sticker take sent as JPEG
+    pairs (quality 80) to a project whose landmarks are a custom layout m01..m13."""
+    from fastapi.testclient import TestClient
+
+    from retarget.layouts import get_layout
+    from server.app import create_app
+    from server.routers.stereo_live import CALIBRATION_FILE
+    from server.wire import encode_stereo_pair
+
+    ibug = get_layout("ibug68")
+    spots = (17, 26, 27, 28, 19, 24, 2, 14, 48, 54, 51, 57, 8)   # iBUG points near the 13 stickers
+    spec = {"points": [{"name": f"m{k + 1:02d}", "region": ibug.regions[i], "side": ibug.sides[i]}
+                       | ({"anchor": True} if f"m{k + 1:02d}" in anchors else {}) for k, i in enumerate(spots)]}
+    app = create_app(data)
+    with TestClient(app) as client:
+        sample = next(p for p in client.get("/api/projects").json() if p["settings"].get("sample"))["id"]
+        indices = client.get(f"/api/projects/{sample}/landmarks").json()["vertex_indices"]
+        pid = client.post("/api/projects", json={"name": "stickers"}).json()["id"]
+        client.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", client.get(f"/api/projects/{sample}/mesh").content)})
+        client.put(f"/api/projects/{pid}/layouts/stickers", json=spec)
+        client.put(f"/api/projects/{pid}/landmarks", json={"layout": "stickers", "vertex_indices": [indices[i] for i in spots]})
+        (app.state.store.folder(pid) / CALIBRATION_FILE).write_text(json.dumps(cal.to_dict()))
+        ms = []
+        with client.websocket_connect(f"/api/projects/{pid}/stereo/live") as ws:
+            ws.receive_json()
+            ws.send_json({"type": "start", "markers": "stickers", "color": "blue", "anchors": anchors})
+            assert ws.receive_json()["type"] == "started"
+            for i, (left, right) in enumerate(frames):
+                jpeg = [cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 80])[1].tobytes() for img in (left, right)]
+                ws.send_bytes(encode_stereo_pair(*jpeg, frame_index=i, capture_time=i / 30))
+                reply = ws.receive_json()
+                if reply["type"] == "tracked":
+                    ms.append(reply["ms"])
+    return float(np.median(ms)), float(np.percentile(ms, 95))
 
 
 _RECORDER = """() => {
