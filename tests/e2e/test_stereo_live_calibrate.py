@@ -7,12 +7,16 @@ calibration stores the calibration with the project, and it matches the rig.
 The clip holds 12 board poses, each for 2 frames at 30 fps and played in a loop: whatever
 rate the page grabs at, consecutive pairs mostly show different poses, so the count rises
 to the 10 needed within seconds (a pose seen again after another counts again; with 12
-poses most of the 10 are distinct).
+poses most of the 10 are distinct). The same clip checks the pairs StereoCapture's worker
+encodes (the camera's two halves; at most two at once).
 """
 
 from __future__ import annotations
 
 import json
+import time
+
+import cv2
 
 import numpy as np
 import pytest
@@ -41,10 +45,10 @@ _STATUS = """() => {
 @pytest.fixture(scope="module")
 def material(tmp_path_factory):
     """The fake camera's file (test_stereo_live's `browser` plays material[0]): the rig's
-    checkerboard views, left and right side by side."""
+    checkerboard views, left and right side by side; and the views (lefts, rights)."""
     lefts, rights, _ = checkerboard_views(*stereo_cameras(), n_views=POSES, seed=7)
     frames = [np.hstack(pair) for pair in zip(lefts, rights) for _ in range(HELD)]
-    return (write_y4m(tmp_path_factory.mktemp("stereo-calibrate") / "boards.y4m", frames, FPS),)
+    return write_y4m(tmp_path_factory.mktemp("stereo-calibrate") / "boards.y4m", frames, FPS), (lefts, rights)
 
 
 def test_calibrate_clicked_counts_views_and_saves_the_rigs_calibration(server, page):
@@ -94,3 +98,37 @@ def test_calibrate_clicked_counts_views_and_saves_the_rigs_calibration(server, p
         assert np.abs(K[:2, 2] - true_K[:2, 2]).max() < 5.0  # principal point, px
     turn = np.degrees(np.arccos(np.clip((np.trace(found.R @ truth.R.T) - 1) / 2, -1, 1)))
     assert turn < 0.2  # the right camera's rotation against the left's, degrees
+
+
+_GRABS = """async () => {
+    const { StereoCapture, MAX_ENCODING } = await import('/static/js/tracking/StereoCapture.js');
+    const capture = new StereoCapture([document.createElement('video'), document.createElement('video')],
+                                      { left: '', split: 'side' });
+    await capture.open();
+    const size = capture.size;
+    const grabs = [capture.grab(0.9), capture.grab(0.9), capture.grab(0.9)];
+    capture.close();  // while the first two encode
+    const [first, second, third] = await Promise.allSettled(grabs);
+    const after = await capture.grab(0.9).then(() => 'a pair', (error) => error.message);
+    return { max: MAX_ENCODING, size, states: [first.status, second.status], third: third.reason?.message, after,
+             left: Array.from(first.value.left), right: Array.from(first.value.right), time: first.value.time };
+}"""
+
+
+def test_pairs_are_encoded_off_the_page_two_at_most(server, page, material):
+    """StereoCapture itself (the panel asks for one pair at a time): its worker's JPEGs are
+    the camera's two halves; a third pair asked while two encode is dropped, not queued; the
+    pairs begun before close still come, and a grab after close is refused."""
+    page.goto(server.url)
+    page.wait_for_function("() => window.app && window.app.projectId")
+    got = page.evaluate(_GRABS)
+    assert got["max"] == 2 and got["size"] == [640, 480] and got["states"] == ["fulfilled", "fulfilled"]
+    assert "2 frame pairs are being encoded already" in got["third"]
+    assert "closed" in got["after"]
+    assert abs(got["time"] - time.time()) < scaled(30)
+    lefts, rights = material[1]
+    left, right = (cv2.imdecode(np.array(got[k], np.uint8), cv2.IMREAD_COLOR) for k in ("left", "right"))
+    assert left.shape == right.shape == (480, 640, 3)
+    # the pose the camera showed, in each half: its left view on the left, its right on the right
+    pose = int(np.argmin([cv2.absdiff(left, view).mean() for view in lefts]))
+    assert cv2.absdiff(left, lefts[pose]).mean() < 3 and cv2.absdiff(right, rights[pose]).mean() < 3

@@ -10,10 +10,12 @@
  *
  * The JPEGs are encoded in a module worker (jpegWorker.js: the frames travel as
  * ImageBitmaps, drawn to an OffscreenCanvas there), not on the page's main thread, where
- * a canvas's toBlob encodes in the idle time the page's rendering leaves (Chromium), so
- * the rendering and the pairs slowed each other. No main-thread fallback: every browser the app runs in has
- * OffscreenCanvas with a 2D context and module workers (Chrome 80, Firefox 114, Safari
- * 16.4), and a fallback would be code no test runs.
+ * a canvas's toBlob encodes in the idle time the page's rendering leaves (Chromium). In
+ * Chromium on SwiftShader most of a pair's time (about 80 ms of 90 on a loaded 2-core
+ * machine) is the read-back of the video frame from the (software) GPU, which the worker
+ * waits for instead of the page; the encoding itself takes a few ms. No main-thread
+ * fallback: every browser the app runs in has OffscreenCanvas with a 2D context and module
+ * workers (Chrome 80, Firefox 114, Safari 16.4), and a fallback would be code no test runs.
  */
 
 /** Frame pairs the worker encodes at once at most; `grab` refuses more (drop, don't queue). */
@@ -89,9 +91,10 @@ export class StereoCapture {
 		for ( const stream of this.streams ) stream.getTracks().forEach( ( track ) => track.stop() );
 		this.streams = [];
 		for ( const video of this.videos ) video.srcObject = null;
-		this.worker?.terminate();
+		// the pairs being encoded still come (a grab begun before close ends as before it)
+		const worker = this.worker;
 		this.worker = null;
-		this._failAll( new Error( 'The cameras were closed.' ) );
+		Promise.allSettled( [ ...this.pending.values() ].map( ( { job } ) => job ) ).then( () => worker?.terminate() );
 
 	}
 
@@ -114,10 +117,14 @@ export class StereoCapture {
 	 */
 	async grab( quality ) {
 
+		if ( ! this.streams.length ) throw new Error( 'The cameras are closed: Open them first.' );
 		if ( this.pending.size >= MAX_ENCODING ) throw new Error( `${ MAX_ENCODING } frame pairs are being encoded already; this one was dropped` );
+		const worker = this._worker();
 		const id = ++ this.jobs;
-		const job = new Promise( ( resolve, reject ) => this.pending.set( id, { resolve, reject } ) );
+		let settle;
+		const job = new Promise( ( resolve, reject ) => ( settle = { resolve, reject } ) );
 		job.catch( () => {} ); // awaited below; not "unhandled" if it fails before that
+		this.pending.set( id, { ...settle, job } );
 		try {
 
 			const time = Date.now() / 1000;
@@ -135,14 +142,14 @@ export class StereoCapture {
 
 			}
 
-			if ( ! this.pending.has( id ) ) {
+			if ( ! this.pending.has( id ) ) { // the worker failed meanwhile
 
-				views.forEach( ( view ) => view.bitmap.close() ); // closed meanwhile
+				views.forEach( ( view ) => view.bitmap.close() );
 				return await job;
 
 			}
 
-			this._worker().postMessage( { id, quality, width: w, height: h, views }, [ ...new Set( views.map( ( view ) => view.bitmap ) ) ] );
+			worker.postMessage( { id, quality, width: w, height: h, views }, [ ...new Set( views.map( ( view ) => view.bitmap ) ) ] );
 			const [ left, right ] = await job;
 			return { left: new Uint8Array( left ), right: new Uint8Array( right ), time };
 
@@ -158,19 +165,20 @@ export class StereoCapture {
 
 		if ( ! this.worker ) {
 
-			this.worker = new Worker( new URL( './jpegWorker.js', import.meta.url ), { type: 'module' } );
-			this.worker.addEventListener( 'message', ( { data } ) => {
+			const worker = new Worker( new URL( './jpegWorker.js', import.meta.url ), { type: 'module' } );
+			this.worker = worker;
+			worker.addEventListener( 'message', ( { data } ) => {
 
 				const job = this.pending.get( data.id );
 				if ( data.error !== undefined ) job?.reject( new Error( `JPEG encoding failed: ${ data.error }` ) );
 				else job?.resolve( data.jpegs );
 
 			} );
-			this.worker.addEventListener( 'error', ( event ) => {
+			worker.addEventListener( 'error', ( event ) => {
 
 				event.preventDefault();
-				this.worker?.terminate();
-				this.worker = null; // the next grab starts another
+				worker.terminate();
+				if ( this.worker === worker ) this.worker = null; // the next grab starts another
 				this._failAll( new Error( `The JPEG encoder stopped: ${ event.message || 'its script did not load' }` ) );
 
 			} );
