@@ -71,8 +71,8 @@ a column's name never changes while the session runs; later stickers are not fol
 
 _SIGHT_RATIO = 6.0   # depth noise over cross-ray noise of the set-up span's anchors, as offline
 _STEADY = 0.5   # mm, spreads below this count as this in the fit short of anchors
-_PRIOR_SPREAD, _PRIOR_HITS = 5.0, 10
-_KEEP=30   # registrations kept per column for its place (3 s at 30 fps)
+_PRIOR_SPREAD, _PRIOR_HITS = 5.0, 10   # mm, pairs: a column's spread before it has registrations
+_KEEP = 30   # registrations kept per column for its place (1 s at 30 fps; 90: 1.25 / 3.19 mm against 1.17 / 3.33)
 _JOIN = 10   # registrations at which a late anchor's place counts half   # mm: a sticker seen in few posed pairs counts as this loose
 _NAME = re.compile(r"m(\d{2,3})")
 
@@ -258,8 +258,8 @@ class LiveStickerTracker:
         return True
 
     def _register(self, head: np.ndarray) -> None:
-        """Keep this pair's head-frame positions (M, 3) of the columns it sees, each
-        column's last `_KEEP`."""
+        """Keep this pair's head-frame positions (M, 3) of the columns it sees, up to each
+        column's first `_KEEP` (then its place is frozen: the head frame cannot drift)."""
         grow = len(head) - self._reg.shape[1]
         if grow > 0:
             self._reg = np.concatenate([self._reg, np.full((_KEEP, grow, 3), np.nan)], axis=1)

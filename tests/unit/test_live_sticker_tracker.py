@@ -85,10 +85,11 @@ def test_a_sticker_that_appears_late_gets_a_column_and_the_head_motion_goes():
     frames = _disc_frames(cams, points)
     # The columns run top to bottom: forehead, the temples, nose, chin; the cheek last.
     tracker = LiveStickerTracker(cal, anchors=["m01", "m02", "m03", "m04"], setup_seconds=0.2,
-                                 depth_window=9)
+                                 depth_window=9, history=30)
     out = [tracker.push(*pair, i / 30) for i, pair in enumerate(frames)]
     assert [len(o) for o in out[:20]] == [5] * 20 and [len(o) for o in out[25:]] == [6] * 15
     assert tracker.names_ == ("m01", "m02", "m03", "m04", "m05", "m06")
+    assert tracker.tracks.n_frames <= 30 + 30 // 4   # the history a session keeps stays bounded
     head = _padded(out)
     assert np.isnan(head[:6]).all() and np.isfinite(head[8:, :5]).all() and np.isfinite(head[25:, 5]).all()
     # A still face in a nodding head: the head frame holds every point still.
