@@ -17,7 +17,8 @@ function canvas( i, width, height ) {
 	if ( ! canvases[ i ] ) {
 
 		const c = new OffscreenCanvas( width, height );
-		// read back by the encoder: a canvas in memory, not on the GPU, saves a readback
+		// in memory, as the encoder reads it (on SwiftShader no faster than a GPU canvas: the
+		// time goes to reading the video frame back, about 80 ms a pair under load)
 		canvases[ i ] = { canvas: c, context: c.getContext( '2d', { alpha: false, willReadFrequently: true } ) };
 
 	}
