@@ -34,7 +34,7 @@ from retarget.sources.headpose import (
     stable_indices,
 )
 from retarget.sources.stereo_depth import expression_depth, sight_smoothed
-from retarget.sources.stereo_tracks import StickerTracks
+from retarget.sources.stereo_tracks import StickerTracks, rejoined_tracks
 from retarget.sources.take import Take, marker_names
 from retarget.sources.video import VideoReader
 
@@ -318,7 +318,8 @@ def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, ancho
             progress(i + 1, n_frames)
     if not tracks.n_frames:
         raise RetargetError("track_stereo: no stereo frames to track")
-    points = tracks.points()
+    # A sticker lost long enough for its track to end comes back as a new one: one column.
+    points, _ = rejoined_tracks(tracks.points())
     m = points.shape[1]
     names = marker_names(m)
     if m < 3:
