@@ -11,6 +11,8 @@ is causal, one frame pair in, that frame's points out, for a source that never e
 - `LiveCalibration`: checkerboard views added as they come (``add_views``), a count of
   the good ones, and the `StereoCalibration` once there are enough (``calibrate``).
 
+Unnamed stickers of one colour are `retarget.sources.stereo_live_stickers`'s.
+
 3D points are in the calibration pattern's units (e.g. mm), in the left camera's frame
 at the head pose of the frame the head frame was set up on.
 """

@@ -14,16 +14,16 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    stickers) fixes the head frame. The anchors are the named ones (1 s is enough), or
    else the 4 most mutually rigid stickers of the span (`rigid_anchors`), which needs the
    face to move in it (talk, smile, raise the brows: 3 s by default; on a still span any
-   sticker looks rigid: on issue 17's take, 1 s of mostly neutral face chose mouth
-   stickers, 3.1 / 15 mm median / p95 shape error, 3 s the forehead, nose bridge and a
-   temple, 0.9 / 2.5 mm). The head may move. The head frame is that of the span's first
-   pair seeing 3 anchors (`anchored_poses`). Every pair of the span comes out NaN;
+   sticker looks rigid. Issue 17's take, seed 0, 120 pairs, median / p95 shape error
+   after the set-up: 1 s, mostly of the neutral face, 1.61 / 4.50 mm, 3 s 1.01 / 3.43).
+   The head may move. The head frame is that of the span's first pair seeing 3 anchors
+   (`anchored_poses`). Every pair of the span comes out NaN;
 3. after it, each pair's head pose is the rigid fit of the anchors it sees onto their
    places, each column's place being the median of its first `_KEEP` registrations in the
    head frame (the span's, then those of pairs whose pose 3 anchors fixed): a median,
    since a temple's first sightings, half hidden at a grazing angle, are millimetres off
-   (on issue 17's take, pose error 2.2 -> 1.9 mm against a running mean), and frozen
-   once full, so the head frame cannot drift in a long session. An anchor not seen in
+   (on issue 17's take, pose error 2.2 mm with a running mean, 1.9 with the median),
+   and frozen once full, so the head frame cannot drift in a long session. An anchor not seen in
    the span (or a named column not tracked yet) joins with its first registration,
    weighted by its count until its place is steady: the pose never jumps when the
    visible set changes. A pair short of placed anchors (a temple turned away) is fitted
@@ -35,11 +35,21 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    (Gaussian, `across` mm) to this pair's position: the one-sided form of
    `sight_smoothed` (a triangulated sticker's error lies along its line of sight; across
    it the position is a tenth of a pixel sure, and an expression's move shows there).
-   Measured on issue 17's take (named anchors, median / p95 mm): window 15 1.51 / 3.93,
-   30 1.33 / 3.59, 45 1.17 / 3.33, 60 1.17 / 3.11. Fitting the pose again to the steadied
-   anchors, or weighing the anchors' depth less in it (`anchored_poses`' sight ratio),
-   gained nothing live (1.18 / 3.28 and 1.31 / 3.48 at 45), so neither is done;
+   Measured on issue 17's take (seed 0, 120 pairs, named anchors, median / p95 mm):
+   window 1 (none) 1.65 / 5.43, 15 1.37 / 3.71, 30 1.21 / 3.55, 45 1.17 / 3.33, 60
+   1.17 / 3.11. Fitting the pose again to the steadied anchors, or weighing the anchors'
+   depth less in it (`anchored_poses`' sight ratio 6), gained nothing live (1.18 / 3.28
+   and 1.31 / 3.48 at 45), so neither is done;
 5. Woodward's causal 3-frame mean (`temporal_window`).
+
+How far this is from offline (`bench/stereo_live.py --stickers`: issue 17's sticker take,
+150 pairs, 3 seeds, shape error median / p95 over the pairs after the set-up): named
+anchors live 1.26 / 4.18 mm, offline 0.63 / 2.81; anchors chosen live 1.77 / 4.75,
+offline 0.77 / 3.53 (targets 1 / 3). The gap is the pose: fitted to one pair's anchors it
+is 1.9 mm off at the median (the stickers' truth mapped with it), where offline's centred
+depth smoothing steadies the anchors first; a causal alpha-beta filter of the pose lagged
+the head's turns and did worse (1.5-2.6 mm), and weighing the columns by their spread in
+the fit gained nothing.
 
 A live player needs points in its target's layout order: `by_name` picks the columns of
 a layout's points named m01..mM (NaN for a point no column has yet). 3D points are in the
