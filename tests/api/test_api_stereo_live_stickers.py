@@ -11,7 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from retarget.layouts import get_layout
-from retarget.sources.stereo import track_stereo_frames
+from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import STICKER_ANCHORS, render_sticker_video, rig_calibration, sticker_scores
 from server.routers.stereo_live import CALIBRATION_FILE
@@ -35,9 +35,12 @@ def material(tmp_path_factory):
     with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
         frames = [(left, right) for (_, left), (_, right) in zip(a, b)]
     cal = rig_calibration(*truth.cameras)
-    kept = track_stereo_frames(frames, cal, layout=None, head_motion="keep")
-    owner = sticker_scores(kept.points, kept.points, truth)["owner"]
-    return frames, cal, [kept.names[m] for m in range(kept.n_points) if owner[m] < STICKER_ANCHORS]
+    tracks = StickerTracks(cal, "blue")
+    for left, right in frames:
+        tracks(left, right)
+    kept = tracks.points()   # the live tracker's columns (tests/unit/test_live_sticker_tracker.py)
+    owner = sticker_scores(kept, kept, truth)["owner"]
+    return frames, cal, [f"m{m + 1:02d}" for m in range(kept.shape[1]) if owner[m] < STICKER_ANCHORS]
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from retarget.errors import RetargetError
-from retarget.sources.stereo import track_stereo_frames
 from retarget.sources.stereo_live_stickers import LiveStickerTracker, by_name
+from retarget.sources.take import marker_names
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (
     FACE_CENTRE,
@@ -43,13 +43,15 @@ def test_live_stickers_are_the_offline_columns_in_a_steady_head_frame(take):
     columns = LiveStickerTracker(cal, setup_seconds=60.0)
     for i, pair in enumerate(frames):
         assert np.isnan(columns.push(*pair, i / 30)).all()
-    offline = track_stereo_frames(frames, cal, layout=None, head_motion="keep")
-    assert columns.names_ == offline.names and len(columns.names_) == 13
+    # The tracker's own columns over the take, in their stable order (what the offline
+    # take starts from, before its own clean-up of split tracks).
+    offline = columns.tracks.points()
+    assert columns.names_ == marker_names(offline.shape[1]) and len(columns.names_) == 13
     assert not columns.anchored_ and columns.setup_error_.startswith("set-up span")
 
     cams, out = [], []
-    first = sticker_scores(offline.points, offline.points, truth)
-    anchors = [offline.names[m] for m in range(13) if first["owner"][m] < STICKER_ANCHORS]
+    first = sticker_scores(offline, offline, truth)
+    anchors = [columns.names_[m] for m in range(13) if first["owner"][m] < STICKER_ANCHORS]
     live = LiveStickerTracker(cal, anchors=anchors, setup_seconds=0.5)
     for i, pair in enumerate(frames):
         out.append(live.push(*pair, i / 30))
@@ -58,8 +60,8 @@ def test_live_stickers_are_the_offline_columns_in_a_steady_head_frame(take):
     # Triangulated as offline, column for column (a late sticker's first pairs, before its
     # track is confirmed, are known offline only).
     seen = np.isfinite(cams)
-    np.testing.assert_allclose(cams[seen], offline.points[seen], atol=1e-3)
-    assert (np.isfinite(offline.points) & ~seen).sum() <= 3 * 3 * 13
+    np.testing.assert_allclose(cams[seen], offline[seen], atol=1e-3)
+    assert (np.isfinite(offline) & ~seen).sum() <= 3 * 3 * 13
     # Nothing through the set-up span (0.5 s from the first pair), then the head frame.
     assert np.isnan(out[:15]).all() and live.anchored_ and sorted(live.names_[a] for a in live.anchors_) == anchors
     scores = sticker_scores(cams, out, truth)
