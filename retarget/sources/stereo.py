@@ -102,6 +102,18 @@ _FACING_CAMERA = np.diag([1.0, -1.0, -1.0])
 # fit) 1.27 / 3.59 mm, 3: 0.94 / 3.27, 6: 0.84 / 2.91, 10: 0.89 / 2.88.
 _SIGHT_RATIO = 6.0
 _SMOOTHING_PASSES = 5   # depth smoothing and head pose, in turn (`_track_stickers`)
+# The anchors' head-frame places from poses fitted to every sticker, the others weighing
+# this much (`anchored_poses`' marker_weight: the temples, never seen together, tied by the
+# rest), and the poses smoothed over this many frames (pose_window). Issue 17, named
+# anchors, median / p95 shape error (bench/stereo.py), seeds 0-6: 0.63 / 2.24, 0.66 / 2.13,
+# 0.63 / 1.96, 0.67 / 2.20, 0.70 / 2.54, 0.60 / 2.38, 0.69 / 2.57 mm (neither: 0.63 / 2.48,
+# 0.82 / 2.72, 0.69 / 2.33, 0.71 / 2.73, 1.62 / 4.24, 0.72 / 2.68, 0.85 / 2.94); weight 10:
+# seed 4 0.72 / 2.63, seed 6 0.79 / 2.70; 15: seed 4 0.85 / 2.88; window 13 (weight 10):
+# seed 4 0.83 / 2.67; window 21 (weight 10, isotropic fits): seeds 0-2's medians 0.72-0.78.
+_MARKER_WEIGHT = 5.0
+_POSE_WINDOW = 17
+_POSE_OPTIONS = {"sight_ratio": _SIGHT_RATIO, "marker_weight": _MARKER_WEIGHT,
+                 "pose_window": _POSE_WINDOW}
 # Expression modes of the stickers' shape model and the share of its depth taken, after
 # the passes (`expression_depth`; issue 17, p95 shape error 2.82 -> 2.73 mm on seed 1).
 _EXPRESSION_MODES = 8
@@ -335,14 +347,14 @@ def _track_stickers(frames, calibration: StereoCalibration, *, fps, color, ancho
                                 f"{', '.join(names)}; got {anchors!r}")
         anchor_idx = np.array([names.index(a) for a in items], dtype=np.int64)
     try:
-        rot, trans, _ = anchored_poses(points, anchor_idx, sight_ratio=_SIGHT_RATIO)
+        rot, trans, _ = anchored_poses(points, anchor_idx, **_POSE_OPTIONS)
         # Alternately: each pose, from depth-smoothed anchors, is steadier, and so is the
         # head frame the next smoothing works in (issue 17, median / p95 shape error: 2
         # passes 0.84 / 2.91 mm, 3: 0.79 / 2.88, 5: 0.74 / 2.81, 6: 0.72 / 2.81).
         steady = points
         for _ in range(_SMOOTHING_PASSES if depth_window > 1 else 0):
             steady = sight_smoothed(steady, rot, trans, depth_window)
-            rot, trans, _ = anchored_poses(steady, anchor_idx, sight_ratio=_SIGHT_RATIO)
+            rot, trans, _ = anchored_poses(steady, anchor_idx, **_POSE_OPTIONS)
         if depth_window > 1:
             # What is left of the depth noise is the sticker's own; its neighbours' fine
             # across-ray motion predicts its depth through the take's expression modes.
