@@ -45,7 +45,6 @@ def test_temples_never_seen_together_are_placed_by_the_other_stickers():
 
 def test_smoothed_poses_are_nearer_the_truth():
     points, face, rot, trans = _take(5)
-    want = np.einsum("ij,nj->ni", rot[0], face[:4]) + trans[0]
     errors = []
     for window in (1, 17):
         r, t, _ = anchored_poses(points, np.arange(4), sight_ratio=6.0, marker_weight=5.0,
