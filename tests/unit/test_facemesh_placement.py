@@ -219,3 +219,47 @@ def test_a_moved_copy_of_the_face_gets_the_same_points(face, tracker):
         back = find_face_mesh(mesh_from_arrays(moved, face.faces), tracker).points.positions(face.vertices)
         gap = np.linalg.norm(back - upright, axis=1) * 10.0
         assert np.median(gap) < 0.3 and np.percentile(gap, 95) < 0.8, (angles, np.median(gap), np.percentile(gap, 95))
+
+
+def _lip_picture(depth_of_row) -> tuple[object, np.ndarray]:
+    """A 200-pixel picture whose every column sees depth `depth_of_row(row)` (a front face
+    everywhere, or none where it is inf), and 468 pixels with the eye corners 100 pixels
+    apart and the lips' lines across columns 60-140, the inner lines at rows 118/122."""
+    from retarget.facemesh.views import Picture, View
+    from retarget.raster import Raster
+
+    rows = np.arange(200, dtype=np.float64)
+    depth = np.repeat(np.array([depth_of_row(r) for r in rows])[:, None], 200, axis=1)
+    seen = np.isfinite(depth)
+    raster = Raster(np.where(seen, 0, -1), np.zeros((200, 200, 3)), depth, seen)
+    pic = Picture(View(np.eye(3), np.zeros(3), 1.0, 200), np.zeros((200, 200, 3), np.uint8), raster)
+    pixels = np.full((468, 2), 100.0)
+    pixels[list(placement.EYE_CORNERS)] = [[50.0, 60.0], [150.0, 60.0]]
+    xs = np.linspace(65.0, 135.0, 9)
+    for line, row in ((placement.INNER_UPPER_LIP, 118.0), (placement.INNER_LOWER_LIP, 122.0),
+                      (placement.UPPER_RINGS[2], 110.0), (placement.LOWER_RINGS[2], 130.0)):
+        pixels[list(line)] = np.column_stack([xs, np.full(9, row)])
+    pixels[list(placement.MOUTH_CORNERS)] = [[60.0, 120.0], [140.0, 120.0]]
+    return pic, pixels
+
+
+def test_the_lip_lines_move_onto_the_contact_line_the_surface_shows():
+    # closed lips: the deepest row (123) is where they meet, 3 pixels below the model's
+    # lip line (rows 118-122, midway 120)
+    pic, pixels = _lip_picture(lambda r: 10.0 - 0.3 * abs(r - 123.0))
+    out = placement._onto_contact_line(pic, pixels)
+    upper, lower = list(placement.INNER_UPPER_LIP), list(placement.INNER_LOWER_LIP)
+    assert np.allclose(out[upper + lower, 1], 123.0) and np.allclose(out[upper + lower, 0], pixels[upper + lower, 0])
+    # the vermilion border follows a third of the inner line's move; the corners sit
+    # CORNER_PUSH pushes (2 pixels) above the contact line
+    assert np.allclose(out[list(placement.UPPER_RINGS[2]), 1], 110.0 + 5.0 / 3)
+    assert np.allclose(out[list(placement.LOWER_RINGS[2]), 1], 130.0 + 1.0 / 3)
+    assert np.allclose(out[list(placement.MOUTH_CORNERS), 1], 121.0)
+    # parted lips: an opening over rows 119-125, whose rims the inner lines take
+    pic, pixels = _lip_picture(lambda r: np.inf if 119 <= r <= 125 else 10.0)
+    out = placement._onto_contact_line(pic, pixels)
+    assert np.allclose(out[upper, 1], 118.5) and np.allclose(out[lower, 1], 125.5)
+    # no contact line to see (a flat surface, or an opening wider than the search): as they were
+    for depth_of_row in (lambda r: 10.0, lambda r: np.inf if 100 <= r <= 140 else 10.0):
+        pic, pixels = _lip_picture(depth_of_row)
+        assert np.array_equal(placement._onto_contact_line(pic, pixels), pixels)
