@@ -329,6 +329,10 @@ def browser_run(frames, boards, n_frames: int, folder: Path) -> None:
             page.select_option("#live-stereo-split", "side")
             page.click("#live-stereo-open")
             page.wait_for_function("() => document.querySelector('#live-stereo-status').textContent.startsWith('Calibrated')")
+            # the neutral is the clip's first frame, as in the in-process run: the rendered
+            # performer moves from the start, so a live neutral capture would refuse it
+            page.evaluate("""() => { for (const [id, v] of [['neutral-mode', 'frame'], ['neutral-value', '0']]) {
+                const e = document.getElementById(id); e.value = v; e.dispatchEvent(new Event('change', {bubbles: true})); } }""")
             page.click("#live-stereo-start")
             page.wait_for_function(f"() => window.bench.drawn.length >= {n_frames}", timeout=300_000, polling=500)
             status = page.inner_text("#live-stereo-status")

@@ -244,7 +244,8 @@ export class StereoLivePanel {
 
 		}
 
-		if ( message.type === 'views' ) {
+		// a view answered after the save must not overwrite the 'Calibrated' status
+		if ( message.type === 'views' && this.mode === 'calibrate' ) {
 
 			this.el( 'live-stereo-save' ).disabled = message.count < message.needed;
 			this.status( `Good views: ${ message.count } of ${ message.needed } needed${ message.good ? ' (+1)' : '' } · ${ this.rates() }` );
