@@ -50,7 +50,8 @@ ARKit shapes (`put_arkit_shapes`) are made by a job from the mesh and landmarks 
 revision (and, on the project's rig, from its rig version): a landmarks, mesh or (for
 those) rig change makes them stale, and they are made again on request. The user's ARKit
 settings (`put_arkit_settings`) belong to the project and outlive those changes (painted
-fixes are per vertex: the router drops them for a mesh they do not fit).
+fixes are per vertex: the router drops them for a mesh they do not fit). So does the live
+stereo cameras' calibration (`put_stereo_calibration`).
 
 Custom layouts (a user's markers, `put_layout`) are saved in the index itself, as the
 validated spec JSON keyed by the project and a name matched against `LAYOUT_NAME`, so no
@@ -93,10 +94,10 @@ MESH_EXTENSIONS = ("obj", "ply", "stl", "off", "glb", "gltf", "zip")
 zip holds a mesh file with its MTL, images or buffers)."""
 
 _FILE_COLUMNS = ("mesh_file", "landmarks_file", "rig_file", "painted_file", "muscles_file", "arkit_file",
-                 "arkit_settings_file")
+                 "arkit_settings_file", "stereo_calibration_file")
 _FILE_PATTERN = re.compile(r"(mesh(-r\d+)?\.[a-z]+|landmarks(-r\d+)?\.json|rig(-r\d+(-[0-9a-f]+)?)?\.npz"
                            r"|paint-r\d+-[0-9a-f]+\.npz|muscles-r\d+-[0-9a-f]+\.json|arkit-r\d+-[0-9a-f]+\.npz"
-                           r"|arkit-settings-[0-9a-f]+\.json|\.tmp-.*)")
+                           r"|arkit-settings-[0-9a-f]+\.json|stereo-calibration(-[0-9a-f]+)?\.json|\.tmp-.*)")
 """Names the store writes in a project folder (plus its temporary files)."""
 
 _RIG_CACHE_BYTES = 512 * 2**20
@@ -145,7 +146,8 @@ CREATE TABLE IF NOT EXISTS projects (
     arkit_file    TEXT,              -- the 52 ARKit shapes (npz), NULL = none yet
     arkit_revision INTEGER,          -- the revision they were made for
     arkit_rig_version INTEGER,       -- the rig version they were made on, NULL = the default rig
-    arkit_settings_file TEXT         -- the user's ARKit settings (JSON), NULL = defaults
+    arkit_settings_file TEXT,        -- the user's ARKit settings (JSON), NULL = defaults
+    stereo_calibration_file TEXT     -- the live stereo cameras' calibration (JSON), NULL = none
 );
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS takes (
@@ -340,6 +342,11 @@ class ProjectStore:
         if "arkit_revision" not in columns:
             db.execute("ALTER TABLE projects ADD COLUMN arkit_revision INTEGER")
             db.execute("ALTER TABLE projects ADD COLUMN arkit_rig_version INTEGER")
+        # a calibration saved before the store kept it, under the live router's fixed name
+        for row in db.execute("SELECT id FROM projects WHERE stereo_calibration_file IS NULL").fetchall():
+            if (self.folder(row["id"]) / "stereo-calibration.json").is_file():
+                db.execute("UPDATE projects SET stereo_calibration_file = 'stereo-calibration.json' "
+                           "WHERE id = ?", (row["id"],))
         if "upload_key" not in {row["name"] for row in db.execute("PRAGMA table_info(takes)")}:
             db.execute("ALTER TABLE takes ADD COLUMN upload_key TEXT")
 
@@ -858,6 +865,25 @@ class ProjectStore:
             if row["arkit_settings_file"] is None:
                 return None
             return json.loads((self.folder(project_id) / row["arkit_settings_file"]).read_text())
+
+    def put_stereo_calibration(self, project_id: str, calibration: dict) -> None:
+        """Store the live stereo cameras' calibration JSON (`StereoCalibration.to_dict`);
+        it belongs to the project's capture set-up and outlives mesh and landmark changes."""
+        with self._transaction() as db:
+            self._row(project_id)
+            name = f"stereo-calibration-{secrets.token_hex(4)}.json"
+            write_atomic(self.folder(project_id) / name, json.dumps(calibration).encode())
+            db.execute("UPDATE projects SET stereo_calibration_file = ?, updated = ? WHERE id = ?",
+                       (name, _now(), project_id))
+        self._sweep(project_id)
+
+    def stereo_calibration(self, project_id: str) -> dict | None:
+        """The live stereo calibration JSON, or None when never saved."""
+        with self._lock:
+            row = self._row(project_id)
+            if row["stereo_calibration_file"] is None:
+                return None
+            return json.loads((self.folder(project_id) / row["stereo_calibration_file"]).read_text())
 
     # -- takes --------------------------------------------------------------------------
 

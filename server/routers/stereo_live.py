@@ -72,7 +72,7 @@ from server.players import LivePlayer
 from server.project_layouts import resolve_layout
 from server.routers.stream import GONE, POLICY_VIOLATION, source_from_message, target_points_of
 from server.stereo_worker import StereoWorker, WorkerDied
-from server.store import ProjectNotFound, write_atomic
+from server.store import ProjectNotFound
 from server.wire import MAX_STEREO_JPEG, decode_stereo_pair
 
 router = APIRouter(tags=["stream"])
@@ -82,9 +82,6 @@ MAX_PAIR_BYTES = 32 + 2 * MAX_STEREO_JPEG
 MAX_PAIRS_PER_SECOND = 60
 MAX_BYTES_PER_SECOND = 8 * 2**20
 MAX_SIZE = (1920, 1080)
-CALIBRATION_FILE = "stereo-calibration.json"
-"""The project's saved live calibration, in its folder (not a store revision file, so the
-store's sweep leaves it)."""
 INTERNAL_ERROR = 1011
 _STICKER_NAME = re.compile(r"m(0[1-9]|[1-9][0-9])")
 
@@ -117,8 +114,8 @@ class _Rate:
 
 def saved_calibration(store, project_id: str) -> StereoCalibration | None:
     """The project's saved live calibration, or None."""
-    path = store.folder(project_id) / CALIBRATION_FILE
-    return StereoCalibration.from_dict(json.loads(path.read_text())) if path.is_file() else None
+    saved = store.stereo_calibration(project_id)
+    return None if saved is None else StereoCalibration.from_dict(saved)
 
 
 def _summary(calibration: StereoCalibration | None) -> dict | None:
@@ -157,8 +154,7 @@ class _Session:
             if self.mode != "calibrate":
                 raise ValueError('"calibration_save" follows a "calibrate" and its views')
             calibration = StereoCalibration.from_dict(await self._call("solve", seconds=120.0))
-            data = json.dumps(calibration.to_dict()).encode()
-            await asyncio.to_thread(write_atomic, self.store.folder(self.project_id) / CALIBRATION_FILE, data)
+            await asyncio.to_thread(self.store.put_stereo_calibration, self.project_id, calibration.to_dict())
             return {"type": "calibrated", "calibration": _summary(calibration)}
         if kind == "start":
             return await self._start(msg)

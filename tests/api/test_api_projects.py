@@ -289,3 +289,26 @@ def test_serve_command_is_wired_and_the_library_imports_without_web_code():
             "('server', 'fastapi', 'uvicorn', 'starlette')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout.replace("'", '"')) == []
+
+
+def test_store_keeps_the_stereo_calibration_through_sweeps_and_adopts_the_old_fixed_name(tmp_path):
+    import sqlite3
+    store = ProjectStore(tmp_path)
+    pid = store.create("stereo")["id"]
+    assert store.stereo_calibration(pid) is None
+    store.put_stereo_calibration(pid, {"rms": 0.1})
+    store.put_stereo_calibration(pid, {"rms": 0.05})        # replaces: the first file is swept
+    assert store.stereo_calibration(pid) == {"rms": 0.05}
+    assert len(list(store.folder(pid).glob("stereo-calibration-*.json"))) == 1
+    store.close()
+    assert ProjectStore(tmp_path).stereo_calibration(pid) == {"rms": 0.05}   # a restart's sweep keeps it
+
+    # a project from before the store kept it: the live router wrote a fixed name
+    db = sqlite3.connect(tmp_path / "index.sqlite")
+    db.execute("UPDATE projects SET stereo_calibration_file = NULL")
+    db.commit()
+    db.close()
+    for path in (tmp_path / "projects" / pid).glob("stereo-calibration-*.json"):
+        path.unlink()
+    (tmp_path / "projects" / pid / "stereo-calibration.json").write_text('{"rms": 0.2}')
+    assert ProjectStore(tmp_path).stereo_calibration(pid) == {"rms": 0.2}

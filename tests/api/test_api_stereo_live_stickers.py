@@ -4,7 +4,6 @@ layout named m01..m13, tracked into its live source; the start message's refusal
 
 from __future__ import annotations
 
-import json
 
 import cv2
 import pytest
@@ -14,7 +13,6 @@ from retarget.layouts import get_layout
 from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import STICKER_ANCHORS, render_sticker_video, rig_calibration, sticker_scores
-from server.routers.stereo_live import CALIBRATION_FILE
 from server.wire import encode_stereo_pair
 
 N_FRAMES = 40
@@ -58,7 +56,7 @@ def project(app, sample_id, material) -> str:
         assert client.put(f"/api/projects/{pid}/layouts/stickers", json=spec).status_code == 201
         picked = {"layout": "stickers", "vertex_indices": [sample["vertex_indices"][i] for i in SPOTS]}
         assert client.put(f"/api/projects/{pid}/landmarks", json=picked).status_code == 200
-    (app.state.store.folder(pid) / CALIBRATION_FILE).write_text(json.dumps(material[1].to_dict()))
+    app.state.store.put_stereo_calibration(pid, material[1].to_dict())
     return pid
 
 

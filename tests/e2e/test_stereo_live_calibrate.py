@@ -25,7 +25,6 @@ from websockets.sync.client import connect
 from retarget.sources.calibration import StereoCalibration
 from retarget.sources.stereo_live import MIN_CALIBRATION_VIEWS
 from retarget.testing.stereo_rig import checkerboard_views, rig_calibration, stereo_cameras
-from server.routers.stereo_live import CALIBRATION_FILE
 from tests.e2e.conftest import open_project
 from tests.e2e.fake_camera import write_y4m
 from tests.e2e.test_stereo_live import FPS, browser, dutreve21_project, server  # noqa: F401 (fixtures)
@@ -89,7 +88,9 @@ def test_calibrate_clicked_counts_views_and_saves_the_rigs_calibration(server, p
     assert summary["views"] >= MIN_CALIBRATION_VIEWS and saved.startswith(f"Calibrated: {summary['views']} views")
     # ... and it is the rig's (found within about 0.1 % of it from the page's JPEGs of clean
     # renders: the bounds fail a wrong square, a view cut from the wrong half or a scaled frame)
-    found = StereoCalibration.from_dict(json.loads((server.data_dir / "projects" / pid / CALIBRATION_FILE).read_text()))
+    saved_files = list((server.data_dir / "projects" / pid).glob("stereo-calibration-*.json"))
+    assert len(saved_files) == 1, saved_files   # the store's one file for it
+    found = StereoCalibration.from_dict(json.loads(saved_files[0].read_text()))
     truth = rig_calibration(*stereo_cameras())
     assert found.rms < 0.3
     assert found.baseline == pytest.approx(150.0, rel=0.01)
