@@ -357,3 +357,30 @@ def test_automatic_anchors_leave_the_jaw_out():
     # other distances, which the expression-fitted spread sees.
     for seed in range(4):
         assert rigid_anchors(_jaw_take(seed), 4).tolist() == [0, 1, 2, 3]
+
+
+def test_a_sticker_turning_into_view_is_followed_back_to_its_faint_first_frames():
+    # Edge-on at first, a sticker is a small dark bluish blob (JPEG took its chroma) for a
+    # few frames before it is blue enough to start a track; the track, once started, is
+    # followed back through them (`StickerTracks._extend_back`).
+    cams = webcam_cameras()
+    cal = rig_calibration(*cams)
+    n = 16
+    base = FACE_CENTRE + np.array([[-60, 30, -40], [60, 30, -40], [0, 60, 10], [0, 25, 25],
+                                   [0, -30, 20], [45, -5, 0]], dtype=np.float64)
+    points = np.repeat(base[None], n, axis=0)
+    points[..., 0] += np.linspace(0, 12, n)[:, None]   # the head moves sideways
+    bright = points.copy()
+    bright[:8, 5] = np.nan
+    frames = _disc_frames(cams, bright)
+    for f in range(4, 8):                              # faint: a dark tinted dot
+        for cam, img in zip(cams, frames[f]):
+            x, y = cam.project(points[f, 5:6])[0]
+            cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 24, (80, 68, 72), -1,
+                       cv2.LINE_AA, 4)
+    take = track_stereo_frames(frames, cal, layout=None, head_motion="keep")
+    seen = np.isfinite(take.points[..., 0])
+    assert take.n_points == 6 and seen[:, :5].all()
+    assert not seen[:4, 5].any() and seen[4:, 5].all()
+    truth = cams[0].to_camera(points[4:, 5])
+    assert np.linalg.norm(take.points[4:, 5] - truth, axis=1).max() < 12.0
