@@ -1,0 +1,357 @@
+"""Ring markers composited onto a real face video, tracked without a layout (issue 17 §1,
+Dutreve et al. 2008 §5): the mono ring-marker tracker on real skin, real light and real
+motion, with a sub-pixel ground truth.
+
+    python bench/markers_real.py [--frames 1008] [--radius-mm 1.5] [--quality 40]
+                                 [--seed 0] [--keep DIR]
+
+The video is ../shared/data/video/face_expressions_480.mp4 (480x480, 30 fps, 1008 frames:
+a real woman making big expressions with mild head motion under uneven light). Each frame
+is tracked by the project's face mesh (`retarget.facemesh.tracker.FaceMeshTracker`, 468
+points with depth; smoothed over 5 frames, as a sticker does not jitter with the mesh), and
+a Dutreve ring marker (a white dot of half the marker's radius in a black ring) is drawn
+at each of 27 fixed mesh vertices (`MARKERS`: brows, above and below the eyes, nose,
+cheeks, lip contour, chin, jaw):
+
+- its size in pixels from the face's own scale, the 3D distance between the eye centres
+  taken as 62 mm (about 1.8 px/mm here: the face is as large as a 640x480 webcam's at
+  30 cm). Dutreve's 3 mm markers would be 10-11 px across at that scale; the default
+  radius 1.5 mm gives issue 17's hard case, markers about 5.3 px across (a webcam at
+  60 cm), which is what `RingTracks` is built and benched for (`bench/markers.py`);
+- a disc on the tangent plane at the vertex (its normal from the mesh's triangles round
+  it), so seen as an ellipse foreshortened by the normal's angle to the view;
+- shaded by the real frame's light there: the dot's and ring's albedos (245 and 18 grey
+  levels, the project's renderer's) times the frame's local brightness over a skin albedo
+  of 161, so a marker on the shadow side is dimmer and one in the light saturates (the
+  brightness: grey levels closed over 3 marker radii, so that brow hairs and creases,
+  dark by albedo, do not count as shadow, then blurred over about two markers' width);
+- supersampled 4x4 per pixel and over 4 instants of a half-frame exposure along its
+  motion (motion blur), blurred by 0.5 px (the lens), with 2 grey levels of noise;
+- not drawn, and not counted as visible, where its normal turns more than 75 degrees from
+  the view or its centre lies inside the mouth's or an eye's opening (the mesh's inner
+  lip and eyelid contours); the vertices are chosen outside those openings, so this
+  only guards.
+
+The frames then go through JPEG at ``--quality`` (the DCT blocks and chroma subsampling of
+a low bit-rate stream; OpenCV's writer does not let one set MPEG-4's rate) and MPEG-4
+Part 2 (OpenCV's VideoWriter, mp4v; this build has no H.264 encoder), and
+`track_marker_video(path, layout=None)` (`RingTracks`) tracks the result. Printed: markers
+found in the first frame (a track within 3 px of a visible marker) out of those visible
+there; per marker, the share of its visible frames its track holds (the lowest ones
+named); median and 95th-percentile error (px) and the share within 3 px over all visible
+marker-frames (a missed one counts as outside) and over those facing the camera within 60
+degrees (`unnamed_track_scores`); identity switches (a track whose nearest true marker
+changes); tracking frames/s (decode included, one core).
+
+Figures (the whole clip, 1008 frames, seed 0, quality 40, radius 1.5 mm; 2-core machine
+under load):
+
+    python bench/markers_real.py
+
+    (see the report in the commit that changes them)
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from retarget.facemesh.canonical import canonical_face  # noqa: E402
+from retarget.facemesh.tracker import FaceMeshTracker  # noqa: E402
+from retarget.sources.markers import track_marker_video  # noqa: E402
+from retarget.testing.marker_video import unnamed_track_scores  # noqa: E402
+
+VIDEO = Path(__file__).resolve().parents[2] / "shared" / "data" / "video" / "face_expressions_480.mp4"
+
+# Face-mesh vertices where Dutreve-style markers would be stuck (person's right first):
+# dutreve21's brows, nose and lip contour (its `mediapipe468`), its eyelid markers moved off
+# the lids onto the skin above the crease and below the lower lid, plus the nose bridge,
+# cheeks, chin and jaw.
+MARKERS = {
+    "brow_right_outer": 70, "brow_right_middle": 105, "brow_right_inner": 107,
+    "brow_left_inner": 336, "brow_left_middle": 334, "brow_left_outer": 300,
+    "eye_right_above": 223, "eye_right_below": 230, "eye_left_above": 443, "eye_left_below": 450,
+    "nose_bridge": 168, "nose_ala_right": 98, "nose_tip": 4, "nose_ala_left": 327,
+    "cheek_right": 50, "cheek_left": 280,
+    "mouth_corner_right": 61, "lip_upper_right": 39, "lip_upper_center": 0, "lip_upper_left": 269,
+    "mouth_corner_left": 291, "lip_lower_left": 321, "lip_lower_center": 17, "lip_lower_right": 91,
+    "chin": 199, "jaw_right": 210, "jaw_left": 430,
+}
+# the openings a marker's centre must not lie in: inner lip contour, the eyelids' margins
+MOUTH = (78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308, 324, 318, 402, 317, 14, 87, 178, 88, 95)
+EYE_RIGHT = (33, 246, 161, 160, 159, 158, 157, 173, 133, 155, 154, 153, 145, 144, 163, 7)
+EYE_LEFT = (263, 466, 388, 387, 386, 385, 384, 398, 362, 382, 381, 380, 374, 373, 390, 249)
+EYE_CENTRES = ((33, 133), (263, 362))   # each eye's corners
+EYE_DISTANCE_MM = 62.0
+MAX_ANGLE = 75.0                        # degrees off the view beyond which a marker is hidden
+WHITE, BLACK, SKIN = 245.0, 18.0, 161.0  # albedos, grey levels (retarget.testing.render's)
+SUPER, INSTANTS, SHUTTER = 4, 4, 0.5    # supersampling, exposure instants, exposure / frame
+LENS_BLUR, NOISE = 0.5, 2.0             # px; grey levels
+
+
+def face_mesh(video: Path, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (F, H, W, 3) uint8 BGR, mesh (F, 468, 3) float64): the video's first
+    `n_frames` frames and the face mesh on each, in image pixels (x right, y down, pixel
+    centres at integers as OpenCV's, z toward the camera in the same scale), smoothed over
+    5 frames (Savitzky-Golay, quadratic): a sticker moves with the skin, not with the mesh's
+    frame-to-frame jitter."""
+    from scipy.signal import savgol_filter
+
+    cap = cv2.VideoCapture(str(video))
+    tracker = FaceMeshTracker()
+    frames, mesh = [], []
+    while len(frames) < n_frames:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        points = tracker.track(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+        if points is None:
+            raise SystemExit(f"no face in frame {len(frames)} of {video}")
+        h = frame.shape[0]
+        # the tracker's continuous coordinates (pixel i spans i..i+1), y up -> OpenCV's
+        mesh.append(np.column_stack([points[:, 0] - 0.5, h - points[:, 1] - 0.5, points[:, 2]]))
+        frames.append(frame)
+    cap.release()
+    mesh = np.asarray(mesh, np.float64)
+    if len(mesh) >= 5:
+        mesh = savgol_filter(mesh, 5, 2, axis=0, mode="interp")
+    return np.asarray(frames), mesh
+
+
+def vertex_normals(mesh: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """(F, N, 3) unit normals at `vertices` (N,) of mesh (F, 468, 3): the area-weighted sum
+    of the canonical face's triangles round each, turned so that the face as a whole faces
+    the camera (+z)."""
+    tri = canonical_face().triangles
+    a, b, c = (mesh[:, tri[:, k]] for k in range(3))
+    face_n = np.cross(b - a, c - a)                                     # (F, T, 3), 2 x area
+    # the winding's sign: the face's summed normal points toward the camera
+    sign = np.sign(face_n[0].sum(0)[2]) or 1.0
+    touch = (tri[None, :, :] == np.asarray(vertices)[:, None, None]).any(2).astype(np.float64)  # (N, T)
+    n = sign * np.einsum("nt,ftk->fnk", touch, face_n)
+    return n / np.linalg.norm(n, axis=2, keepdims=True)
+
+
+def openings(mesh: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """(F, N) bool: centres (F, N, 2) inside the mouth's or an eye's opening (the polygons
+    `MOUTH`, `EYE_RIGHT`, `EYE_LEFT` of mesh (F, 468, 3))."""
+    inside = np.zeros(centres.shape[:2], bool)
+    for f in range(len(mesh)):
+        for ring in (MOUTH, EYE_RIGHT, EYE_LEFT):
+            poly = mesh[f, list(ring), :2].astype(np.float32)
+            inside[f] |= [cv2.pointPolygonTest(poly, (float(x), float(y)), False) > 0 for x, y in centres[f]]
+    return inside
+
+
+def composite(frames: np.ndarray, centres: np.ndarray, normals: np.ndarray, visible: np.ndarray,
+              ring_px: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(F, H, W, 3) uint8: ring markers drawn into frames (F, H, W, 3) uint8 BGR.
+
+    centres : (F, N, 2) px (x right, y down); normals : (F, N, 3) unit, z toward the
+    camera; visible : (F, N) bool (the others are not drawn); ring_px : (F,) the markers'
+    outer radius in px, the dot half of it. Each marker is a disc on its tangent plane seen
+    along z (orthographic, as the face mesh's depth is): an image offset d lies at
+    rho^2 = (d.u)^2 + (d.v / |n_z|)^2 from the centre on the disc, u the disc's axis in
+    the image plane, v the foreshortened one. Supersampled in space and over the exposure
+    along the marker's motion; see the module docstring for the shading.
+    """
+    n_frames, h, w = frames.shape[:3]
+    out = np.empty_like(frames)
+    # motion in px per frame (central differences), for the exposure
+    motion = np.gradient(centres, axis=0) if n_frames > 1 else np.zeros_like(centres)
+    sub = (np.arange(SUPER) + 0.5) / SUPER - 0.5
+    instants = (np.arange(INSTANTS) + 0.5) / INSTANTS - 0.5
+    for f in range(n_frames):
+        frame = frames[f].astype(np.float32)
+        grey = cv2.cvtColor(frames[f], cv2.COLOR_BGR2GRAY).astype(np.float32)
+        # the light on the skin there: a closing removes the dark thin things (brow hairs,
+        # lid lines, lip creases) whose albedo, not light, darkens them, then a blur over
+        # about two markers' width
+        size = 2 * int(np.ceil(3.0 * ring_px[f])) + 1
+        closed = cv2.morphologyEx(grey, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        light = cv2.GaussianBlur(closed, (0, 0), 2.0 * ring_px[f])
+        show = np.flatnonzero(visible[f])
+        if show.size == 0:
+            out[f] = frames[f]
+            continue
+        c, nrm, v = centres[f, show], normals[f, show], motion[f, show]
+        reach = int(np.ceil(ring_px[f] + 0.5 * SHUTTER * np.abs(v).max() + 3))
+        grid = np.arange(-reach, reach + 1)
+        base = np.rint(c).astype(np.int64)
+        gx = base[:, 0, None, None] + grid[None, None, :]                # (K, 1, P)
+        gy = base[:, 1, None, None] + grid[None, :, None]                # (K, P, 1)
+        gx, gy = np.broadcast_arrays(gx, gy)
+        # offsets from each instant's centre of every sub-sample: (K, P, P, T, S, S)
+        at = c[:, None] + SHUTTER * instants[None, :, None] * v[:, None]     # (K, T, 2)
+        dx = (gx[..., None, None, None] + sub[None, None, None, None, None, :]
+              - at[:, None, None, :, 0, None, None])
+        dy = (gy[..., None, None, None] + sub[None, None, None, None, :, None]
+              - at[:, None, None, :, 1, None, None])
+        k = np.linalg.norm(nrm[:, :2], axis=1)
+        flat = k < 1e-6
+        u = np.where(flat[:, None], [1.0, 0.0], np.stack([-nrm[:, 1], nrm[:, 0]], 1) / np.maximum(k, 1e-12)[:, None])
+        vv = np.stack([-u[:, 1], u[:, 0]], 1)
+        ex = lambda a: a[:, None, None, None, None, None]  # noqa: E731
+        along = dx * ex(u[:, 0]) + dy * ex(u[:, 1])
+        across = (dx * ex(vv[:, 0]) + dy * ex(vv[:, 1])) / ex(np.abs(nrm[:, 2]))
+        rho = np.sqrt(along * along + across * across) / ring_px[f]     # 1 on the ring's edge
+        inside = rho < 1.0
+        albedo = np.where(rho < 0.5, WHITE, BLACK) * inside
+        cover = inside.mean((3, 4, 5))                                   # (K, P, P)
+        paint = albedo.mean((3, 4, 5))
+        ok = (gx >= 0) & (gx < w) & (gy >= 0) & (gy < h) & (cover > 0)
+        alpha = np.zeros((h, w), np.float32)
+        colour = np.zeros((h, w), np.float32)
+        np.add.at(alpha, (gy[ok], gx[ok]), cover[ok])
+        np.add.at(colour, (gy[ok], gx[ok]), paint[ok] / SKIN * light[gy[ok], gx[ok]])
+        over = alpha > 1.0                                               # overlapping markers share
+        colour[over] /= alpha[over]
+        alpha = np.minimum(alpha, 1.0)
+        alpha = cv2.GaussianBlur(alpha, (0, 0), LENS_BLUR)
+        colour = cv2.GaussianBlur(colour, (0, 0), LENS_BLUR)
+        colour += alpha * rng.normal(0.0, NOISE, colour.shape).astype(np.float32)
+        mixed = frame * (1.0 - alpha[..., None]) + colour[..., None]
+        out[f] = np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
+    return out
+
+
+def encode(frames: np.ndarray, path: Path, quality: int, fps: float = 30.0) -> None:
+    """Write frames (F, H, W, 3) uint8 BGR through JPEG at `quality`, then MPEG-4 Part 2."""
+    h, w = frames.shape[1:3]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+    if not writer.isOpened():
+        raise SystemExit(f"OpenCV cannot write MPEG-4 to {path}")
+    for frame in frames:
+        ok, data = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        writer.write(cv2.imdecode(data, cv2.IMREAD_COLOR))
+    writer.release()
+
+
+def marked_video(path: Path, n_frames: int = 1008, radius_mm: float = 1.5, quality: int = 40,
+                 seed: int = 0, video: Path = VIDEO) -> SimpleNamespace:
+    """Composite `MARKERS` onto the first `n_frames` of `video` and write them to `path`.
+
+    Returns the truth as `unnamed_track_scores` takes it: points2d (F, 1, N, 2) the drawn
+    centres (px, x right, y down), visible and facing (F, 1, N) (bool; cosine of the
+    normal's angle to the view), plus names (N,), ring_px (F,) and px_per_mm (F,)."""
+    frames, mesh = face_mesh(video, n_frames)
+    vertices = np.array(list(MARKERS.values()))
+    centres = mesh[:, vertices, :2]
+    normals = vertex_normals(mesh, vertices)
+    facing = normals[..., 2]
+    eyes = np.stack([mesh[:, list(pair)].mean(1) for pair in EYE_CENTRES], 1)    # (F, 2, 3)
+    px_per_mm = np.linalg.norm(eyes[:, 0] - eyes[:, 1], axis=1) / EYE_DISTANCE_MM
+    visible = (facing > np.cos(np.radians(MAX_ANGLE))) & ~openings(mesh, centres)
+    ring_px = radius_mm * px_per_mm
+    marked = composite(frames, centres, normals, visible, ring_px, np.random.default_rng(seed))
+    encode(marked, path, quality)
+    return SimpleNamespace(points2d=centres[:, None], visible=visible[:, None], facing=facing[:, None],
+                           names=tuple(MARKERS), ring_px=ring_px, px_per_mm=px_per_mm)
+
+
+def scores(points: np.ndarray, truth: SimpleNamespace) -> dict:
+    """The figures the module docstring lists, for tracks points (F, M, 2) px (x right, y
+    down, NaN: no point) against the truth `marked_video` returned.
+
+    Each true marker's track is the one `unnamed_track_scores` gives it (the track whose
+    nearest true marker it is in most frames, the longest such); err (F, N) is that
+    track's distance to it, inf where the track has no point. Returns a dict: tracks,
+    switches (`unnamed_track_scores`'), err, visible (F, N) and clear (F, N) bool (visible
+    and facing the camera within 60 degrees), found_first and visible_first (markers with
+    a track within 3 px in the first frame, and markers visible there)."""
+    p = np.asarray(points, np.float64)
+    with np.errstate(invalid="ignore"):     # its p95 of inf - inf, unused here
+        base = unnamed_track_scores(p, truth)
+    gt, vis = truth.points2d[:, 0], truth.visible[:, 0]
+    d = np.linalg.norm(p[:, :, None] - gt[:, None], axis=3)              # (F, M, N)
+    tracked = np.isfinite(p[..., 0])
+    nearest = np.where(tracked, np.nan_to_num(d, nan=np.inf).argmin(2), -1)
+    owner = np.array([np.bincount(nearest[tracked[:, m], m]).argmax() if tracked[:, m].any() else -1
+                      for m in range(p.shape[1])], np.int64)
+    err = np.full(vis.shape, np.inf)
+    for n in range(gt.shape[1]):
+        mine = np.flatnonzero(owner == n)
+        if mine.size:
+            m = mine[tracked[:, mine].sum(0).argmax()]
+            err[:, n] = np.where(tracked[:, m], d[:, m, n], np.inf)
+    first = np.nan_to_num(d[0], nan=np.inf)
+    return {"tracks": base["tracks"], "switches": base["switches"], "err": err, "visible": vis,
+            "clear": vis & (truth.facing[:, 0] > 0.5),
+            "found_first": int(((first < 3.0).any(0) & vis[0]).sum()), "visible_first": int(vis[0].sum())}
+
+
+def summary(err: np.ndarray, where: np.ndarray) -> str:
+    """Median, p95 (px) and the share within 3 px of err (F, N) over where (F, N) bool."""
+    e = np.minimum(err[where], 1e9)
+    med, p95 = np.median(e), np.percentile(e, 95)
+    return ((f"median {med:.3f} px" if med < 1e9 else "median missed") + ", p95 "
+            + (f"{p95:.2f} px" if p95 < 1e9 else "missed")
+            + f", {100 * (e < 3.0).mean():.1f} % within 3 px, {100 * np.isinf(err[where]).mean():.1f} % missed")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--frames", type=int, default=1008, help="frames from the start of the video")
+    p.add_argument("--radius-mm", type=float, default=1.5, help="marker (ring) radius, mm on the face")
+    p.add_argument("--quality", type=int, default=40, help="JPEG quality before the MPEG-4 encoder")
+    p.add_argument("--seed", type=int, default=0, help="seed of the markers' sensor noise")
+    p.add_argument("--keep", type=Path, help="folder to write the marked video and its truth into")
+    p.add_argument("--video", type=Path, default=VIDEO)
+    args = p.parse_args(argv)
+    if not args.video.exists():
+        print(f"no {args.video}: nothing to do")
+        return 1
+    cv2.setNumThreads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = args.keep or Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"marked_{args.radius_mm:g}mm_q{args.quality}_s{args.seed}.mp4"
+        t = time.perf_counter()
+        truth = marked_video(path, args.frames, args.radius_mm, args.quality, args.seed, args.video)
+        made_s = time.perf_counter() - t
+        if args.keep:
+            np.savez_compressed(path.with_suffix(".npz"), points2d=truth.points2d, visible=truth.visible,
+                                facing=truth.facing, names=np.array(truth.names), ring_px=truth.ring_px)
+        t = time.perf_counter()
+        take = track_marker_video(path, layout=None)
+        tracked_s = time.perf_counter() - t
+    n = len(truth.points2d)
+    points = take.points.astype(np.float64)
+    points[..., 1] = take.meta["size"][1] - points[..., 1]
+    s = scores(points, truth)
+    err, vis, clear = s["err"], s["visible"], s["clear"]
+    print(f"{args.video.name}: {n} frames, {len(truth.names)} markers of {args.radius_mm:g} mm radius "
+          f"({np.median(2 * truth.ring_px):.1f} px across, {np.median(truth.px_per_mm):.2f} px/mm), "
+          f"JPEG q{args.quality} + MPEG-4, seed {args.seed}  (made in {made_s:.0f} s)")
+    print(f"  first frame: {s['found_first']}/{s['visible_first']} markers found; {s['tracks']} tracks, "
+          f"{s['switches']} identity switches; tracked at {n / tracked_s:.0f} frames/s (decode included)")
+    print(f"  visible (within {MAX_ANGLE:.0f} deg, {100 * vis.mean():.1f} % of marker-frames): {summary(err, vis)}")
+    print(f"  clear view (within 60 deg, {100 * clear.mean():.1f} %): {summary(err, clear)}")
+    oblique = vis & ~clear
+    if oblique.any():
+        print(f"  oblique (60-75 deg, {100 * oblique.mean():.1f} %): {summary(err, oblique)}")
+    for label, where in (("visible", vis), ("clear-view", clear)):
+        share = (np.isfinite(err) & where).sum(0) / np.maximum(where.sum(0), 1)
+        share = np.where(where.any(0), share, np.nan)
+        order = np.argsort(np.nan_to_num(share, nan=2.0))
+        print(f"  tracked share of each marker's {label} frames: {(share >= 0.99).sum()}/{np.isfinite(share).sum()} "
+              f">= 99 %; lowest " + ", ".join(f"{truth.names[k]} {100 * share[k]:.1f}" for k in order[:5]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
