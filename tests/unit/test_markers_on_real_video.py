@@ -1,0 +1,82 @@
+"""Ring markers composited onto the real face video (`bench/markers_real.py`, issue 17 §1)
+and tracked without a layout, on the clip's first 45 frames: the markers found in the first
+frame followed sub-pixel on the drawn centres, with no identity switch; every marker facing
+the camera found (issue 17's target) is not met yet (xfail, strict).
+
+The span ends before the first fast jaw drop (frames 48-51: the lower lip moves 8-14 px a
+frame), which the tracker does not follow yet (see the bench's docstring). The real video
+is ``../shared/data/video/face_expressions_480.mp4``; the test skips only when ../shared is
+absent.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHARED = Path(__file__).resolve().parents[3] / "shared"
+VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
+FRAMES = 45
+
+
+@pytest.fixture(scope="module")
+def tracked(tmp_path_factory):
+    """(scores as `bench.markers_real.scores` gives them, the truth) for the first 45
+    frames, markers of 1.5 mm radius, JPEG q40 + MPEG-4."""
+    if not SHARED.is_dir():
+        pytest.skip("../shared is absent")
+    import cv2
+
+    from bench.markers_real import marked_video, scores
+    from retarget.sources.markers import track_marker_video
+
+    cv2.setNumThreads(1)
+    path = tmp_path_factory.mktemp("marked") / "marked.mp4"
+    truth = marked_video(path, FRAMES, radius_mm=1.5, quality=40, seed=0, video=VIDEO)
+    take = track_marker_video(path, layout=None)
+    points = take.points.astype(np.float64)
+    points[..., 1] = take.meta["size"][1] - points[..., 1]      # y down, as the truth
+    return scores(points, truth), truth
+
+
+def test_the_composite_is_the_material_it_claims(tracked):
+    """27 markers about 5.3 px across (1.5 mm at the face's ~1.8 px/mm), nearly all
+    visible, most facing the camera."""
+    s, truth = tracked
+    assert truth.points2d.shape == (FRAMES, 1, 27, 2)
+    assert 4.5 < np.median(2 * truth.ring_px) < 6.0
+    assert s["visible"].mean() > 0.9 and s["clear"].mean() > 0.85
+
+
+def _shares(s):
+    """(N,) share of each marker's clear-view frames (facing the camera within 60
+    degrees) its track holds, NaN for markers in clear view in fewer than 5 frames."""
+    clear = s["clear"]
+    held = (np.isfinite(s["err"]) & clear).sum(0) / np.maximum(clear.sum(0), 1)
+    return np.where(clear.sum(0) >= 5, held, np.nan)
+
+
+def test_markers_found_in_the_first_frame_are_followed_on_their_own_marker(tracked):
+    """Every marker tracked in the first frame: held in >= 95 % of its clear-view frames,
+    median <= 0.2 px and >= 97 % within 3 px over them; at most 3 of the visible
+    markers missed in the first frame; no track changes marker."""
+    s, _ = tracked
+    first = np.isfinite(s["err"][0]) & s["visible"][0]
+    share = _shares(s)[first]
+    assert np.nanmin(share) >= 0.95, share
+    e = s["err"][:, first][s["clear"][:, first]]
+    assert np.median(e) <= 0.2, np.median(e)
+    assert (e < 3.0).mean() >= 0.97, (e < 3.0).mean()
+    assert s["found_first"] >= s["visible_first"] - 3, (s["found_first"], s["visible_first"])
+    assert s["switches"] == 0
+
+
+@pytest.mark.xfail(strict=True, reason="jaw_left (vertex 430, 50-65 degrees off the view on the "
+                   "shadow side) is never found: ring_contrast samples the ring at a fixed radius, "
+                   "which on a foreshortened ring lies on the skin, so its dot never counts as bright")
+def test_every_marker_facing_the_camera_is_found(tracked):
+    """Issue 17's mono target: every marker in clear view found (held >= 95 %)."""
+    s, _ = tracked
+    assert np.nanmin(_shares(s)) >= 0.95, _shares(s)
