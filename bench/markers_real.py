@@ -97,39 +97,68 @@ EYE_RIGHT = (33, 246, 161, 160, 159, 158, 157, 173, 133, 155, 154, 153, 145, 144
 EYE_LEFT = (263, 466, 388, 387, 386, 385, 384, 398, 362, 382, 381, 380, 374, 373, 390, 249)
 EYE_CENTRES = ((33, 133), (263, 362))   # each eye's corners
 EYE_DISTANCE_MM = 62.0
+REPEAT_PERIOD = 6                       # 25 fps brought to 30 repeats every 6th frame
 MAX_ANGLE = 75.0                        # degrees off the view beyond which a marker is hidden
 WHITE, BLACK, SKIN = 245.0, 18.0, 161.0  # albedos, grey levels (retarget.testing.render's)
 SUPER, INSTANTS, SHUTTER = 4, 4, 0.5    # supersampling, exposure instants, exposure / frame
 LENS_BLUR, NOISE = 0.5, 2.0             # px; grey levels
 
 
-def face_mesh(video: Path, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """(frames (F, H, W, 3) uint8 BGR, mesh (F, 468, 3) float64): the video's first
-    `n_frames` frames and the face mesh on each, in image pixels (x right, y down, pixel
-    centres at integers as OpenCV's, z toward the camera in the same scale), smoothed over
-    5 frames (Savitzky-Golay, quadratic): a sticker moves with the skin, not with the mesh's
+def repeated_frames(grey_steps: np.ndarray, period: int = REPEAT_PERIOD) -> np.ndarray:
+    """(K,) int64 indices of the frames that repeat the one before, given grey_steps (F - 1,)
+    the mean absolute grey difference of each frame from the previous one: every
+    `period`-th frame where that phase's median step is under a third of the others'
+    (a 25 fps recording brought to 30 fps by repeating every fifth frame), else none."""
+    steps = np.asarray(grey_steps, np.float64)
+    if len(steps) < 2 * period:
+        return np.zeros(0, np.int64)
+    phase_median = np.array([np.median(steps[k::period]) for k in range(period)])
+    k = int(phase_median.argmin())
+    if phase_median[k] >= np.median(np.delete(phase_median, k)) / 3.0:
+        return np.zeros(0, np.int64)
+    return np.arange(k, len(steps), period) + 1
+
+
+def face_mesh(video: Path, n_frames: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """(frames (F, H, W, 3) uint8 BGR, mesh (F, 468, 3) float64, repeats): the video's
+    first `n_frames` frames that are not repeats of the one before (`repeated_frames`:
+    this video is 25 fps content at 30 fps, and a marker moved on a repeated frame, or
+    smoothed across one, would slide on the still skin), `repeats` of them dropped, and the
+    face mesh on each, in image pixels (x right, y down, pixel centres at integers as
+    OpenCV's, z toward the camera in the same scale), smoothed over 5 frames
+    (Savitzky-Golay, quadratic): a sticker moves with the skin, not with the mesh's
     frame-to-frame jitter."""
     from scipy.signal import savgol_filter
 
     cap = cv2.VideoCapture(str(video))
-    tracker = FaceMeshTracker()
-    frames, mesh = [], []
-    while len(frames) < n_frames:
+    read, steps, previous = [], [], None
+    # enough frames to find the repeats' phase, and n_frames once they are dropped
+    while len(read) < max(120, 2 * n_frames):
         ok, frame = cap.read()
         if not ok:
             break
-        points = tracker.track(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+        grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY).astype(np.float32)
+        if previous is not None:
+            steps.append(float(np.abs(grey - previous).mean()))
+        previous = grey
+        read.append(frame)
+    cap.release()
+    repeats = repeated_frames(np.array(steps))
+    kept = np.setdiff1d(np.arange(len(read)), repeats)[:n_frames]
+    tracker = FaceMeshTracker()
+    frames, mesh = [], []
+    for i in kept:
+        points = tracker.track(cv2.cvtColor(read[i], cv2.COLOR_BGR2RGB))
         if points is None:
-            raise SystemExit(f"no face in frame {len(frames)} of {video}")
-        h = frame.shape[0]
+            raise SystemExit(f"no face in frame {i} of {video}")
+        h = read[i].shape[0]
         # the tracker's continuous coordinates (pixel i spans i..i+1), y up -> OpenCV's
         mesh.append(np.column_stack([points[:, 0] - 0.5, h - points[:, 1] - 0.5, points[:, 2]]))
-        frames.append(frame)
-    cap.release()
+        frames.append(read[i])
     mesh = np.asarray(mesh, np.float64)
     if len(mesh) >= 5:
         mesh = savgol_filter(mesh, 5, 2, axis=0, mode="interp")
-    return np.asarray(frames), mesh
+    return np.asarray(frames), mesh, int((repeats <= kept[-1]).sum()) if len(kept) else 0
 
 
 def vertex_normals(mesh: np.ndarray, vertices: np.ndarray) -> np.ndarray:
@@ -247,8 +276,10 @@ def marked_video(path: Path, n_frames: int = 1008, radius_mm: float = 1.5, quali
 
     Returns the truth as `unnamed_track_scores` takes it: points2d (F, 1, N, 2) the drawn
     centres (px, x right, y down), visible and facing (F, 1, N) (bool; cosine of the
-    normal's angle to the view), plus names (N,), ring_px (F,) and px_per_mm (F,)."""
-    frames, mesh = face_mesh(video, n_frames)
+    normal's angle to the view), plus names (N,), ring_px (F,), px_per_mm (F,), repeats (the
+    repeated source frames dropped) and fps (the output's: 25 here)."""
+    frames, mesh, repeats = face_mesh(video, n_frames)
+    fps = 30.0 * (1.0 - 1.0 / REPEAT_PERIOD) if repeats else 30.0   # 25 fps content
     vertices = np.array(list(MARKERS.values()))
     centres = mesh[:, vertices, :2]
     normals = vertex_normals(mesh, vertices)
@@ -258,9 +289,10 @@ def marked_video(path: Path, n_frames: int = 1008, radius_mm: float = 1.5, quali
     visible = (facing > np.cos(np.radians(MAX_ANGLE))) & ~openings(mesh, centres)
     ring_px = radius_mm * px_per_mm
     marked = composite(frames, centres, normals, visible, ring_px, np.random.default_rng(seed))
-    encode(marked, path, quality)
+    encode(marked, path, quality, fps=round(fps))
     return SimpleNamespace(points2d=centres[:, None], visible=visible[:, None], facing=facing[:, None],
-                           names=tuple(MARKERS), ring_px=ring_px, px_per_mm=px_per_mm)
+                           names=tuple(MARKERS), ring_px=ring_px, px_per_mm=px_per_mm,
+                           repeats=repeats, fps=fps)
 
 
 def scores(points: np.ndarray, truth: SimpleNamespace) -> dict:
@@ -292,6 +324,24 @@ def scores(points: np.ndarray, truth: SimpleNamespace) -> dict:
     return {"tracks": base["tracks"], "switches": base["switches"], "err": err, "visible": vis,
             "clear": vis & (truth.facing[:, 0] > 0.5),
             "found_first": int(((first < 3.0).any(0) & vis[0]).sum()), "visible_first": int(vis[0].sum())}
+
+
+def relative_motion(points2d: np.ndarray, visible: np.ndarray, neighbours: int = 6) -> np.ndarray:
+    """(K,) px: each marker's move from frame to frame less the median move of its
+    `neighbours` nearest markers (the part of its motion `RingTracks` cannot predict from
+    theirs), over the markers visible in both frames; points2d (F, N, 2), visible (F, N)."""
+    step = np.diff(points2d, axis=0)
+    out = []
+    for f in range(len(step)):
+        idx = np.flatnonzero(visible[f] & visible[f + 1])
+        if len(idx) <= neighbours:
+            continue
+        q = points2d[f, idx]
+        d = np.linalg.norm(q[:, None] - q[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        near = np.argsort(d, 1)[:, :neighbours]
+        out.append(np.linalg.norm(step[f, idx] - np.median(step[f, idx][near], axis=1), axis=1))
+    return np.concatenate(out) if out else np.zeros(0)
 
 
 def summary(err: np.ndarray, where: np.ndarray) -> str:
@@ -337,6 +387,11 @@ def main(argv=None) -> int:
     print(f"{args.video.name}: {n} frames, {len(truth.names)} markers of {args.radius_mm:g} mm radius "
           f"({np.median(2 * truth.ring_px):.1f} px across, {np.median(truth.px_per_mm):.2f} px/mm), "
           f"JPEG q{args.quality} + MPEG-4, seed {args.seed}  (made in {made_s:.0f} s)")
+    moves = np.linalg.norm(np.diff(truth.points2d[:, 0], axis=0), axis=2)[vis[1:] & vis[:-1]]
+    rel = relative_motion(truth.points2d[:, 0], vis)
+    print(f"  marker motion, px/frame: median {np.median(moves):.2f}, p95 {np.percentile(moves, 95):.1f}, "
+          f"max {moves.max():.1f}; less its 6 neighbours': median {np.median(rel):.2f}, p95 "
+          f"{np.percentile(rel, 95):.1f}, {100 * (rel > 3.0).mean():.1f} % over 3 px")
     print(f"  first frame: {s['found_first']}/{s['visible_first']} markers found; {s['tracks']} tracks, "
           f"{s['switches']} identity switches; tracked at {n / tracked_s:.0f} frames/s (decode included)")
     print(f"  visible (within {MAX_ANGLE:.0f} deg, {100 * vis.mean():.1f} % of marker-frames): {summary(err, vis)}")

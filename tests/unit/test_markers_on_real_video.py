@@ -1,10 +1,12 @@
 """Ring markers composited onto the real face video (`bench/markers_real.py`, issue 17 §1)
-and tracked without a layout, on the clip's first 45 frames: the markers found in the first
+and tracked without a layout, on the clip's first 38 frames: the markers found in the first
 frame followed sub-pixel on the drawn centres, with no identity switch; every marker facing
 the camera found (issue 17's target) is not met yet (xfail, strict).
 
-The span ends before the first fast jaw drop (frames 48-51: the lower lip moves 8-14 px a
-frame), which the tracker does not follow yet (see the bench's docstring). The real video
+The 38 frames are the video's first 46 less its repeated frames (`repeated_frames`: 25 fps
+content at 30 fps); the span ends before the first fast jaw drop (source frames 48-51: the
+lower lip moves 8-14 px a frame), which the tracker does not follow yet (see the bench's
+docstring). The real video
 is ``../shared/data/video/face_expressions_480.mp4``; the test skips only when ../shared is
 absent.
 """
@@ -18,12 +20,12 @@ import pytest
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
-FRAMES = 45
+FRAMES = 38
 
 
 @pytest.fixture(scope="module")
 def tracked(tmp_path_factory):
-    """(scores as `bench.markers_real.scores` gives them, the truth) for the first 45
+    """(scores as `bench.markers_real.scores` gives them, the truth) for the first 38
     frames, markers of 1.5 mm radius, JPEG q40 + MPEG-4."""
     if not SHARED.is_dir():
         pytest.skip("../shared is absent")
@@ -80,3 +82,16 @@ def test_every_marker_facing_the_camera_is_found(tracked):
     """Issue 17's mono target: every marker in clear view found (held >= 95 %)."""
     s, _ = tracked
     assert np.nanmin(_shares(s)) >= 0.95, _shares(s)
+
+
+def test_repeated_frames_are_every_sixth_when_that_phase_stands_still():
+    """25 fps content at 30 fps: the frames after steps 2, 8, 14, ... repeat; steps with
+    no such phase (or too few of them) give none."""
+    from bench.markers_real import repeated_frames
+
+    rng = np.random.default_rng(0)
+    steps = rng.uniform(0.5, 3.0, 60)
+    steps[2::6] = rng.uniform(0.0, 0.2, 10)
+    assert repeated_frames(steps).tolist() == list(range(3, 61, 6))
+    assert repeated_frames(rng.uniform(0.5, 3.0, 60)).size == 0
+    assert repeated_frames(steps[:8]).size == 0
