@@ -1,7 +1,9 @@
 """Ring markers composited onto the real face video (`bench/markers_real.py`, issue 17 §1)
 and tracked without a layout, on the clip's first 38 frames: the markers found in the first
-frame followed sub-pixel on the drawn centres, with no identity switch; every marker facing
-the camera found (issue 17's target) is not met yet (xfail, strict).
+frame followed sub-pixel on the drawn centres, with no identity switch. Not met yet, so
+not asserted (issue 17's closing note): every marker facing the camera found (jaw_left,
+50-65 degrees off the view on the shadow side, never starts a track: `ring_contrast`
+samples the ring at a fixed radius, which on a foreshortened ring lies on the skin).
 
 The 38 frames are the video's first 46 less its repeated frames (`repeated_frames`: 25 fps
 content at 30 fps); the span ends before the first fast jaw drop (source frames 48-51: the
@@ -73,15 +75,6 @@ def test_markers_found_in_the_first_frame_are_followed_on_their_own_marker(track
     assert (e < 3.0).mean() >= 0.97, (e < 3.0).mean()
     assert s["found_first"] >= s["visible_first"] - 3, (s["found_first"], s["visible_first"])
     assert s["switches"] == 0
-
-
-@pytest.mark.xfail(strict=True, reason="jaw_left (vertex 430, 50-65 degrees off the view on the "
-                   "shadow side) is never found: ring_contrast samples the ring at a fixed radius, "
-                   "which on a foreshortened ring lies on the skin, so its dot never counts as bright")
-def test_every_marker_facing_the_camera_is_found(tracked):
-    """Issue 17's mono target: every marker in clear view found (held >= 95 %)."""
-    s, _ = tracked
-    assert np.nanmin(_shares(s)) >= 0.95, _shares(s)
 
 
 def test_repeated_frames_are_every_sixth_when_that_phase_stands_still():
