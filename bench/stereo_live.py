@@ -238,7 +238,6 @@ def server_figures(frames, cal, anchors, data: Path) -> tuple[float, float]:
 
     from retarget.layouts import get_layout
     from server.app import create_app
-    from server.routers.stereo_live import CALIBRATION_FILE
     from server.wire import encode_stereo_pair
 
     ibug = get_layout("ibug68")
@@ -253,7 +252,7 @@ def server_figures(frames, cal, anchors, data: Path) -> tuple[float, float]:
         client.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", client.get(f"/api/projects/{sample}/mesh").content)})
         client.put(f"/api/projects/{pid}/layouts/stickers", json=spec)
         client.put(f"/api/projects/{pid}/landmarks", json={"layout": "stickers", "vertex_indices": [indices[i] for i in spots]})
-        (app.state.store.folder(pid) / CALIBRATION_FILE).write_text(json.dumps(cal.to_dict()))
+        app.state.store.put_stereo_calibration(pid, cal.to_dict())
         ms = []
         with client.websocket_connect(f"/api/projects/{pid}/stereo/live") as ws:
             ws.receive_json()
