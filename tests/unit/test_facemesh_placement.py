@@ -191,10 +191,12 @@ def test_lights_around_the_face_steady_the_points_under_a_small_turn(face, track
 def test_halfway_to_the_model_depth_brings_two_faces_placements_together(tracker, monkeypatch):
     # bench/accuracy.py --dense --seed 1: the same face-mesh point placed on identities A
     # and B, compared on A's surface through ICT's shared topology, 2.48 mm apart (p95
-    # 6.06) on the rays, 2.19 (p95 5.07) halfway to the model's own 3D points
+    # 6.06) on the rays, 2.19 (p95 5.07) halfway to the model's own 3D points (step 5
+    # alone: step 6, which draws them together too, 1.96 against 2.03, is left out)
     from bench.accuracy import scenario
 
     model, a, b, _ = scenario(1, 0)
+    monkeypatch.setattr(placement, "_toward_canonical_shape", lambda mesh, points, surface=None: points)
 
     def apart_mm() -> np.ndarray:
         on_a, on_b = (find_face_mesh(mesh_from_arrays(v, model.faces), tracker).points for v in (a, b))
@@ -263,3 +265,39 @@ def test_the_lip_lines_move_onto_the_contact_line_the_surface_shows():
     for depth_of_row in (lambda r: 10.0, lambda r: np.inf if 100 <= r <= 140 else 10.0):
         pic, pixels = _lip_picture(depth_of_row)
         assert np.array_equal(placement._onto_contact_line(pic, pixels), pixels)
+
+
+def test_the_forehead_brows_cheeks_and_nose_move_toward_the_shape_the_other_points_give():
+    # the canonical face itself, scaled, turned and shifted: points on their own vertices
+    # stay; forehead, brow, cheek and nose points found 6 mm up and to the side come back
+    # their SHAPE_PULL share of the way, but for the iBUG points (the offset table's);
+    # the lips, eyes and jaw never move
+    from retarget.facemesh.canonical import canonical_face
+    from retarget.landmarks import SurfacePoints
+
+    canonical = canonical_face()
+    turn = Rotation.from_euler("zyx", [10, -5, 3], degrees=True).as_matrix()
+    vertices = canonical.vertices @ turn.T * 1.3 + [2.0, -1.0, 0.5]
+    mesh = mesh_from_arrays(vertices, canonical.triangles)
+    first = np.array([np.flatnonzero((canonical.triangles == i).any(1))[0] for i in range(468)])
+    corners = canonical.triangles[first]
+    exact = SurfacePoints(corners, (corners == np.arange(468)[:, None]).astype(np.float64))
+    assert np.allclose(exact.positions(vertices), vertices)
+    kept = placement._toward_canonical_shape(mesh, exact).positions(vertices)
+    assert np.abs(kept - vertices).max() < 1e-6
+
+    regions = np.asarray(get_layout("mediapipe468").regions)
+    pull = placement._shape_pull()[0]
+    off = 1.3 * 0.6 * np.array([0.6, 0.8, 0.0]) @ turn.T   # 6 mm (the face is 1.3 times life size)
+    tri, bary = placement._closest_surface_points(mesh, vertices[pull > 0] + off)
+    astray = SurfacePoints(exact.vertex_indices.copy(), exact.barycentric.copy())
+    astray.vertex_indices[pull > 0], astray.barycentric[pull > 0] = tri, bary
+    before = np.linalg.norm(astray.positions(vertices) - vertices, axis=1)
+    after = np.linalg.norm(placement._toward_canonical_shape(mesh, astray).positions(vertices) - vertices, axis=1)
+    for region, share in placement.SHAPE_PULL.items():
+        rows = (regions == region) & (pull > 0)
+        assert rows.sum() >= 10, region
+        assert after[rows].mean() < (1.0 - share) * before[rows].mean() + 0.03, (region, after[rows].mean())
+    assert pull[regions == "forehead"].min() > 0 and pull[regions == "cheeks"].min() > 0
+    assert not pull[list(get_layout("ibug68").mediapipe468)].any()
+    assert np.abs(after - before)[pull == 0].max() < 1e-6
