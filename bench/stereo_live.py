@@ -201,33 +201,44 @@ def sticker_figures(truth, frames, data: Path) -> dict:
     """One seed's figures (`sticker_bench`)."""
     from retarget.sources.stereo import track_stereo_frames
     from retarget.sources.stereo_live_stickers import LiveStickerTracker
+    from retarget.sources.stereo_tracks import StickerTracks
     from retarget.testing.stereo_rig import STICKER_ANCHORS, rig_calibration, sticker_scores
 
     cal = rig_calibration(*truth.cameras)
     kept = track_stereo_frames(frames, cal, layout=None, head_motion="keep")
     owner = sticker_scores(kept.points, kept.points, truth)["owner"]
     named = [kept.names[m] for m in range(kept.n_points) if owner[m] < STICKER_ANCHORS]
+    # Live columns are `StickerTracks`' own, in the order first seen; offline ones are
+    # those with a split sticker's tracks joined again (`rejoined_tracks`), so the same
+    # sticker may have another name live: the anchors are named in each one's columns.
+    raw = StickerTracks(cal, "blue")
+    for left, right in frames:
+        raw(left, right)
+    raw_owner = sticker_scores(raw.points(), raw.points(), truth)["owner"]
+    live_named = [f"m{m + 1:02d}" for m in range(len(raw_owner)) if raw_owner[m] < STICKER_ANCHORS]
     out: dict = {}
-    for label, anchors in (("named", named), ("auto", None)):
-        tracker = LiveStickerTracker(cal, "blue", anchors=anchors)
-        live, ms = [], []
+    for label, anchors, live_anchors in (("named", named, live_named), ("auto", None, None)):
+        tracker = LiveStickerTracker(cal, "blue", anchors=live_anchors)
+        live, camera, ms = [], [], []
         for i, (left, right) in enumerate(frames):
             began = time.perf_counter()
             live.append(tracker.push(left, right, i / 30))
             ms.append(1000 * (time.perf_counter() - began))
-        m = kept.n_points
-        live = np.stack([np.pad(p[:m], ((0, m - len(p[:m])), (0, 0)), constant_values=np.nan) for p in live])
+            camera.append(tracker.camera_)
+        m = max(len(p) for p in live)
+        live, camera = (np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in seq])
+                        for seq in (live, camera))
         after = np.isfinite(live).any(axis=(1, 2))
         after[:int(np.argmax(after))] = False
         offline = track_stereo_frames(frames, cal, layout=None, anchors=anchors, temporal_window=3)
-        for name, points in (("live", live), ("offline", offline.points)):
-            err = sticker_scores(kept.points, np.where(after[:, None, None], points, np.nan), truth)["error"]
+        for name, seen, points in (("live", camera, live), ("offline", kept.points, offline.points)):
+            err = sticker_scores(seen, np.where(after[:, None, None], points, np.nan), truth)["error"]
             err = err[np.isfinite(err)]
             out[f"{label}_{name}_median"] = float(np.median(err))
             out[f"{label}_{name}_p95"] = float(np.percentile(err, 95))
         if label == "named":
             out["library_ms"], out["library_p95_ms"] = float(np.median(ms)), float(np.percentile(ms, 95))
-    out["server_ms"], out["server_p95_ms"] = server_figures(frames, cal, named, data)
+    out["server_ms"], out["server_p95_ms"] = server_figures(frames, cal, live_named, data)
     return out
 
 
