@@ -850,40 +850,38 @@ class ProjectStore:
 
     def put_arkit_settings(self, project_id: str, settings: dict) -> None:
         """Store the user's (already validated) ARKit settings JSON."""
-        with self._transaction() as db:
-            self._row(project_id)
-            name = f"arkit-settings-{secrets.token_hex(4)}.json"
-            write_atomic(self.folder(project_id) / name, json.dumps(settings).encode())
-            db.execute("UPDATE projects SET arkit_settings_file = ?, updated = ? WHERE id = ?",
-                       (name, _now(), project_id))
-        self._sweep(project_id)
+        self._put_json(project_id, "arkit_settings_file", "arkit-settings", settings)
 
     def arkit_settings(self, project_id: str) -> dict | None:
         """The user's ARKit settings JSON, or None when never saved."""
-        with self._lock:
-            row = self._row(project_id)
-            if row["arkit_settings_file"] is None:
-                return None
-            return json.loads((self.folder(project_id) / row["arkit_settings_file"]).read_text())
+        return self._json(project_id, "arkit_settings_file")
 
     def put_stereo_calibration(self, project_id: str, calibration: dict) -> None:
         """Store the live stereo cameras' calibration JSON (`StereoCalibration.to_dict`);
         it belongs to the project's capture set-up and outlives mesh and landmark changes."""
-        with self._transaction() as db:
-            self._row(project_id)
-            name = f"stereo-calibration-{secrets.token_hex(4)}.json"
-            write_atomic(self.folder(project_id) / name, json.dumps(calibration).encode())
-            db.execute("UPDATE projects SET stereo_calibration_file = ?, updated = ? WHERE id = ?",
-                       (name, _now(), project_id))
-        self._sweep(project_id)
+        self._put_json(project_id, "stereo_calibration_file", "stereo-calibration", calibration)
 
     def stereo_calibration(self, project_id: str) -> dict | None:
         """The live stereo calibration JSON, or None when never saved."""
+        return self._json(project_id, "stereo_calibration_file")
+
+    def _put_json(self, project_id: str, column: str, stem: str, data: dict) -> None:
+        """A project-level JSON document (one the user's edits of mesh and landmarks leave
+        alone) written to a new file ``stem-<hex>.json`` named in `column`; the old one swept."""
+        with self._transaction() as db:
+            self._row(project_id)
+            name = f"{stem}-{secrets.token_hex(4)}.json"
+            write_atomic(self.folder(project_id) / name, json.dumps(data).encode())
+            db.execute(f"UPDATE projects SET {column} = ?, updated = ? WHERE id = ?", (name, _now(), project_id))
+        self._sweep(project_id)
+
+    def _json(self, project_id: str, column: str) -> dict | None:
+        """The document `_put_json` wrote to `column`, or None."""
         with self._lock:
             row = self._row(project_id)
-            if row["stereo_calibration_file"] is None:
+            if row[column] is None:
                 return None
-            return json.loads((self.folder(project_id) / row["stereo_calibration_file"]).read_text())
+            return json.loads((self.folder(project_id) / row[column]).read_text())
 
     # -- takes --------------------------------------------------------------------------
 
