@@ -204,23 +204,19 @@ class LiveStickerTracker:
         that order (a new track after `confirm` pairs in a row, or dropped), so confirmed
         tracks are the first rows and keep their rows; the ones confirmed this pair (born
         together) are ordered top to bottom, then left to right, as offline."""
-        tracks = self.tracks
-        confirmed = np.flatnonzero(tracks._confirmed)
+        confirmed, xyz, px = self.tracks.latest()
+        confirmed = np.flatnonzero(confirmed)
         new = confirmed[len(self._rows):][: MAX_STICKERS - len(self._rows)]
         if new.size:
-            px = tracks._px[-1][new]
-            self._rows = np.concatenate([self._rows, new[np.lexsort((px[:, 0], px[:, 1]))]])
+            self._rows = np.concatenate([self._rows, new[np.lexsort((px[new, 0], px[new, 1]))]])
             self.identified_ = True
-        return tracks._xyz[-1][self._rows].astype(np.float64)
+        return xyz[self._rows].astype(np.float64)
 
     def _forget(self) -> None:
-        """Keep `history` pairs of the tracks' per-pair lists (they serve the prediction of
-        a lost sticker from where it was last seen; the live columns never read them)."""
-        tracks = self.tracks
-        extra = len(tracks._xyz) - self.history
-        if extra >= self.history // 4:   # in steps: trimming a list copies it
-            for name in ("_xyz", "_px", "_fine"):
-                del getattr(tracks, name)[:extra]
+        """Keep `history` pairs of the tracks' history (it serves the prediction of a lost
+        sticker from where it was last seen; the live columns never read it)."""
+        if self.tracks.n_frames - self.history >= self.history // 4:   # in steps: trimming a list copies it
+            self.tracks.forget(self.history)
 
     # -- head frame ----------------------------------------------------------------------
 

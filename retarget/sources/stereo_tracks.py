@@ -601,6 +601,26 @@ class StickerTracks:
         """Frames tracked so far."""
         return len(self._xyz)
 
+    def latest(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The last pair's tracks, one row each in the order they were born: (T,) bool
+        confirmed, (T, 3) float64 points in the left camera's frame and (T, 4) float64 px
+        (left x, y, right x, y), NaN where unseen. A track is confirmed after `confirm`
+        frames in a row or dropped, so confirmed rows come first and keep their rows (a
+        live source's columns, `LiveStickerTracker`)."""
+        if not self._xyz:
+            raise RetargetError("StickerTracks: no frames tracked")
+        return self._confirmed.copy(), self._xyz[-1].copy(), self._px[-1].copy()
+
+    def forget(self, keep: int) -> None:
+        """Drop all but the last `keep` frames of the per-frame history, for a source that
+        never ends: its memory, and the cost of carrying a lost sticker by its neighbours'
+        motion since it was last seen, stay bounded; a sticker lost longer comes back as
+        a new track. `points()` and `left_px()` then cover the frames kept."""
+        extra = len(self._xyz) - max(int(keep), 2)
+        if extra > 0:
+            for history in (self._xyz, self._px, self._fine):
+                del history[:extra]
+
     def _order(self) -> np.ndarray:
         px = np.stack(self._px)[:, self._confirmed, :2]
         seen = np.isfinite(px[..., 0])

@@ -14,6 +14,7 @@ from retarget.sources.color_markers import color_blobs, refined_centres, sticker
 from retarget.sources.headpose import anchored_poses, rigid_anchors
 from retarget.sources.stereo import track_stereo_frames, track_stereo_videos
 from retarget.sources.stereo_depth import expression_depth, sight_smoothed
+from retarget.sources.stereo_tracks import StickerTracks
 from retarget.testing.stereo_rig import (
     FACE_CENTRE,
     STICKER_ANCHORS,
@@ -384,3 +385,21 @@ def test_a_sticker_turning_into_view_is_followed_back_to_its_faint_first_frames(
     assert not seen[:4, 5].any() and seen[4:, 5].all()
     truth = cams[0].to_camera(points[4:, 5])
     assert np.linalg.norm(take.points[4:, 5] - truth, axis=1).max() < 12.0
+
+
+def test_forgetting_the_history_keeps_the_tracks_going(clip):
+    """A live source trims the history (`forget`); the tracks then follow the same stickers
+    as without (`latest`: the last pair's rows, confirmed ones first)."""
+    from retarget.sources.video import VideoReader
+
+    cal = rig_calibration(*clip.cameras)
+    whole, trimmed = StickerTracks(cal, "blue"), StickerTracks(cal, "blue")
+    with VideoReader(clip.videos[0]) as a, VideoReader(clip.videos[1]) as b:
+        for (_, left), (_, right) in zip(a, b):
+            whole(left, right)
+            trimmed(left, right)
+            trimmed.forget(4)
+    assert whole.n_frames == 30 and trimmed.n_frames == 4 and trimmed.points().shape[0] == 4
+    done, xyz, px = trimmed.latest()
+    assert done[:done.sum()].all() and done.sum() == 13 and xyz.shape == (len(done), 3) and px.shape == (len(done), 4)
+    np.testing.assert_allclose(xyz[done], whole.latest()[1][whole.latest()[0]], atol=1e-9)
