@@ -133,13 +133,17 @@ def test_lip_stickers_on_one_epipolar_line_keep_their_identity():
     assert np.isfinite(err).all() and err.max() < 8.0
 
 
-def test_a_sticker_hidden_at_the_start_gets_a_column_when_it_appears():
+def _six_stickers(n: int = 16):
+    """The webcam pair, its calibration, and (n, 6, 3) mm places of six stickers held
+    still in front of it (the caller moves them)."""
     cams = webcam_cameras()
-    cal = rig_calibration(*cams)
-    n = 16
     base = FACE_CENTRE + np.array([[-60, 30, -40], [60, 30, -40], [0, 60, 10], [0, 25, 25],
                                    [0, -30, 20], [45, -5, 0]], dtype=np.float64)
-    points = np.repeat(base[None], n, axis=0)
+    return cams, rig_calibration(*cams), n, np.repeat(base[None], n, axis=0)
+
+
+def test_a_sticker_hidden_at_the_start_gets_a_column_when_it_appears():
+    cams, cal, n, points = _six_stickers()
     points[..., 1] += np.linspace(0, 15, n)[:, None]   # the head nods
     points[:8, 5] = np.nan                             # a cheek sticker under a finger
     take = track_stereo_frames(_disc_frames(cams, points), cal, layout=None, head_motion="keep")
@@ -364,12 +368,7 @@ def test_a_sticker_turning_into_view_is_followed_back_to_its_faint_first_frames(
     # Edge-on at first, a sticker is a small dark bluish blob (JPEG took its chroma) for a
     # few frames before it is blue enough to start a track; the track, once started, is
     # followed back through them (`StickerTracks._extend_back`).
-    cams = webcam_cameras()
-    cal = rig_calibration(*cams)
-    n = 16
-    base = FACE_CENTRE + np.array([[-60, 30, -40], [60, 30, -40], [0, 60, 10], [0, 25, 25],
-                                   [0, -30, 20], [45, -5, 0]], dtype=np.float64)
-    points = np.repeat(base[None], n, axis=0)
+    cams, cal, n, points = _six_stickers()
     points[..., 0] += np.linspace(0, 12, n)[:, None]   # the head moves sideways
     bright = points.copy()
     bright[:8, 5] = np.nan
