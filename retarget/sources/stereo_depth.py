@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-__all__ = ["sight_smoothed", "expression_depth"]
+__all__ = ["sight_smoothed", "expression_depth", "weighted_median_along"]
 
 _CHUNK = 1024   # frames per block: the windows are (frames, stickers, 3, window) floats
 
@@ -79,7 +79,7 @@ def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0,
     shift = np.full(p.shape[:2], np.nan)
     for f0 in range(0, len(p), _CHUNK):
         part = slice(f0, f0 + _CHUNK)
-        shift[part] = _weighted_median_along(windows[part] - stab[part, ..., None], ray[part], across,
+        shift[part] = weighted_median_along(windows[part] - stab[part, ..., None], ray[part], across,
                                              ridge)
     steady = stab + shift[..., None] * ray
     # Back into the camera frame: p = R^T (s - t).
@@ -88,7 +88,7 @@ def sight_smoothed(points, rot, trans, window: int = 45, *, across: float = 2.0,
     return np.where(ok[..., None], out, p)
 
 
-def _weighted_median_along(diff: np.ndarray, ray: np.ndarray, across: float,
+def weighted_median_along(diff: np.ndarray, ray: np.ndarray, across: float,
                            ridge: float = np.inf) -> np.ndarray:
     """(F, M) the weighted median over the window of the offsets `diff` (F, M, 3, W) along
     `ray` (F, M, 3), each weighted by exp(-d^2 / 2 across^2), d its length across the ray,

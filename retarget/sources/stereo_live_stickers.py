@@ -70,6 +70,7 @@ from retarget.sources.calibration import StereoCalibration
 from retarget.sources.filters import temporal_mean
 from retarget.sources.headpose import anchored_poses, rigid_anchors, rigid_transform
 from retarget.sources.stereo_live import checked_pair
+from retarget.sources.stereo_depth import weighted_median_along
 from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.take import marker_names
 
@@ -364,15 +365,6 @@ def _sight_median(past: np.ndarray, head: np.ndarray, ray: np.ndarray, across: f
     window `past` (W, M, 3) and itself along the ray, each weighted by exp(-d^2 / 2
     across^2), d its distance across the ray from `head` (the causal `sight_smoothed`)."""
     window = np.concatenate([past, head[None]])                       # (W + 1, M, 3)
-    diff = window - head
-    along = np.einsum("wmi,mi->wm", diff, ray)
-    off = np.linalg.norm(diff - along[..., None] * ray, axis=2)
-    seen = np.isfinite(along)
-    weight = np.where(seen, np.exp(-0.5 * (np.nan_to_num(off) / across) ** 2), 0.0)
-    order = np.argsort(np.where(seen, along, np.inf), axis=0)
-    along = np.take_along_axis(along, order, axis=0)
-    cum = np.cumsum(np.take_along_axis(weight, order, axis=0), axis=0)
-    at = np.minimum((cum < 0.5 * cum[-1:]).sum(axis=0), len(window) - 1)
-    shift = np.take_along_axis(along, at[None], axis=0)[0]
+    shift = weighted_median_along((window - head).transpose(1, 2, 0)[None], ray[None], across)[0]
     # A point not seen this pair stays lost (NaN): the window only steadies a seen one.
     return head + np.nan_to_num(shift)[:, None] * ray
