@@ -40,7 +40,7 @@ from retarget.errors import RetargetError
 from retarget.layouts import REGIONS, SIDES, SPEC_FORMAT, Layout, get_layout, register_layout
 
 __all__ = ["MAX_POINTS", "MAX_NAME", "MAX_DESCRIPTION", "MAX_SPEC_BYTES", "layout_from_spec",
-           "load_layout_file", "spec_of_names", "take_reference"]
+           "load_layout_file", "spec_of_names", "stereo_reference", "take_reference"]
 
 MAX_POINTS = 1000
 """Most points a custom layout may have (the dense built-in one has 468)."""
@@ -138,33 +138,63 @@ def spec_of_names(names: list[str], regions: list[str], sides: list[str] | None 
     return {"format": SPEC_FORMAT, "description": description, "points": points}
 
 
-def take_reference(points) -> list[list[float]] | None:
-    """Each marker's ``reference`` for a layout made from a 2D marker take, so later takes
-    of the same markers are named by where they sit, not by the order a tracker met them.
+def take_reference(take) -> list[list[float]] | None:
+    """Each marker's ``reference`` for a layout made from a marker take, so later takes (and
+    live sessions) of the same markers are named by where they sit, not by the order a
+    tracker met them.
 
-    points : (F, M, 2) float, the take's pixels (x right, y up; NaN where lost).
-    Returns (M, 3) rows, each marker's first position seen, centred and scaled to the
-    built-in face's size (the layouts' reference convention: cm, +x the subject's left as
-    the camera sees it, +y up, z 0 on this picture plane), or None when a marker is never
-    seen or the take is not 2D. The markers are named against them by a similarity and
-    then affine fit (`retarget.sources.markers.assign_markers`), so any camera distance or
-    roll that the first take had works.
+    take : a `Take`. A 2D marker take (pixels, x right, y up): each marker's first
+    position seen, z 0 on this picture plane; later 2D takes are named against it by a
+    similarity and then affine fit (`retarget.sources.markers.assign_markers`), so any
+    camera distance or roll the first take had works. A stereo take (``source`` "stereo",
+    3D, mm): `stereo_reference` of each marker's median place over the frames it is seen;
+    live stereo sessions are named against it (`retarget.sources.place_names`).
+    Returns (M, 3) rows, centred and scaled to the built-in face's size (the layouts'
+    reference convention: cm, +x the subject's left as the camera sees it, +y up), or None
+    when a marker is never seen or the take is 3D from another source (its axes unknown).
     """
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 3 or p.shape[2] != 2 or len(p) == 0:
-        return None
+    p = np.asarray(take.points, dtype=np.float64)
     seen = np.isfinite(p).all(axis=2)
-    if not seen.any(axis=0).all():
+    if len(p) == 0 or not seen.any(axis=0).all():
         return None
-    first = p[seen.argmax(axis=0), np.arange(p.shape[1])]
-    centred = first - first.mean(axis=0)
+    if p.shape[2] == 2:
+        first = p[seen.argmax(axis=0), np.arange(p.shape[1])]
+        xy = _face_sized(first)
+        return None if xy is None else np.round(np.column_stack([xy, np.zeros(len(xy))]), 4).tolist()
+    if take.source != "stereo":
+        return None
+    # A median, not the first sighting: a sticker first seen half hidden at a grazing
+    # angle is millimetres off, and one the take opens on mid-expression is too.
+    reference = stereo_reference(np.nanmedian(p, axis=0))
+    return None if reference is None else np.round(reference, 4).tolist()
+
+
+def stereo_reference(places) -> np.ndarray | None:
+    """(M, 3) float64 stereo head-frame places as a layout's reference, None when they
+    do not span a face (all at one point).
+
+    places : (M, 3) float, a stereo take's or live session's head frame (the left
+    camera's axes at the head's first pose, `retarget.sources.stereo`: x right, y down,
+    z away from the camera), any unit.
+    The layouts' convention is +x the subject's left as the camera sees it (the camera's
+    x), +y up and +z out of the face towards the camera: the camera's y and z flip (a
+    rotation, so a left sticker stays left). Then centred and scaled to the built-in
+    face's 3D size (cm), as `take_reference` does a 2D take's.
+    """
+    p = np.asarray(places, dtype=np.float64) * [1.0, -1.0, -1.0]
+    return _face_sized(p)
+
+
+def _face_sized(points: np.ndarray) -> np.ndarray | None:
+    """(M, D) `points` (M, D), D 2 or 3, centred and scaled to the root-mean-square radius
+    of the built-in face's iBUG points in their first D axes (cm); None for no spread."""
+    centred = points - points.mean(axis=0)
     spread = np.sqrt((centred ** 2).sum(axis=1).mean())
     if not spread > 0:
         return None
-    face = get_layout("ibug68").reference_points()[:, :2]
+    face = get_layout("ibug68").reference_points()[:, :points.shape[1]]
     size = np.sqrt(((face - face.mean(axis=0)) ** 2).sum(axis=1).mean())
-    xy = centred * (size / spread)
-    return np.round(np.column_stack([xy, np.zeros(len(xy))]), 4).tolist()
+    return centred * (size / spread)
 
 
 def _point(i: int, point) -> dict:

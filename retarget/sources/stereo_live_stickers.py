@@ -52,9 +52,16 @@ the head's turns and did worse (1.5-2.6 mm), and weighing the columns by their s
 the fit gained nothing.
 
 A live player needs points in its target's layout order: `by_name` picks the columns of
-a layout's points named m01..mM (NaN for a point no column has yet). 3D points are in the
-calibration's units (mm), in the left camera's frame at the head pose of the span's first
-anchored pair.
+a layout's points by name (NaN for a point no column has yet). Given a `layout` with a 3D
+reference (one made from a stereo sticker take, `retarget.custom_layouts.take_reference`),
+the columns are named by where they sit, not by the order met: once the head frame is set
+up, the columns placed in `_PLACED` posed pairs are matched to the reference together
+(`retarget.sources.place_names.matched_places`: similarity and assignment), and a column
+placed later against the fit to those named; ``names_`` then gives each column its
+layout point's name, "" for one that matches none (an extra sticker, or one not placed
+yet). Without such a layout the columns are m01..mM in the order met, and a layout's
+points of those names take them. 3D points are in the calibration's units (mm), in the
+left camera's frame at the head pose of the span's first anchored pair.
 """
 
 from __future__ import annotations
@@ -65,10 +72,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from retarget.custom_layouts import stereo_reference
 from retarget.errors import RetargetError
+from retarget.layouts import Layout
 from retarget.sources.calibration import StereoCalibration
 from retarget.sources.filters import temporal_mean
 from retarget.sources.headpose import anchored_poses, rigid_anchors, rigid_transform
+from retarget.sources.place_names import matched_places
 from retarget.sources.stereo_live import checked_pair
 from retarget.sources.stereo_depth import weighted_median_along
 from retarget.sources.stereo_tracks import StickerTracks
@@ -85,6 +95,7 @@ _STEADY = 0.5   # mm, spreads below this count as this in the fit short of ancho
 _PRIOR_SPREAD, _PRIOR_HITS = 5.0, 10   # mm, pairs: a column's spread before it has registrations
 _KEEP = 30   # registrations kept per column for its place (1 s at 30 fps; 90: 1.25 / 3.19 mm against 1.17 / 3.33)
 _JOIN = 10   # registrations at which a late anchor's place counts half   # mm: a sticker seen in few posed pairs counts as this loose
+_PLACED = 10   # registrations before a column is named by place (its median place a few mm sure)
 _NAME = re.compile(r"m(\d{2,3})")
 
 
@@ -131,6 +142,8 @@ class LiveStickerTracker:
     history : pairs of `StickerTracks`' history kept (a lost sticker is predicted from
         where it was last seen: one hidden longer than this comes back as a new column);
         the session's memory and time per pair stay bounded however long it runs.
+    layout : the target layout; when its reference has depth (made from a stereo sticker
+        take), the columns are named by place as its points (module doc), else m01..mM.
 
     ``push(left, right, time)`` takes (H, W, 3) uint8 BGR images and the capture time (s,
     increasing) and returns (M, 3) float32 head-frame points, NaN where lost and through
@@ -145,7 +158,7 @@ class LiveStickerTracker:
                  anchors: Sequence[int | str] | None = None, setup_seconds: float | None = None,
                  depth_window: int = 45, across: float = 2.0,
                  temporal_window: int = 3, max_epipolar: float = 3.0, setup_frames: int = 300,
-                 history: int = 900):
+                 history: int = 900, layout: Layout | None = None):
         self.calibration = calibration
         self.tracks = StickerTracks(calibration, color, max_epipolar=max_epipolar)
         if anchors is not None:
@@ -164,6 +177,11 @@ class LiveStickerTracker:
         self.temporal_window = int(temporal_window)
         self.setup_frames, self.history = int(setup_frames), int(history)
         self._rows = np.zeros(0, np.int64)      # the tracks' row of each column
+        # A flat reference (a 2D take's, z 0) says nothing of depth: by name then.
+        placed = layout is not None and layout.reference is not None and np.ptp(layout.reference_points()[:, 2]) > 0
+        self._layout = layout if placed else None
+        self._named = np.zeros(0, np.int64)     # each column's layout point, -1 for none
+        self._tried = np.zeros(0, bool)         # the columns matched so far
         self._time = -np.inf
         self._setup: list[np.ndarray] = []       # camera-frame points of the set-up span
         self._setup_start: float | None = None
@@ -179,7 +197,10 @@ class LiveStickerTracker:
 
     @property
     def names_(self) -> tuple[str, ...]:
-        return marker_names(len(self._rows))
+        if self._layout is None:
+            return marker_names(len(self._rows))
+        named = np.pad(self._named, (0, len(self._rows) - len(self._named)), constant_values=-1)
+        return tuple(self._layout.point_names[k] if k >= 0 else "" for k in named)
 
     def push(self, left: np.ndarray, right: np.ndarray, time: float) -> np.ndarray:
         """(M, 3) float32 head-frame points of this pair, after the temporal mean."""
@@ -194,7 +215,10 @@ class LiveStickerTracker:
                 raise RetargetError(f"live stickers: no head frame after {self.frames_} frame pairs: "
                                     f"{self.setup_error_}")
             return np.full(xyz.shape, np.nan, np.float32)
-        return self._mean(self._stabilised(xyz))
+        points = self._mean(self._stabilised(xyz))
+        if self._layout is not None:
+            self._name_placed()
+        return points
 
     # -- columns -------------------------------------------------------------------------
 
@@ -326,6 +350,23 @@ class LiveStickerTracker:
         jump: the pose did not use it), and the anchors' places, the mean of their
         registrations, grow steadier."""
         self._register(xyz @ rot.T + trans)
+
+    def _name_placed(self) -> None:
+        """Name by place the columns placed (`_PLACED` registrations) since the last call:
+        the first 3 or more together, later ones against the fit to those named (a name,
+        once given, stays)."""
+        m = len(self._hits)
+        tried = np.pad(self._tried, (0, m - len(self._tried)))
+        ready = (self._hits >= _PLACED) & ~tried
+        use = tried | ready
+        if not ready.any() or use.sum() < 3:
+            return
+        named = np.pad(self._named, (0, m - len(self._named)), constant_values=-1)
+        places = stereo_reference(self._place_all()[0][use])
+        if places is None:   # the placed columns coincide: no shape to match yet
+            return
+        named[use] = matched_places(places, self._layout.reference_points(), known=named[use])
+        self._named, self._tried = named, use
 
     def _stabilised(self, xyz: np.ndarray) -> np.ndarray:
         """(M, 3) head-frame points with their depth steadied (module doc, steps 3-4)."""

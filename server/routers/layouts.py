@@ -96,9 +96,9 @@ def list_project_layouts(project: ProjectDep, store: StoreDep) -> list[dict]:
 def get_take_markers(project: ProjectDep, store: StoreDep, take_id: str) -> dict:
     """The names of a take's points (its markers, in its order), for making a custom layout
     of them: ``{take, names, reference}``, the reference (`take_reference`) null unless the
-    take is 2D with every marker seen; 404 for no such take."""
+    take is 2D or from stereo stickers, with every marker seen; 404 for no such take."""
     take = store.take(project["id"], take_id, trimmed=False)
-    return {"take": take_id, "names": list(take.names), "reference": take_reference(take.points)}
+    return {"take": take_id, "names": list(take.names), "reference": take_reference(take)}
 
 
 @router.post("/api/projects/{project_id}/layouts/from-take", responses=responses(404, 415, 503))
@@ -117,7 +117,7 @@ def post_take_markers(project: ProjectDep, limits: LimitsDep, isolation: Isolati
     take = isolation.call(take_from_upload, data, f"take.{ext}", file.filename,
                           {"layout": None, "fps": fps}, {}, None,
                           what=f"take file {file.filename!r} refused: not a readable {ext.upper()} file")
-    return {"take": None, "names": list(take.names), "reference": take_reference(take.points)}
+    return {"take": None, "names": list(take.names), "reference": take_reference(take)}
 
 
 @router.get("/api/projects/{project_id}/layouts/{name}", responses=responses(404))

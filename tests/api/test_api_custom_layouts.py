@@ -176,7 +176,7 @@ def test_a_take_named_by_the_markers_exports_with_partial_retargeting_and_condit
     take = r.json()
     assert take["n_points"] == len(NAMES)
     r = client.get(f"/api/projects/{project}/layouts/from-take/{take['id']}")
-    assert r.json() == {"take": take["id"], "names": NAMES, "reference": None}  # 3D: no picture-plane reference
+    assert r.json() == {"take": take["id"], "names": NAMES, "reference": None}  # 3D, not from stereo stickers: axes unknown, no reference
     assert client.get(f"/api/projects/{project}/layouts/from-take/AAAAAAAAAAAAAAAA").status_code == 404
     assert client.get(f"/api/projects/{project}/layouts/from-take/..%2F..").status_code == 404
     settings = json.dumps({"head_pose": "remove", "filter": "none",

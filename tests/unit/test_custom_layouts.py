@@ -223,7 +223,7 @@ def test_a_layout_made_from_one_marker_take_names_the_markers_of_the_next(tmp_pa
         path = tmp_path / f"clip{seed}.mkv"
         clips.append((path, render_marker_video(path, n_frames=20, seed=seed, start=start)))
     first = track_marker_video(clips[0][0], layout=None)
-    reference = take_reference(first.points)
+    reference = take_reference(first)
     assert reference is not None and len(reference) == first.n_points
     spec = {"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
                        for name, xyz in zip(first.names, reference)]}
@@ -233,4 +233,25 @@ def test_a_layout_made_from_one_marker_take_names_the_markers_of_the_next(tmp_pa
     assert later.names == first.names and later.layout == layout.name
     np.testing.assert_array_equal(_truth_markers(later.points, clips[1][1]),
                                   _truth_markers(first.points, clips[0][1]))
-    assert take_reference(np.full((3, 4, 2), np.nan)) is None  # a marker never seen: no reference
+    lost = Take(np.full((3, 4, 2), np.nan), ("a", "b", "c", "d"), 30.0)
+    assert take_reference(lost) is None  # a marker never seen: no reference
+
+
+def test_a_stereo_take_s_reference_is_each_sticker_s_median_place_in_the_layouts_axes():
+    """A stereo take's head frame is the left camera's (x right, y down, z away from it):
+    its reference has +y up and +z out of the face, each sticker at its median place
+    (a frame off does not move it), centred and scaled to the built-in face."""
+    from retarget.custom_layouts import take_reference
+    # forehead, chin, the subject's left cheek (the camera's right), nose tip: mm, camera frame
+    places = np.array([[0.0, -60.0, 1000.0], [0.0, 60.0, 1000.0], [50.0, 0.0, 1010.0], [0.0, 0.0, 975.0]])
+    points = np.repeat(places[None], 5, axis=0)
+    points[1] += 30.0   # one frame off
+    points[2, 3] = np.nan   # the nose lost in one
+    reference = np.array(take_reference(Take(points, ("forehead", "chin", "cheek_l", "nose"), 30.0, source="stereo")))
+    expected = (places - places.mean(axis=0)) * [1, -1, -1]
+    face = get_layout("ibug68").reference_points()
+    size = np.sqrt(((face - face.mean(axis=0)) ** 2).sum(axis=1).mean())
+    np.testing.assert_allclose(reference, expected * size / np.sqrt((expected ** 2).sum(axis=1).mean()), atol=1e-4)
+    assert reference[0, 1] > reference[1, 1] and reference[2, 0] > 0 and reference[3, 2] > 0
+    # A 3D take from another source: its axes are unknown, so no reference.
+    assert take_reference(Take(points, ("forehead", "chin", "cheek_l", "nose"), 30.0, source="c3d")) is None

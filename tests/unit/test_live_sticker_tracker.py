@@ -1,22 +1,27 @@
 """Live single-colour stickers (retarget.sources.stereo_live_stickers, issue 17 §3): the
-rendered sticker take of test_stereo_stickers against its truth, the offline columns, and
-a sticker that appears late."""
+rendered sticker take of test_stereo_stickers against its truth, the offline columns, a
+sticker that appears late, and columns named by place after a layout made from a take."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from retarget.custom_layouts import layout_from_spec, take_reference
 from retarget.errors import RetargetError
+from retarget.sample_face import sample_face
+from retarget.sources.stereo import track_stereo_frames
 from retarget.sources.stereo_live_stickers import LiveStickerTracker, by_name
 from retarget.sources.take import marker_names
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (
     FACE_CENTRE,
+    MM_PER_CM,
     STICKER_ANCHORS,
     render_sticker_video,
     rig_calibration,
     sticker_scores,
+    sticker_vertices,
     webcam_cameras,
 )
 from tests.unit.test_stereo_stickers import _disc_frames
@@ -103,6 +108,52 @@ def test_a_sticker_that_appears_late_gets_a_column_and_the_head_motion_goes():
     mapped = by_name(out[-1], tracker.names_, ["m06", "nose", "m01"])
     np.testing.assert_array_equal(mapped[[0, 2]], out[-1][[5, 0]])
     assert np.isnan(mapped[1]).all()
+
+
+def _turned(points: np.ndarray, yaw: float, roll: float) -> np.ndarray:
+    """(N, 3) world mm `points` turned `yaw` degrees about the vertical through the face
+    centre, then rolled `roll` about the line of sight."""
+    a, b = np.radians(yaw), np.radians(roll)
+    turn = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    tilt = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    return (points - FACE_CENTRE) @ (tilt @ turn).T + FACE_CENTRE
+
+
+def _owners(camera_points: np.ndarray, truth_camera: np.ndarray) -> np.ndarray:
+    """(M,) the truth sticker (rows of (N, 3)) nearest each column's point (M, 3), mm apart
+    at most 5 (asserted: the column follows it)."""
+    d = np.linalg.norm(camera_points[:, None] - truth_camera[None], axis=2)
+    assert d.min(axis=1).max() < 5.0
+    return d.argmin(axis=1)
+
+
+def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout():
+    # The 13 stickers of the sticker material on the still built-in face; a take of them
+    # (every one in view, the face still) makes a layout m01..m13 with their places.
+    cams = webcam_cameras()
+    cal = rig_calibration(*cams)
+    face = sample_face(1)
+    stickers = face.vertices[sticker_vertices(face)] * MM_PER_CM
+    take = track_stereo_frames(_disc_frames(cams, np.repeat(stickers[None], 10, axis=0)), cal, layout=None)
+    reference = take_reference(take)
+    layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
+                                          for name, xyz in zip(take.names, reference)]})
+    took = _owners(take.points[-1], cams[0].to_camera(stickers))   # head frame = camera frame: still
+    # Live, the head turned and rolled, nodding, and the first sticker the take met (the
+    # forehead's, the top one) under a finger for the first 12 pairs: the tracker meets
+    # the stickers in another order, and the forehead's last.
+    n = 40
+    live = np.stack([_turned(stickers, 15.0 + 0.2 * i, -10.0) for i in range(n)])
+    live[:12, took[0]] = np.nan
+    tracker = LiveStickerTracker(cal, setup_seconds=0.2, depth_window=9, layout=layout)
+    out = [tracker.push(*pair, i / 30) for i, pair in enumerate(_disc_frames(cams, live))]
+    owners = _owners(tracker.camera_, cams[0].to_camera(live[-1]))
+    assert tracker.names_ != take.names[:len(tracker.names_)]          # met in another order
+    assert tracker.names_ == tuple(take.names[list(took).index(k)] for k in owners)   # named by place
+    # The layout's points take the columns of their stickers (the forehead's too, named
+    # once placed after it appeared).
+    mapped = by_name(out[-1], tracker.names_, layout.point_names)
+    assert np.isfinite(mapped).all()
 
 
 def test_bad_inputs_are_refused_precisely():
