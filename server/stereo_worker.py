@@ -110,8 +110,9 @@ def _track(state: dict, calibration: dict, layout, stickers: dict | None = None)
     if stickers is None:
         state["tracker"], state["names"] = LiveStereoTracker(calibration, layout), None
     else:
-        state["tracker"] = LiveStickerTracker(calibration, stickers["color"], anchors=stickers.get("anchors"))
-        state["names"] = layout.point_names   # the columns m01..mM go to these by name
+        state["tracker"] = LiveStickerTracker(calibration, stickers["color"], anchors=stickers.get("anchors"),
+                                              layout=layout)
+        state["names"] = layout.point_names   # the columns go to these by their names_
     return {"size": list(calibration.size)}
 
 
@@ -136,8 +137,8 @@ _REQUESTS = {"calibrate": _calibrate, "view": _view, "solve": _solve, "track": _
 """What the child answers: calibrate(pattern, size) starts a calibration; view(left, right)
 adds a pair of JPEGs to it; solve() returns the calibration's dict; track(calibration
 dict, layout, stickers=None) starts a tracker of the layout's colour markers, or with
-stickers ``{"color", "anchors"}`` a `LiveStickerTracker` whose columns m01..mM go to the
-layout's points of those names; pair(left, right, time) tracks a pair of JPEGs, returning
+stickers ``{"color", "anchors"}`` a `LiveStickerTracker` whose columns go to the layout's
+points by place (a layout made from a stereo sticker take) or else m01..mM by name; pair(left, right, time) tracks a pair of JPEGs, returning
 ((N, 3) float32 points in the layout's order, info)."""
 
 

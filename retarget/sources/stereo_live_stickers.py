@@ -84,7 +84,7 @@ from retarget.sources.stereo_depth import weighted_median_along
 from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.take import marker_names
 
-__all__ = ["LiveStickerTracker", "by_name", "MAX_STICKERS", "sticker_index"]
+__all__ = ["LiveStickerTracker", "by_name", "MAX_STICKERS", "named_by_place", "sticker_index", "sticker_points"]
 
 MAX_STICKERS = 99
 """Most columns a live sticker tracker gives (m01..m99): the names keep two digits, so
@@ -110,6 +110,22 @@ def sticker_index(anchor: int | str) -> int:
     if isinstance(anchor, bool) or not isinstance(anchor, (int, np.integer)) or not 0 <= anchor < MAX_STICKERS:
         raise RetargetError(f"a sticker anchor index is 0..{MAX_STICKERS - 1}; got {anchor!r:.40}")
     return int(anchor)
+
+
+def named_by_place(layout: Layout) -> bool:
+    """Whether live sticker columns go to `layout`'s points by where they sit (module doc):
+    its reference has depth, as one made from a stereo sticker take has
+    (`retarget.custom_layouts.take_reference`; a 2D take's lies flat, z 0), else by name."""
+    return layout.reference is not None and bool(np.ptp(layout.reference_points()[:, 2]) > 0)
+
+
+def sticker_points(layout: Layout) -> tuple[str, ...]:
+    """The points of `layout` that live sticker columns can drive: every one when it is
+    named by place (`named_by_place`), else those named as the columns are (m01..m99)."""
+    if named_by_place(layout):
+        return layout.point_names
+    columns = set(marker_names(MAX_STICKERS))
+    return tuple(name for name in layout.point_names if name in columns)
 
 
 def by_name(points: np.ndarray, names: Sequence[str], wanted: Sequence[str]) -> np.ndarray:
@@ -177,9 +193,7 @@ class LiveStickerTracker:
         self.temporal_window = int(temporal_window)
         self.setup_frames, self.history = int(setup_frames), int(history)
         self._rows = np.zeros(0, np.int64)      # the tracks' row of each column
-        # A flat reference (a 2D take's, z 0) says nothing of depth: by name then.
-        placed = layout is not None and layout.reference is not None and np.ptp(layout.reference_points()[:, 2]) > 0
-        self._layout = layout if placed else None
+        self._layout = layout if layout is not None and named_by_place(layout) else None
         self._named = np.zeros(0, np.int64)     # each column's layout point, -1 for none
         self._tried = np.zeros(0, bool)         # the columns matched so far
         self._time = -np.inf

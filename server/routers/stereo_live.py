@@ -7,8 +7,8 @@ messages, `server.wire.decode_stereo_pair`); the session's child process
 
 On connect the server sends ``{"type": "hello", "project", "layout", "n_points",
 "sticker_points", "calibration": {rms, baseline, size, views} | null, "limits": {...}}``
-(sticker_points: the layout's points named m01..m99, which single-colour stickers can
-drive). JSON controls:
+(sticker_points: how many of the layout's points single-colour stickers can drive,
+`retarget.sources.stereo_live_stickers.sticker_points`). JSON controls:
 
 - ``{"type": "calibrate", "pattern": {"cols": 9, "rows": 6, "square": 25}, "size": [w, h]}``:
   calibration mode (a checkerboard of cols x rows inner corners, `square` in mm, shown to
@@ -29,11 +29,15 @@ drive). JSON controls:
   colour (`retarget.sources.stereo_live_stickers.LiveStickerTracker`; color as the CLI's
   ``--color``: a name, "B,G,R" or "hsv:H,S,V"; anchors: >= 3 columns that move with the
   head only, or null to choose the most rigid after the set-up span). Stickers have no
-  names, so the tracker numbers them m01..mM as it first sees them (top to bottom at the
-  start, a later one at the end) and column mK drives the landmark named mK: the project's
-  landmarks must be placed with a custom layout whose points are named so (``PUT
-  /api/projects/{id}/layouts/{name}``, then landmarks in it), the same names an offline
-  sticker take (`track_stereo_videos` without a layout) plays by. The live player keeps
+  names, so the tracker numbers its columns m01..mM as it first sees them (top to bottom
+  at the start, a later one at the end; the anchors name these columns). The project's
+  landmarks must be placed with a custom layout (``PUT /api/projects/{id}/layouts/{name}``,
+  then landmarks in it) either made from an offline stereo sticker take
+  (`track_stereo_videos` without a layout; its 3D ``reference``, `take_reference`, keeps
+  where each sticker sat): the columns are then named by place, each driving the
+  landmark of the sticker where it sits, whatever order they were met in; or, without
+  such a reference, whose points are named m01..mM: column mK drives the landmark mK
+  (which holds only while the stickers are met in the take's order). The live player keeps
   the landmarks' fixed N: a column not yet seen, or a landmark no sticker carries, is a
   lost (NaN) row, so M may grow during the session. "tracked" adds "stickers" (M so far)
   and "anchors" (their names once chosen); until the set-up span ends (the head frame is
@@ -65,7 +69,7 @@ from fastapi import APIRouter, WebSocket
 from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
 from retarget.sources.color_markers import MARKER_COLORS
-from retarget.sources.stereo_live_stickers import MAX_STICKERS
+from retarget.sources.stereo_live_stickers import MAX_STICKERS, sticker_points
 from server.deps import HubDep, StoreDep
 from server.hub import StreamHub
 from server.players import LivePlayer
@@ -170,7 +174,8 @@ class _Session:
         if stickers is not None and not sticker_points(layout):
             raise ValueError(f"single-colour stickers are unnamed: their columns m01, m02, ... drive the "
                              f"landmarks of those names, and this project's layout {layout.name!r} has none; "
-                             "place the landmarks with a custom layout whose points are named m01..mM")
+                             "place the landmarks with a custom layout made from a stereo sticker take "
+                             "(its stickers' places name them) or whose points are named m01..mM")
         calibration = await asyncio.to_thread(saved_calibration, self.store, self.project_id)
         if calibration is None:
             raise ValueError("this project has no stereo calibration yet: calibrate the cameras first")
@@ -212,11 +217,6 @@ class _Session:
 
     async def _call(self, kind: str, *args, seconds: float | None = None):
         return await asyncio.to_thread(self.worker.call, kind, *args, seconds=seconds)
-
-
-def sticker_points(layout) -> list[str]:
-    """The layout's points named as live sticker columns are (m01..m99)."""
-    return [name for name in layout.point_names if _STICKER_NAME.fullmatch(name)]
 
 
 def _sticker_count(store, project_id: str, layout: str) -> int:

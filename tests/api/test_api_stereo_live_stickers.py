@@ -1,18 +1,26 @@
 """Live single-colour stickers over ``WS /api/projects/{id}/stereo/live`` (issue 17 §3):
 the rendered sticker take sent as JPEG pairs to a project whose landmarks are a custom
-layout named m01..m13, tracked into its live source; the start message's refusals."""
+layout named m01..m13, tracked into its live source; to one whose layout was made from an
+offline take of the stickers (named by place); the start message's refusals."""
 
 from __future__ import annotations
 
-
 import cv2
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
 from retarget.layouts import get_layout
+from retarget.similarity import similarity_transform
+from retarget.sources.stereo import track_stereo_frames
 from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.video import VideoReader
-from retarget.testing.stereo_rig import STICKER_ANCHORS, render_sticker_video, rig_calibration, sticker_scores
+from retarget.testing.stereo_rig import (
+    STICKER_ANCHORS,
+    render_sticker_video,
+    rig_calibration,
+    sticker_scores,
+)
 from server.wire import encode_stereo_pair
 
 N_FRAMES = 40
@@ -83,6 +91,58 @@ def test_stickers_are_tracked_live_into_the_stream_by_name(app, project, materia
         assert app.state.hub.source(project).describe()["source"] == "live"
         ws.send_json({"type": "stop"})
         assert ws.receive_json()["type"] == "stopped"
+
+
+@pytest.fixture(scope="module")
+def placed_project(app, sample_id, material) -> tuple[str, np.ndarray]:
+    """The sample face with landmarks in a layout made from an offline take of the
+    stickers (stored in the project; its 3D reference from ``GET .../layouts/from-take``),
+    its points renamed (no m01..: only their places can name them) and listed in reverse;
+    and the take's last frame (N, 3) mm in the layout's order."""
+    frames, cal, anchors = material
+    with TestClient(app) as client:
+        pid = client.post("/api/projects", json={"name": "stickers by place"}).json()["id"]
+        take = track_stereo_frames(frames, cal, layout=None)
+        info = app.state.store.put_take(pid, take, name="sticker take")
+        made = client.get(f"/api/projects/{pid}/layouts/from-take/{info['id']}").json()
+        assert made["reference"] is not None and len(made["names"]) == len(SPOTS)
+        # The head anchors (the conditioning's too) are the columns of the temples,
+        # forehead and nose bridge (the take's columns are the live tracker's here).
+        spec = {"points": [{"name": f"sticker_{name}", "region": IBUG.regions[i], "side": "center",
+                            "reference": xyz, "anchor": name in anchors}
+                           for name, xyz, i in zip(made["names"], made["reference"], SPOTS)][::-1]}
+        sample = client.get(f"/api/projects/{sample_id}/landmarks").json()
+        mesh = client.get(f"/api/projects/{sample_id}/mesh").content
+        assert client.put(f"/api/projects/{pid}/mesh", files={"file": ("face.obj", mesh)}).status_code == 200
+        assert client.put(f"/api/projects/{pid}/layouts/placed", json=spec).status_code == 201, spec
+        picked = {"layout": "placed", "vertex_indices": [sample["vertex_indices"][i] for i in SPOTS]}
+        assert client.put(f"/api/projects/{pid}/landmarks", json=picked).status_code == 200
+    app.state.store.put_stereo_calibration(pid, cal.to_dict())
+    return pid, take.points[-1, ::-1]
+
+
+def test_stickers_drive_a_layout_made_from_a_take_by_where_they_sit(app, placed_project, material):
+    (frames, _, anchors), (project, offline) = material, placed_project
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{project}/stereo/live") as ws:
+        assert ws.receive_json()["sticker_points"] == len(offline)   # every point: named by place
+        ws.send_json({"type": "start", "markers": "stickers", "color": "blue", "anchors": anchors})
+        assert ws.receive_json()["type"] == "started"
+        player, pushed = app.state.hub.source(project), []
+        push = player.push
+        player.push = lambda points, t, index: (pushed.append(points), push(points, t, index))
+        tracked = []
+        for i, (left, right) in enumerate(frames):
+            ws.send_bytes(pair(left, right, i))
+            tracked.append(ws.receive_json())
+        assert tracked[-1]["anchored"] and tracked[-1]["found"] >= 10, tracked[-1]
+    # The last pair's points reach the live source in the layout's order: the offline
+    # take's last frame to a few mm (its head frame up to a similarity), where two
+    # stickers swapped would be centimetres off.
+    last = pushed[-1]
+    seen = np.isfinite(last).all(axis=1)
+    scale, rot, trans = similarity_transform(last[seen], offline[seen])
+    residual = np.linalg.norm(scale * last[seen] @ rot.T + trans - offline[seen], axis=1)
+    assert seen.sum() >= 10 and residual.max() < 5.0, residual
 
 
 @pytest.mark.parametrize("message, detail", [
