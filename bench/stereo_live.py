@@ -44,6 +44,13 @@ the anchors named (temples, forehead, nose bridge: 1 s set-up) and chosen (3 s s
 the library's time per pair on one core; and the server's time per pair (``ms`` of the
 "tracked" answers: JPEG decoding at quality 80 and tracking in the session's child) over
 ``WS .../stereo/live`` for a project whose landmarks are a custom layout m01..m13.
+Then the naming (issue 17 §2): a layout is made from the offline take of the whole clip
+(`take_reference`: each sticker's median head-frame place), and a live session (anchors
+chosen, 3 s set-up) starts at frame 0 and at a third of the clip (another head pose,
+the stickers met in another order); printed, the share of the layout's points that the
+right sticker drives at the end: named by place (`LiveStickerTracker(layout=...)`) and
+by the order met (column mK to point mK, as without a reference), and the share named
+wrong by place.
 Medians over the seeds are printed last (targets, as offline: median <= 1 mm, p95 <= 3).
 """
 
@@ -195,6 +202,12 @@ def sticker_bench(seeds: int, n_frames: int) -> None:
               "(target median <= 1, p95 <= 3)")
     print(f"  library {med['library_ms']:.1f} ms a pair on one core (p95 {med['library_p95_ms']:.1f}); "
           f"server {med['server_ms']:.1f} ms a pair (p95 {med['server_p95_ms']:.1f}), JPEG 80 decoding included")
+    print("Naming against a layout made from the offline take of the clip, share of its points driven "
+          "by the right sticker at the end (mean over the seeds):")
+    for start in ("0", "third"):
+        mean = {k: float(np.mean([r[f"{k}_{start}"] for r in rows])) for k in ("place", "order", "wrong")}
+        print(f"  live from frame {'0' if start == '0' else n_frames // 3}: by place {mean['place']:.0%} "
+              f"(named wrong {mean['wrong']:.0%}), by the order met {mean['order']:.0%}")
 
 
 def sticker_figures(truth, frames, data: Path) -> dict:
@@ -239,7 +252,39 @@ def sticker_figures(truth, frames, data: Path) -> dict:
         if label == "named":
             out["library_ms"], out["library_p95_ms"] = float(np.median(ms)), float(np.percentile(ms, 95))
     out["server_ms"], out["server_p95_ms"] = server_figures(frames, cal, live_named, data)
+    take = track_stereo_frames(frames, cal, layout=None)
+    for start, label in ((0, "0"), (len(frames) // 3, "third")):
+        for key, share in naming_figures(truth, frames, cal, take, owner, start).items():
+            out[f"{key}_{label}"] = share
     return out
+
+
+def naming_figures(truth, frames, cal, take, owner, start: int) -> dict:
+    """Shares of the points of a layout made from `take` (the offline take of `frames`,
+    its columns following the truth stickers `owner`) that the right sticker drives at
+    the end of a live session from frame `start`: named by place ("place"; "wrong": named
+    by place to another sticker) and by the order met ("order")."""
+    from retarget.custom_layouts import layout_from_spec, take_reference
+    from retarget.sources.stereo_live_stickers import LiveStickerTracker
+    from retarget.testing.stereo_rig import sticker_scores
+
+    layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
+                                          for name, xyz in zip(take.names, take_reference(take))]})
+    tracker = LiveStickerTracker(cal, "blue", layout=layout)
+    camera = []
+    for i, (left, right) in enumerate(frames[start:]):
+        tracker.push(left, right, i / 30)
+        camera.append(tracker.camera_)
+    m = len(camera[-1])
+    camera = np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in camera])
+    # The truth of the pairs before the session: lost, so the columns' owners are of its pairs.
+    seen = np.concatenate([np.full((start, m, 3), np.nan), camera])
+    live = sticker_scores(seen, seen, truth)["owner"]
+    sticker = dict(zip(take.names, owner))   # each layout point's truth sticker
+    place = [sticker[name] == live[c] for c, name in enumerate(tracker.names_) if name]
+    order = [sticker.get(f"m{c + 1:02d}") == live[c] for c in range(m)]
+    n = len(take.names)
+    return {"place": sum(place) / n, "wrong": (len(place) - sum(place)) / n, "order": sum(order) / n}
 
 
 def server_figures(frames, cal, anchors, data: Path) -> tuple[float, float]:
