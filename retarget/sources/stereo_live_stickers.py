@@ -11,7 +11,8 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    bottom, then left to right), so a sticker that appears later gets a new column at the
    end and M only grows;
 2. a **set-up span** (`setup_seconds` of capture time from the first pair showing 3
-   stickers) fixes the head frame. The anchors are the named ones (1 s is enough), or
+   stickers) fixes the head frame. The anchors are the named ones (1 s is enough), or a
+   layout's own found by place (below; 1 s), or
    else the 4 most mutually rigid stickers of the span (`rigid_anchors`), which needs the
    face to move in it (talk, smile, raise the brows: 3 s by default; on a still span any
    sticker looks rigid. Issue 17's take, seed 0, 120 pairs, median / p95 shape error
@@ -59,7 +60,10 @@ up, the columns placed in `_PLACED` posed pairs are matched to the reference tog
 (`retarget.sources.place_names.matched_places`: similarity and assignment), and a column
 placed later against the fit to those named; ``names_`` then gives each column its
 layout point's name, "" for one that matches none (an extra sticker, or one not placed
-yet). Without such a layout the columns are m01..mM in the order met, and a layout's
+yet). When such a layout marks head anchors and none are named, they are the anchors:
+at the span's end its columns are named from the one pair of it that sees most (no head
+frame yet; the span's blur of a turning head would not match), and a layout anchor
+named later joins them. Without such a layout the columns are m01..mM in the order met, and a layout's
 points of those names take them. 3D points are in the calibration's units (mm), in the
 left camera's frame at the head pose of the span's first anchored pair.
 """
@@ -95,7 +99,7 @@ _STEADY = 0.5   # mm, spreads below this count as this in the fit short of ancho
 _PRIOR_SPREAD, _PRIOR_HITS = 5.0, 10   # mm, pairs: a column's spread before it has registrations
 _KEEP = 30   # registrations kept per column for its place (1 s at 30 fps; 90: 1.25 / 3.19 mm against 1.17 / 3.33)
 _JOIN = 10   # registrations at which a late anchor's place counts half   # mm: a sticker seen in few posed pairs counts as this loose
-_PLACED = 10   # registrations before a column is named by place (its median place a few mm sure)
+_PLACED = 3   # registrations before a column is named by place (a median of 3 outvotes a bad one; one pair names well)
 _NAME = re.compile(r"m(\d{2,3})")
 
 
@@ -160,6 +164,8 @@ class LiveStickerTracker:
         the session's memory and time per pair stay bounded however long it runs.
     layout : the target layout; when its reference has depth (made from a stereo sticker
         take), the columns are named by place as its points (module doc), else m01..mM.
+        Its anchors, if it marks any and `anchors` is None, are the head anchors (found
+        by place at the set-up's end, 1 s by default).
 
     ``push(left, right, time)`` takes (H, W, 3) uint8 BGR images and the capture time (s,
     increasing) and returns (M, 3) float32 head-frame points, NaN where lost and through
@@ -184,8 +190,11 @@ class LiveStickerTracker:
                 raise RetargetError(f"anchors must name at least 3 different stickers; got {anchors!r:.80}")
             anchors = np.array(sorted(set(idx)), np.int64)
         self.named_anchors = anchors
+        self._layout = layout if layout is not None and named_by_place(layout) else None
+        # The layout's own anchors, found by place at the set-up's end, unless named here.
+        self._by_layout = anchors is None and self._layout is not None and bool(self._layout.anchors)
         if setup_seconds is None:
-            setup_seconds = 1.0 if anchors is not None else 3.0
+            setup_seconds = 1.0 if anchors is not None or self._by_layout else 3.0
         if not setup_seconds >= 0 or depth_window < 1 or temporal_window < 1 or history < 30:
             raise RetargetError("setup_seconds must be >= 0, depth_window and temporal_window >= 1, "
                                 "history >= 30")
@@ -193,7 +202,6 @@ class LiveStickerTracker:
         self.temporal_window = int(temporal_window)
         self.setup_frames, self.history = int(setup_frames), int(history)
         self._rows = np.zeros(0, np.int64)      # the tracks' row of each column
-        self._layout = layout if layout is not None and named_by_place(layout) else None
         self._named = np.zeros(0, np.int64)     # each column's layout point, -1 for none
         self._tried = np.zeros(0, bool)         # the columns matched so far
         self._time = -np.inf
@@ -267,14 +275,18 @@ class LiveStickerTracker:
             self._setup_start = self._time
         self._setup.append(xyz)
         if self._time - self._setup_start < self.setup_seconds:
-            self.setup_error_ = ("set-up span: keep the stickers in view" if self.named_anchors is not None else
+            self.setup_error_ = ("set-up span: keep the stickers in view"
+                                 if self.named_anchors is not None or self._by_layout else
                                  "set-up span: talk, smile and raise the brows, so the stickers that "
                                  "do not move show")
             return False
         m = len(xyz)
         span = np.stack([np.pad(p, ((0, m - len(p)), (0, 0)), constant_values=np.nan) for p in self._setup])
         try:
-            anchors = rigid_anchors(span, min(4, m)) if self.named_anchors is None else self.named_anchors
+            if self._by_layout:
+                anchors = self._anchors_by_place(span)
+            else:
+                anchors = rigid_anchors(span, min(4, m)) if self.named_anchors is None else self.named_anchors
             tracked = anchors[anchors < m]
             if tracked.size < 3:
                 raise RetargetError(f"{tracked.size} of the anchors {', '.join(f'm{a + 1:02d}' for a in anchors)} "
@@ -301,6 +313,26 @@ class LiveStickerTracker:
         self.anchored_ = True
         self.setup_error_ = ""
         return True
+
+    def _anchors_by_place(self, span: np.ndarray) -> np.ndarray:
+        """(K,) the columns that are the layout's anchors, the span's columns named by
+        place from its pair (F, M, 3 camera frame) that sees most of them: there is no head
+        frame yet, and one pair's places hold the face's shape where the span's would blur
+        it as the head turns. This is the session's first naming (`_name_placed` goes on
+        from it); `RetargetError` when fewer than 3 anchors are found."""
+        pair = span[np.isfinite(span[..., 0]).sum(axis=1).argmax()]
+        seen = np.isfinite(pair).all(axis=1)
+        named = np.full(len(pair), -1, np.int64)
+        places = stereo_reference(pair[seen])
+        if places is not None:
+            named[seen] = matched_places(places, self._layout.reference_points())
+        anchors = np.flatnonzero(np.isin(named, self._layout.anchors))
+        if anchors.size < 3:
+            wanted = ", ".join(self._layout.point_names[k] for k in self._layout.anchors)
+            raise RetargetError(f"{anchors.size} of the layout's head anchors ({wanted}) were found by "
+                                "place in the set-up span; 3 are needed: keep them in view")
+        self._named, self._tried = named, seen
+        return anchors
 
     def _register(self, head: np.ndarray) -> None:
         """Keep this pair's head-frame positions (M, 3) of the columns it sees, up to each
@@ -368,7 +400,7 @@ class LiveStickerTracker:
     def _name_placed(self) -> None:
         """Name by place the columns placed (`_PLACED` registrations) since the last call:
         the first 3 or more together, later ones against the fit to those named (a name,
-        once given, stays)."""
+        once given, stays); those named as the layout's anchors join the anchors."""
         m = len(self._hits)
         tried = np.pad(self._tried, (0, m - len(self._tried)))
         ready = (self._hits >= _PLACED) & ~tried
@@ -381,6 +413,8 @@ class LiveStickerTracker:
             return
         named[use] = matched_places(places, self._layout.reference_points(), known=named[use])
         self._named, self._tried = named, use
+        if self._by_layout:   # a layout anchor named late joins the anchors, as a named one met late
+            self.anchors_ = np.union1d(self.anchors_, np.flatnonzero(np.isin(named, self._layout.anchors)))
 
     def _stabilised(self, xyz: np.ndarray) -> np.ndarray:
         """(M, 3) head-frame points with their depth steadied (module doc, steps 3-4)."""

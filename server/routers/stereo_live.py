@@ -28,7 +28,8 @@ On connect the server sends ``{"type": "hello", "project", "layout", "n_points",
   "m03"] | null, "settings": {...}}``: the same with Woodward's unnamed stickers of one
   colour (`retarget.sources.stereo_live_stickers.LiveStickerTracker`; color as the CLI's
   ``--color``: a name, "B,G,R" or "hsv:H,S,V"; anchors: >= 3 columns that move with the
-  head only, or null to choose the most rigid after the set-up span). Stickers have no
+  head only, or null: the layout's own anchors when it is named by place and marks some,
+  else the most rigid after the set-up span). Stickers have no
   names, so the tracker numbers its columns m01..mM as it first sees them (top to bottom
   at the start, a later one at the end; the anchors name these columns). The project's
   landmarks must be placed with a custom layout (``PUT /api/projects/{id}/layouts/{name}``,

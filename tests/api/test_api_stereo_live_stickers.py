@@ -123,9 +123,11 @@ def placed_project(app, sample_id, material) -> tuple[str, np.ndarray]:
 
 def test_stickers_drive_a_layout_made_from_a_take_by_where_they_sit(app, placed_project, material):
     (frames, _, anchors), (project, offline) = material, placed_project
+
     with TestClient(app) as client, client.websocket_connect(f"/api/projects/{project}/stereo/live") as ws:
         assert ws.receive_json()["sticker_points"] == len(offline)   # every point: named by place
-        ws.send_json({"type": "start", "markers": "stickers", "color": "blue", "anchors": anchors})
+        # No anchors: the layout's own, found by place (1 s set-up).
+        ws.send_json({"type": "start", "markers": "stickers", "color": "blue", "anchors": None})
         assert ws.receive_json()["type"] == "started"
         player, pushed = app.state.hub.source(project), []
         push = player.push
@@ -134,7 +136,8 @@ def test_stickers_drive_a_layout_made_from_a_take_by_where_they_sit(app, placed_
         for i, (left, right) in enumerate(frames):
             ws.send_bytes(pair(left, right, i))
             tracked.append(ws.receive_json())
-        assert tracked[-1]["anchored"] and tracked[-1]["found"] >= 10, tracked[-1]
+        assert tracked[-1]["anchored"] and tracked[-1]["found"] >= 10, [(t["anchored"], t["detail"]) for t in tracked]
+        assert sorted(tracked[-1]["anchors"]) == anchors   # the columns of the layout's anchors
     # The last pair's points reach the live source in the layout's order: the offline
     # take's last frame to a few mm (its head frame up to a similarity), where two
     # stickers swapped would be centimetres off.

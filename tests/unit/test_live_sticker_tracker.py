@@ -154,6 +154,16 @@ def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout
     # once placed after it appeared).
     mapped = by_name(out[-1], tracker.names_, layout.point_names)
     assert np.isfinite(mapped).all()
+    # A layout that marks its head anchors (temples, forehead, nose bridge) gives them to
+    # the tracker by place: those seen in the set-up span (the forehead is not).
+    spec = layout.spec()
+    for k, point in enumerate(spec["points"]):
+        point["anchor"] = bool(took[k] < STICKER_ANCHORS)
+    tracker = LiveStickerTracker(cal, setup_seconds=0.2, depth_window=9, layout=layout_from_spec(spec))
+    for i, pair in enumerate(_disc_frames(cams, live[:15])):
+        tracker.push(*pair, i / 30)
+    owners = _owners(tracker.camera_, cams[0].to_camera(live[14]))
+    assert sorted(owners[tracker.anchors_]) == sorted({0, 1, 2, 3} - {took[0]})
 
 
 def test_bad_inputs_are_refused_precisely():
