@@ -139,7 +139,7 @@ def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout
     layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
                                           for name, xyz in zip(take.names, reference)]})
     took = _owners(take.points[-1], cams[0].to_camera(stickers))   # head frame = camera frame: still
-    # Live, the head turned and rolled, nodding, and the first sticker the take met (the
+    # Live, the head turned (15 to 23 degrees) and rolled 10, and the first sticker the take met (the
     # forehead's, the top one) under a finger for the first 12 pairs: the tracker meets
     # the stickers in another order, and the forehead's last.
     n = 40
@@ -155,15 +155,18 @@ def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout
     mapped = by_name(out[-1], tracker.names_, layout.point_names)
     assert np.isfinite(mapped).all()
     # A layout that marks its head anchors (temples, forehead, nose bridge) gives them to
-    # the tracker by place: those seen in the set-up span (the forehead is not).
+    # the tracker by place: those seen in the set-up span, then the forehead once named.
     spec = layout.spec()
     for k, point in enumerate(spec["points"]):
         point["anchor"] = bool(took[k] < STICKER_ANCHORS)
     tracker = LiveStickerTracker(cal, setup_seconds=0.2, depth_window=9, layout=layout_from_spec(spec))
-    for i, pair in enumerate(_disc_frames(cams, live[:15])):
+    anchors = []
+    for i, pair in enumerate(_disc_frames(cams, live)):
         tracker.push(*pair, i / 30)
-    owners = _owners(tracker.camera_, cams[0].to_camera(live[14]))
-    assert sorted(owners[tracker.anchors_]) == sorted({0, 1, 2, 3} - {took[0]})
+        anchors.append(tracker.anchors_)
+    owners = _owners(tracker.camera_, cams[0].to_camera(live[-1]))
+    assert sorted(owners[anchors[10]]) == sorted({0, 1, 2, 3} - {took[0]})
+    assert sorted(owners[anchors[-1]]) == [0, 1, 2, 3]
 
 
 def test_bad_inputs_are_refused_precisely():
