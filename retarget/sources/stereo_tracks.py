@@ -45,6 +45,7 @@ import warnings
 import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 
 from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
@@ -245,12 +246,14 @@ def _dark_candidate(image: np.ndarray, x: int, y: int, color: MarkerColor):
 
 
 def flow_moved(predicted: np.ndarray, found: np.ndarray, trusted: np.ndarray, reach: float,
-               neighbours: int = 4, rounds: int = 2) -> np.ndarray:
+               tolerance: float = 3.0, neighbours: int = 4, rounds: int = 2) -> np.ndarray:
     """(T, 2) px: the predictions (T, 2) (NaN: none) moved by the image motion that the
     trusted ones ((T,) bool) show against the candidates found (K, 2) px.
 
-    A trusted prediction and its nearest candidate, when each is the other's nearest and
-    within `reach` px, give a residual; every prediction moves by the median residual of
+    The whole constellation first moves by the shift (within `reach` px) that brings the
+    most trusted predictions within `tolerance` px of a candidate. Then a trusted
+    prediction and its nearest candidate, when each is the other's nearest and within
+    `reach` px, give a residual; every prediction moves by the median residual of
     the `neighbours` matched predictions nearest it (the rigid-plus-expression prior in
     2D: its neighbours move as it does), `rounds` times, the first taking the head's bulk
     motion, the next what is left about each sticker. At 30 pairs a second the residuals
@@ -266,6 +269,20 @@ def flow_moved(predicted: np.ndarray, found: np.ndarray, trusted: np.ndarray, re
     if use.size < 3 or len(cand) < 3:
         return out
     good = np.isfinite(out).all(axis=1)
+    # First the one shift that brings the most predictions within `tolerance` of a
+    # candidate: after a reversal between pairs far apart (the head turning back) every
+    # prediction overshoots by more than half the stickers' spacing, and each one's
+    # nearest candidate is its neighbour's sticker.
+    src = out[use]
+    shifts = (cand[None] - src[:, None]).reshape(-1, 2)
+    shifts = shifts[np.linalg.norm(shifts, axis=1) <= reach]
+    if len(shifts):
+        near = cKDTree(cand).query((src[None] + shifts[:, None]).reshape(-1, 2))[0].reshape(len(shifts), -1)
+        hits = near <= tolerance
+        score = hits.sum(axis=1) - np.where(hits, near, 0.0).sum(axis=1) / (tolerance * len(src) + 1.0)
+        best = int(score.argmax())
+        if hits[best].sum() >= 3:
+            out[good] += shifts[best]
     for _ in range(rounds):
         src = out[use]
         d = np.linalg.norm(src[:, None] - cand[None], axis=2)

@@ -405,21 +405,24 @@ def test_forgetting_the_history_keeps_the_tracks_going(clip):
 
 def test_pairs_three_frames_apart_keep_every_sticker_on_its_track(tmp_path):
     # A page on a software renderer sends about 9 pairs a second: the head turns and nods
-    # past the tracking gate between two pairs. Before the stickers' predictions moved
-    # with their neighbours' image motion (`flow_moved`), these 30 pairs made 18 tracks of
-    # the 13 stickers and 8 identity switches.
-    truth = render_sticker_video(tmp_path / "take.mp4", n_frames=90, seed=0)
-    tracks = StickerTracks(rig_calibration(*truth.cameras))
+    # past the tracking gate between two pairs; and a looping camera file plays the take
+    # forth and back, so the turn reverses between two pairs and every prediction
+    # overshoots by a sticker's spacing. Before the stickers' predictions moved with the
+    # image motion (`flow_moved`), these 60 pairs made 22 tracks of the 13 stickers.
+    truth = render_sticker_video(tmp_path / "take.mp4", n_frames=45, seed=1)
     with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
-        for (i, left), (_, right) in zip(a, b):
-            if i % 3 == 0:
-                tracks(left, right)
+        pairs = [(left, right) for (_, left), (_, right) in zip(a, b)]
+    loop = list(range(45)) + list(range(43, 0, -1))
+    order = [loop[3 * k % len(loop)] for k in range(60)]
+    tracks = StickerTracks(rig_calibration(*truth.cameras))
+    for i in order:
+        tracks(*pairs[i])
     points = tracks.points()
     k = truth.cameras[0].K
     # identities in the left image, a tenth of a pixel sure (the depth is millimetres)
     px = points[..., :2] / points[..., 2:] * k[[0, 1], [0, 1]] + k[:2, 2]
-    owner, switches = _owners(px, truth.points2d[::3, 0])
+    owner, switches = _owners(px, truth.points2d[order, 0])
     assert points.shape[1] == 13 and sorted(owner.tolist()) == list(range(13))
     assert switches == 0
-    both = truth.visible[::3].all(axis=1)[:, owner]      # (F, 13): each column's sticker in view
+    both = truth.visible[order].all(axis=1)[:, owner]      # (F, 13): each column's sticker in view
     assert np.isfinite(points[..., 0])[both].mean() > 0.9
