@@ -61,9 +61,10 @@ up, the columns placed in `_PLACED` posed pairs are matched to the reference tog
 placed later against the fit to those named; ``names_`` then gives each column its
 layout point's name, "" for one that matches none (an extra sticker, or one not placed
 yet). When such a layout marks head anchors and none are named, they are the anchors:
-at the span's end its columns are named from the one pair of it that sees most (no head
-frame yet; the span's blur of a turning head would not match), and a layout anchor
-named later joins them. Without such a layout the columns are m01..mM in the order met, and a layout's
+at the span's end its columns are named at their median places in a head frame fitted
+to them all, and a layout anchor named later joins them. A column not yet placed also
+takes registrations from pairs posed short of anchors, so that a temple hidden through
+the set-up gets named (and joins) while the other temple is hidden. Without such a layout the columns are m01..mM in the order met, and a layout's
 points of those names take them. 3D points are in the calibration's units (mm), in the
 left camera's frame at the head pose of the span's first anchored pair.
 """
@@ -315,17 +316,17 @@ class LiveStickerTracker:
         return True
 
     def _anchors_by_place(self, span: np.ndarray) -> np.ndarray:
-        """(K,) the columns that are the layout's anchors, the span's columns named by
-        place from its pair (F, M, 3 camera frame) that sees most of them: there is no head
-        frame yet, and one pair's places hold the face's shape where the span's would blur
-        it as the head turns. This is the session's first naming (`_name_placed` goes on
-        from it); `RetargetError` when fewer than 3 anchors are found."""
-        pair = span[np.isfinite(span[..., 0]).sum(axis=1).argmax()]
-        seen = np.isfinite(pair).all(axis=1)
-        named = np.full(len(pair), -1, np.int64)
-        places = stereo_reference(pair[seen])
-        if places is not None:
-            named[seen] = matched_places(places, self._layout.reference_points())
+        """(K,) the columns that are the layout's anchors: the span's columns (F, M, 3
+        camera frame) named by place, each at its median place over the span in a head
+        frame fitted to every column (no pair need see them all, and the expressions'
+        moves are millimetres). This is the session's first naming (`_name_placed` goes
+        on from it); `RetargetError` when fewer than 3 anchors are found."""
+        _, _, places = anchored_poses(span, np.arange(span.shape[1]))
+        seen = np.isfinite(places).all(axis=1)
+        named = np.full(len(places), -1, np.int64)
+        shape = stereo_reference(places[seen]) if seen.sum() >= 3 else None
+        if shape is not None:
+            named[seen] = matched_places(shape, self._layout.reference_points())
         anchors = np.flatnonzero(np.isin(named, self._layout.anchors))
         if anchors.size < 3:
             wanted = ", ".join(self._layout.point_names[k] for k in self._layout.anchors)
@@ -334,14 +335,15 @@ class LiveStickerTracker:
         self._named, self._tried = named, seen
         return anchors
 
-    def _register(self, head: np.ndarray) -> None:
+    def _register(self, head: np.ndarray, keep: int = _KEEP) -> None:
         """Keep this pair's head-frame positions (M, 3) of the columns it sees, up to each
-        column's first `_KEEP` (then its place is frozen: the head frame cannot drift)."""
+        column's first `keep` (`_KEEP`: then its place is frozen, the head frame cannot
+        drift)."""
         grow = len(head) - self._reg.shape[1]
         if grow > 0:
             self._reg = np.concatenate([self._reg, np.full((_KEEP, grow, 3), np.nan)], axis=1)
             self._hits = np.concatenate([self._hits, np.zeros(grow)])
-        seen = np.flatnonzero(np.isfinite(head).all(axis=1) & (self._hits < _KEEP))
+        seen = np.flatnonzero(np.isfinite(head).all(axis=1) & (self._hits < keep))
         if seen.size == 0:
             return
         self._reg[self._hits[seen].astype(np.int64), seen] = head[seen]
@@ -419,10 +421,11 @@ class LiveStickerTracker:
     def _stabilised(self, xyz: np.ndarray) -> np.ndarray:
         """(M, 3) head-frame points with their depth steadied (module doc, steps 3-4)."""
         fit = self._fit(xyz)
-        if fit is None:
+        held = fit is None
+        if held:
             if self._pose_ is None:
                 return np.full(xyz.shape, np.nan)
-            fit = (*self._pose_, False)   # held
+            fit = (*self._pose_, False)   # the last pose, held
         rot, trans, full = fit
         head = xyz @ rot.T + trans
         ray = xyz / np.linalg.norm(xyz, axis=1, keepdims=True) @ rot.T
@@ -431,6 +434,11 @@ class LiveStickerTracker:
         self._pose_ = (rot, trans)
         if full:
             self._learn(xyz, rot, trans)
+        elif self._layout is not None and not held:
+            # Naming by place needs a column placed: one hidden through the set-up (the
+            # second temple) would else wait for 3 placed anchors, and it may be the third.
+            # Fitted to every column, the pose is a few mm sure: enough to name it by.
+            self._register(head, keep=_PLACED)
         self._steady = [*self._steady[-(self.depth_window - 1):], head] if self.depth_window > 1 else []
         return steady
 
