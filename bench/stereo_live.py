@@ -45,12 +45,13 @@ the library's time per pair on one core; and the server's time per pair (``ms`` 
 "tracked" answers: JPEG decoding at quality 80 and tracking in the session's child) over
 ``WS .../stereo/live`` for a project whose landmarks are a custom layout m01..m13.
 Then the naming (issue 17 §2): a layout is made from the offline take of the whole clip
-(`take_reference`: each sticker's median head-frame place), and a live session (anchors
-chosen, 3 s set-up) starts at frame 0 and at a third of the clip (another head pose,
-the stickers met in another order); printed, the share of the layout's points that the
-right sticker drives at the end: named by place (`LiveStickerTracker(layout=...)`) and
-by the order met (column mK to point mK, as without a reference), and the share named
-wrong by place.
+(`take_reference`: each sticker's median head-frame place; its anchors the columns of the
+temples, forehead and nose bridge), and a live session (the layout's anchors found by
+place, 1 s set-up) starts at frame 0, a third and two thirds into the clip (other head
+poses, the stickers met in another order); printed, the share of the layout's points
+that the right sticker drives at the end: named by place (`LiveStickerTracker(layout=...)`)
+and by the order met (column mK to point mK, as without a reference), and the share
+named wrong by place.
 Medians over the seeds are printed last (targets, as offline: median <= 1 mm, p95 <= 3).
 """
 
@@ -204,9 +205,9 @@ def sticker_bench(seeds: int, n_frames: int) -> None:
           f"server {med['server_ms']:.1f} ms a pair (p95 {med['server_p95_ms']:.1f}), JPEG 80 decoding included")
     print("Naming against a layout made from the offline take of the clip, share of its points driven "
           "by the right sticker at the end (mean over the seeds):")
-    for start in ("0", "third"):
+    for start in _NAMING_STARTS:
         mean = {k: float(np.mean([r[f"{k}_{start}"] for r in rows])) for k in ("place", "order", "wrong")}
-        print(f"  live from frame {'0' if start == '0' else n_frames // 3}: by place {mean['place']:.0%} "
+        print(f"  live from frame {n_frames * start // 100}: by place {mean['place']:.0%} "
               f"(named wrong {mean['wrong']:.0%}), by the order met {mean['order']:.0%}")
 
 
@@ -253,10 +254,14 @@ def sticker_figures(truth, frames, data: Path) -> dict:
             out["library_ms"], out["library_p95_ms"] = float(np.median(ms)), float(np.percentile(ms, 95))
     out["server_ms"], out["server_p95_ms"] = server_figures(frames, cal, live_named, data)
     take = track_stereo_frames(frames, cal, layout=None)
-    for start, label in ((0, "0"), (len(frames) // 3, "third")):
-        for key, share in naming_figures(truth, frames, cal, take, owner, start).items():
-            out[f"{key}_{label}"] = share
+    for start in _NAMING_STARTS:
+        for key, share in naming_figures(truth, frames, cal, take, owner, len(frames) * start // 100).items():
+            out[f"{key}_{start}"] = share
     return out
+
+
+_NAMING_STARTS = (0, 33, 67)
+"""Where in the clip the naming bench's live sessions start (% of its frames)."""
 
 
 def naming_figures(truth, frames, cal, take, owner, start: int) -> dict:
@@ -266,10 +271,11 @@ def naming_figures(truth, frames, cal, take, owner, start: int) -> dict:
     by place to another sticker) and by the order met ("order")."""
     from retarget.custom_layouts import layout_from_spec, take_reference
     from retarget.sources.stereo_live_stickers import LiveStickerTracker
-    from retarget.testing.stereo_rig import sticker_scores
+    from retarget.testing.stereo_rig import STICKER_ANCHORS, sticker_scores
 
-    layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
-                                          for name, xyz in zip(take.names, take_reference(take))]})
+    layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz,
+                                           "anchor": bool(sticker < STICKER_ANCHORS)}
+                                          for name, xyz, sticker in zip(take.names, take_reference(take), owner)]})
     tracker = LiveStickerTracker(cal, "blue", layout=layout)
     camera = []
     for i, (left, right) in enumerate(frames[start:]):
