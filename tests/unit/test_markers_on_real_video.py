@@ -7,8 +7,10 @@ samples the ring at a fixed radius, which on a foreshortened ring lies on the sk
 
 The 38 frames are the video's first 46 less its repeated frames (`repeated_frames`: 25 fps
 content at 30 fps); the span ends before the first fast jaw drop (source frames 48-51: the
-lower lip moves 8-14 px a frame), which the tracker does not follow yet (see the bench's
-docstring). The real video
+lower lip moves 8-14 px a frame). The first 80 frames take in two jaw drops: there the
+tracks must stay few and on their markers (before the lost tracks were carried by their
+neighbours' fit and kept off faint peaks away from their last bright sighting: 36 tracks,
+14 identity switches, 84.6 % within 3 px; now 31, 1, 91.6 %). The real video
 is ``../shared/data/video/face_expressions_480.mp4``; the test skips only when ../shared is
 absent.
 """
@@ -23,11 +25,11 @@ import pytest
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
 FRAMES = 38
+JAW_FRAMES = 80
 
 
-@pytest.fixture(scope="module")
-def tracked(tmp_path_factory):
-    """(scores as `bench.markers_real.scores` gives them, the truth) for the first 38
+def _tracked(tmp_path_factory, frames: int):
+    """(scores as `bench.markers_real.scores` gives them, the truth) for the first `frames`
     frames, markers of 1.5 mm radius, JPEG q40 + MPEG-4."""
     if not SHARED.is_dir():
         pytest.skip("../shared is absent")
@@ -38,11 +40,23 @@ def tracked(tmp_path_factory):
 
     cv2.setNumThreads(1)
     path = tmp_path_factory.mktemp("marked") / "marked.mp4"
-    truth = marked_video(path, FRAMES, radius_mm=1.5, quality=40, seed=0, video=VIDEO)
+    truth = marked_video(path, frames, radius_mm=1.5, quality=40, seed=0, video=VIDEO)
     take = track_marker_video(path, layout=None)
     points = take.points.astype(np.float64)
     points[..., 1] = take.meta["size"][1] - points[..., 1]      # y down, as the truth
     return scores(points, truth), truth
+
+
+@pytest.fixture(scope="module")
+def tracked(tmp_path_factory):
+    """`_tracked` on the first 38 frames (before the first fast jaw drop)."""
+    return _tracked(tmp_path_factory, FRAMES)
+
+
+@pytest.fixture(scope="module")
+def tracked_jaw(tmp_path_factory):
+    """`_tracked` on the first 80 frames (two fast jaw drops)."""
+    return _tracked(tmp_path_factory, JAW_FRAMES)
 
 
 def test_the_composite_is_the_material_it_claims(tracked):
@@ -75,6 +89,17 @@ def test_markers_found_in_the_first_frame_are_followed_on_their_own_marker(track
     assert (e < 3.0).mean() >= 0.97, (e < 3.0).mean()
     assert s["found_first"] >= s["visible_first"] - 3, (s["found_first"], s["visible_first"])
     assert s["switches"] == 0
+
+
+def test_tracks_hold_their_markers_through_fast_jaw_drops(tracked_jaw):
+    """Through two jaw drops (the lower lip 8-14 px a frame, its neighbours still): at most
+    32 tracks for the 27 markers, at most 3 identity switches, >= 88 % of the clear-view
+    marker-frames within 3 px (36, 14 and 84.6 % before)."""
+    s, _ = tracked_jaw
+    e = s["err"][s["clear"]]
+    assert s["tracks"] <= 32, s["tracks"]
+    assert s["switches"] <= 3, s["switches"]
+    assert (e < 3.0).mean() >= 0.88, (e < 3.0).mean()
 
 
 def test_repeated_frames_are_every_sixth_when_that_phase_stands_still():
