@@ -34,14 +34,14 @@ const HTML = `
 	</div>
 	<div class="row">
 		<label for="live-stereo-markers">Markers</label>
-		<select id="live-stereo-markers" title="What the face carries: the layout's coloured markers, or unnamed stickers of one colour (Woodward's), numbered m01, m02, ... as first seen">
+		<select id="live-stereo-markers" title="What the face carries: the layout's coloured markers, or unnamed stickers of one colour (Woodward's): named by where they sit when the layout was made from a stereo take of them, else m01, m02, ... as first seen">
 			<option value="layout">layout colours</option>
 			<option value="stickers">stickers, one colour</option>
 		</select>
 		<input id="live-stereo-color" value="blue" size="9" disabled
 			title="The stickers' colour: a name (blue, green, ...), B,G,R or hsv:H,S,V">
 		<input id="live-stereo-anchors" value="" size="14" placeholder="anchors: chosen" disabled
-			title="At least 3 stickers that move with the head only (temples, forehead, nose bridge), e.g. m01,m03,m04; empty: the most rigid ones, chosen after 3 s of talking and smiling">
+			title="At least 3 stickers that move with the head only (temples, forehead, nose bridge), as numbered when first seen, e.g. m01,m03,m04; empty: the layout's head anchors, or else the most rigid ones, chosen after 3 s of talking and smiling">
 	</div>
 	<div class="row">
 		<label for="live-stereo-quality">JPEG</label>
@@ -58,10 +58,11 @@ const HTML = `
  * as the webcam's do. The panel shows frames per second and the bandwidth.
  *
  * Markers: the layout's colour markers, or unnamed stickers of one colour (a colour, and
- * optionally the anchors m01, ...): the server numbers the stickers as it first sees them
- * and sticker mK drives the landmark named mK, so the project's landmarks must be a custom
- * layout named m01..mM (the hello's sticker_points counts them; without any the choice is
- * disabled).
+ * optionally the anchors m01, ...). When the project's layout was made from a stereo take
+ * of the stickers (it keeps each one's place), the server names them by where they sit;
+ * otherwise it numbers them as it first sees them and sticker mK drives the landmark named
+ * mK (a custom layout named m01..mM). The hello's sticker_points counts the landmarks
+ * stickers can drive; without any the choice is disabled.
  */
 export class StereoLivePanel {
 
@@ -126,8 +127,8 @@ export class StereoLivePanel {
 		const stickers = this.el( 'live-stereo-markers' ).querySelector( 'option[value="stickers"]' );
 		stickers.disabled = ! hello.sticker_points;
 		stickers.title = hello.sticker_points
-			? `${ hello.sticker_points } landmarks are named as stickers (m01, ...)`
-			: 'This project\'s landmarks have no points named m01, m02, ...: place them with a custom layout named so';
+			? `${ hello.sticker_points } landmarks can be driven by stickers`
+			: 'No landmark can be driven by stickers: make the layout from a stereo take of them, or name its points m01, m02, ...';
 		if ( stickers.disabled ) this.el( 'live-stereo-markers' ).value = 'layout';
 		this.markersChanged();
 
