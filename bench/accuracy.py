@@ -10,7 +10,12 @@ expression weights. Source conditions: "same" (A's 3D points in the target's fra
 of a frontal camera, z = 0). The first row, "paper", is Dutreve 2008 as written: adaptive
 multiquadric transfer and ellipsoid LBS. "true" rows feed the deformer the true target
 feature motion, to separate deformer error from transfer error. --dense adds the
-dense-source rows (`dense_rows`): MediaPipe's 468 points found on A and B with no clicks.
+dense-source rows (`dense_rows`): MediaPipe's 468 points found on A and B with no clicks;
+their "as A's" row drives B's found points by A's displacements unchanged, which ICT's
+truth (the same expression offsets on every identity) moves by, to separate what the
+similarity transform's scale and turn cost from what the placement costs (seeds 0/1/2,
+"468 found": similarity 21.5/18.9/21.4 %, as A's 19.7/15.5/16.8; the similarity's scale
+0.995/1.061/1.099 and turn 4.0/3.6/0.7 degrees).
 
 Figures: relative error = sum of per-vertex error norms / sum of true displacement norms
 over the face area (ICT vertices [0, 9409)) and all expressions; mean and 95th-percentile
@@ -167,6 +172,12 @@ def dense_rows(seed: int, n_random: int, method: str, kernel: str, smoothing: fl
             rows.append({**rows[-1], "kernel": "-", "condition": "true", "fit_ms": float("nan"),
                          "frame_ms": float("nan"), "transfer_ms": float("nan"),
                          **error_figures(pred, truth, tgt0, report)})
+            # What the space transform costs against this truth: ICT's expression offsets
+            # are the same on every identity, so A's displacements carried over unscaled and
+            # unturned are what the truth moves by, where the similarity scales them by the
+            # faces' size ratio and turns them by their shapes' relative turn.
+            pred = tgt0 + skin_displacements(matrix, s - s0)
+            rows.append({**rows[-1], "condition": "as A's", **error_figures(pred, truth, tgt0, report)})
     return rows
 
 
@@ -184,7 +195,10 @@ def print_rows(rows: list[dict]) -> None:
         if "transfer_ms" in r and np.isfinite(r["transfer_ms"]):
             print(f"{r['setup']}: the space transform alone (the server's per-frame work; the browser "
                   f"skins): {r['transfer_ms']:.3f} ms a frame")
-        if "apart_mean" in r and r["condition"] != "true":
+        if r["condition"] == "as A's":
+            print(f"{r['setup']}, as A's: A's displacements unscaled and unturned (ICT's expression "
+                  f"offsets are the same on every identity), not a transform a product can use")
+        if "apart_mean" in r and r["condition"] == "same":
             print(f"{r['setup']}: A's and B's placements of the same point, compared on A's surface: "
                   f"{r['apart_mean']:.2f} mm apart (p95 {r['apart_p95']:.2f})")
     print("errors in mm over the ICT face area; rel% = sum |error| / sum |true displacement|;\n"
