@@ -379,20 +379,9 @@ def scores(points: np.ndarray, truth: SimpleNamespace) -> dict:
     p = np.asarray(points, np.float64)
     with np.errstate(invalid="ignore"):     # its p95 of inf - inf, unused here
         base = unnamed_track_scores(p, truth)
-    gt, vis = truth.points2d[:, 0], truth.visible[:, 0]
-    d = np.linalg.norm(p[:, :, None] - gt[:, None], axis=3)              # (F, M, N)
-    tracked = np.isfinite(p[..., 0])
-    nearest = np.where(tracked, np.nan_to_num(d, nan=np.inf).argmin(2), -1)
-    owner = np.array([np.bincount(nearest[tracked[:, m], m]).argmax() if tracked[:, m].any() else -1
-                      for m in range(p.shape[1])], np.int64)
-    err = np.full(vis.shape, np.inf)
-    for n in range(gt.shape[1]):
-        mine = np.flatnonzero(owner == n)
-        if mine.size:
-            m = mine[tracked[:, mine].sum(0).argmax()]
-            err[:, n] = np.where(tracked[:, m], d[:, m, n], np.inf)
-    first = np.nan_to_num(d[0], nan=np.inf)
-    return {"tracks": base["tracks"], "switches": base["switches"], "err": err, "visible": vis,
+    vis = truth.visible[:, 0]
+    first = np.nan_to_num(np.linalg.norm(p[0][:, None] - truth.points2d[0, 0][None], axis=2), nan=np.inf)
+    return {"tracks": base["tracks"], "switches": base["switches"], "err": base["err"], "visible": vis,
             "clear": vis & (truth.facing[:, 0] > 0.5),
             "found_first": int(((first < 3.0).any(0) & vis[0]).sum()), "visible_first": int(vis[0].sum())}
 
