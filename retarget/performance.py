@@ -194,6 +194,13 @@ class Performance:
         self._fit(neutral)
         self._captured = None
 
+    @property
+    def waiting(self) -> tuple[str, ...]:
+        """The points a live neutral capture was taken without, not seen yet: each joins
+        once it shows (`SourceConditioner`'s ``waiting_``; Woodward's temple stickers show
+        when the head turns). Empty before the capture and when none is missing."""
+        return () if self._conditioner is None else self._conditioner.waiting_
+
     # -- frames -----------------------------------------------------------------------------
 
     def push(self, points, t: float) -> PerformanceFrame | None:

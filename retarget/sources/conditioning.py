@@ -20,6 +20,7 @@ over a whole take, so a recorded take and a live stream are conditioned alike.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -43,14 +44,15 @@ _SELECTORS = set(REGIONS) | set(GROUPS) | {p for lay in LAYOUTS.values() for p i
 
 class NeutralMoved(RetargetError):
     """A neutral capture refused because the performer moved during it; ``motion`` is the
-    largest point spread found, in eye distances (`SourceConditioner`'s
-    ``max_neutral_motion``)."""
+    largest point spread found (a point's median distance from its neutral over the
+    capture), in eye distances (`SourceConditioner`'s ``max_neutral_motion``)."""
 
     def __init__(self, motion: float, allowed: float):
         self.motion = motion
         super().__init__(
             "You moved during the neutral capture: hold still and capture again "
-            f"(a point moved {motion:.2f} eye distances; at most {allowed:.2f} is still)")
+            f"(a point was {motion:.2f} eye distances from its rest place through half of it; "
+            f"at most {allowed:.2f} is still)")
 
 
 @dataclass
@@ -130,7 +132,7 @@ class SourceConditioner:
     settings : `ConditionSettings` (or its dict form); default `ConditionSettings()`.
     neutral : (N, dims) float, the neutral for mode "given" (refused otherwise).
     max_neutral_motion : None, or the most a point may move during a "first_seconds"
-        capture, in eye distances (`eye_distance`): each point's spread is its largest
+        capture, in eye distances (`eye_distance`): each point's spread is its median
         distance from the captured neutral over the capture's frames (registered on the
         stable points when head motion is removed, so moving the head is allowed, as
         Woodward §5.1 has it). A capture that moved more raises `NeutralMoved`, and no
@@ -138,8 +140,14 @@ class SourceConditioner:
         to capture again rather than have a grimace become the rest pose.
     lost_wait : None, or seconds a "first_seconds" capture goes on past its span while a
         point has been lost in every frame of it (a live tracker that finds the last
-        markers a few frames in, or a stalled camera that gave only a frame or two);
-        after that the capture is refused for those points as it is at once without it.
+        markers a few frames in, or a stalled camera that gave only a frame or two).
+        After that the neutral is taken without those points (NaN rows, ``waiting_``
+        names them) and each joins when it shows: its neutral is the median of its
+        positions over its first `seconds` seen (in the head frame when head motion is
+        removed; an anchor then anchors too), and ``neutral_`` is replaced by a new array
+        with it. Woodward's temple stickers show only when the head turns; a live session
+        waits for none of them. Without `lost_wait` such a capture is refused at once,
+        naming the points.
 
     `push(points (N, D), t seconds) -> (N, D) float32 | None`: None while the neutral is
     being captured; lost points (NaN rows) stay NaN. After the capture, ``neutral_``
@@ -189,6 +197,8 @@ class SourceConditioner:
         self._t0 = None
         self._count = 0
         self._remover = self._filter = self._gain = None
+        self.waiting_: tuple[str, ...] = ()
+        self._late: dict[int, list] = {}   # a point joining late: [first time seen, positions]
         if self._given is not None:
             self._start(self._given)
 
@@ -234,30 +244,52 @@ class SourceConditioner:
         frames = np.stack(self._captured)
         self._captured, self._t0 = [], None  # a failed capture starts again at the next frame
         lost = np.isnan(frames[..., 0]).all(axis=0)
-        if lost.any():
+        if lost.any() and (self.lost_wait is None or lost.all()):
             raise RetargetError(
                 f"no neutral for points lost throughout the first {self.settings.neutral['seconds']:g} s: "
                 f"{self._names(lost)}")
+        seen = np.flatnonzero(~lost)
+        neutral = np.full(frames.shape[1:], np.nan, np.float32)
         if self.removes_head:
-            neutral = head_neutral(frames, self._stable)
+            stable = np.flatnonzero(np.isin(seen, self._stable))
+            if len(stable) < 3:
+                raise RetargetError(
+                    f"no neutral: only {len(stable)} of the head's stable points were seen in the first "
+                    f"{self.settings.neutral['seconds']:g} s (3 are needed); lost: {self._names(lost)}")
+            neutral[seen] = head_neutral(frames[:, seen], stable)
         else:
-            neutral = frames[0] if len(frames) == 1 else np.nanmedian(frames, axis=0).astype(np.float32)
+            neutral[seen] = frames[0, seen] if len(frames) == 1 else np.nanmedian(frames[:, seen], axis=0)
+        self.waiting_ = tuple(self._names(lost, every=True))
         if self.max_neutral_motion is not None:
-            motion = self._capture_motion(frames, neutral)
+            motion = self._capture_motion(frames[:, seen], neutral[seen], seen)
             if motion > self.max_neutral_motion:
                 self._refused = True
                 raise NeutralMoved(motion, self.max_neutral_motion)
         return neutral
 
-    def _capture_motion(self, frames: np.ndarray, neutral: np.ndarray) -> float:
-        """The largest distance of any point from `neutral` over (F, N, D) `frames`, in eye
-        distances (head motion taken out first when it is removed); 0 for one frame."""
+    def _capture_motion(self, frames: np.ndarray, neutral: np.ndarray, seen: np.ndarray) -> float:
+        """How far the face moved during the capture: the largest, over the points `seen`
+        ((K,) indices), of a point's median distance from `neutral` (K, D) over (F, K, D)
+        `frames` (head motion taken out first when it is removed), in eye distances; 0
+        for one frame.
+
+        The median, because the neutral is each point's median over the same frames: a
+        point away from it in under half of them (a twitch, a blink, a live tracker's
+        depth spike or a pose jolted by an anchor turning away) leaves the neutral as the
+        still face's, while one away in most of them (a word, a held smile) made the
+        neutral a pose. (The largest distance refused live stickers on a still face:
+        issue 17's take at 10 pairs/s, 0.33 eye distances at most, 0.07 in median.)"""
         if self.removes_head:
-            frames = remove_head_motion(frames, neutral, self._stable)[0]
-        spread = np.linalg.norm(frames - neutral, axis=2)  # (F, N), NaN where lost
+            frames = remove_head_motion(frames, neutral, np.flatnonzero(np.isin(seen, self._stable)))[0]
+        spread = np.linalg.norm(frames - neutral, axis=2)  # (F, K), NaN where lost
         if not np.isfinite(spread).any():
             return 0.0
-        return float(np.nanmax(spread)) / eye_distance(neutral, self.layout)
+        with warnings.catch_warnings():   # a point lost in every registered frame
+            warnings.simplefilter("ignore", RuntimeWarning)
+            typical = np.nanmedian(spread, axis=0)
+        full = np.full((self._n, neutral.shape[1]), np.nan)
+        full[seen] = neutral
+        return float(np.nanmax(typical)) / eye_distance(full, self.layout)
 
     def _start(self, neutral: np.ndarray) -> None:
         """Set S0 and build the per-frame steps that depend on it."""
@@ -282,11 +314,34 @@ class SourceConditioner:
             p = self._remover(p)
             rotation = self._remover.rotation_
             self.rotation_ = rotation.T if np.isfinite(rotation).all() else np.eye(3)
+        if self.waiting_:
+            p = self._joined(p, t)
         if self._filter is not None:
             p = self._filter(p, t)
         if self._gain is not None:
             p = self.neutral_ + self._gain[:, None] * (p - self.neutral_)
         return np.asarray(p, dtype=np.float32)
+
+    def _joined(self, p: np.ndarray, t: float) -> np.ndarray:
+        """`p` (N, D), registered, with the points still waiting for their neutral NaN;
+        a waiting point seen for `seconds` joins (`lost_wait`)."""
+        waiting = np.flatnonzero(np.isnan(self.neutral_[:, 0]))
+        for i in waiting[np.isfinite(p[waiting, 0])]:
+            first, positions = self._late.setdefault(int(i), [t, []])
+            if t <= first + self.settings.neutral["seconds"]:   # its span, as the capture's
+                positions.append(p[i].copy())
+                continue
+            neutral = self.neutral_.copy()   # a new array: a consumer refits on it
+            neutral[i] = np.median(positions, axis=0)
+            if self._remover is not None and i in self._stable:
+                self._remover.place([i], neutral[i:i + 1])
+            self.neutral_ = neutral
+            del self._late[int(i)]
+        lost = np.isnan(self.neutral_[:, 0])
+        self.waiting_ = tuple(self._names(lost, every=True))
+        p = p.copy()
+        p[lost] = np.nan
+        return p
 
     def _per_point(self, entries: dict, default: float) -> np.ndarray:
         """(N,) float64 values from {selector: value}, later entries overriding."""
@@ -315,10 +370,13 @@ class SourceConditioner:
         p[np.isnan(p).any(axis=1)] = np.nan
         return p
 
-    def _names(self, mask: np.ndarray) -> str:
+    def _names(self, mask: np.ndarray, *, every: bool = False):
+        """The names of the points in `mask`: a text (the first 12), or every name as a list."""
         idx = np.flatnonzero(mask)
-        names = [self.layout.point_names[i] if self.layout else f"point {i}" for i in idx[:12]]
-        return ", ".join(names) + (f" and {len(idx) - 12} more" if len(idx) > 12 else "")
+        names = [self.layout.point_names[i] if self.layout else f"point {i}" for i in idx]
+        if every:
+            return names
+        return ", ".join(names[:12]) + (f" and {len(idx) - 12} more" if len(idx) > 12 else "")
 
 
 

@@ -22,8 +22,9 @@ On connect the server sends ``{"type": "hello", "project", "layout", "n_points",
   the project exactly as the webcam's (`server.players.LivePlayer`, the settings are
   `ConditionSettings`) and every pair's points, in the head frame, are pushed to it, so
   every viewer of ``/stream`` sees the retargeted face. Each pair answers ``{"type":
-  "tracked", "frame", "found", "n_points", "identified", "anchored", "ms", "detail"}``
-  (found: points seen; ms: the server's time on the pair);
+  "tracked", "frame", "found", "n_points", "identified", "anchored", "ms", "waiting", "detail"}``
+  (found: points seen; ms: the server's time on the pair; waiting: the points the live
+  neutral was taken without, each joining once it shows, `Performance.waiting`);
 - ``{"type": "start", "markers": "stickers", "color": "blue", "anchors": ["m01", "m02",
   "m03"] | null, "settings": {...}}``: the same with Woodward's unnamed stickers of one
   colour (`retarget.sources.stereo_live_stickers.LiveStickerTracker`; color as the CLI's
@@ -214,7 +215,8 @@ class _Session:
         if found:
             self.player.push(points, pair.capture_time, pair.frame_index)
         return {"type": "tracked", "frame": pair.frame_index, "found": found, "n_points": len(points),
-                "ms": round(1000 * (time.perf_counter() - began), 1), **info}
+                "ms": round(1000 * (time.perf_counter() - began), 1),
+                "waiting": list(self.player.performance.waiting), **info}
 
     async def _call(self, kind: str, *args, seconds: float | None = None):
         return await asyncio.to_thread(self.worker.call, kind, *args, seconds=seconds)

@@ -15,6 +15,7 @@ from retarget.layouts import get_layout
 from retarget.sample_face import EXPRESSION_NAMES, demo_weights, posed_vertices, sample_face
 from retarget.sources.conditioning import ConditionSettings, SourceConditioner, condition_take
 from retarget.sources.filters import temporal_mean
+from retarget.sources.headpose import stable_indices
 from retarget.sources.take import Take
 
 IBUG = get_layout("ibug68")
@@ -222,12 +223,47 @@ def test_a_live_capture_waits_for_points_its_span_missed():
         at_once = SourceConditioner("ibug68", 3, settings)
         for i, f in enumerate(frames):
             at_once.push(f, i / 10)
-    short = SourceConditioner("ibug68", 3, settings, lost_wait=0.2)
-    with pytest.raises(RetargetError, match="lost throughout the first 0.2 s: chin"):
-        for i, f in enumerate(frames):
-            short.push(f, i / 10)
     with pytest.raises(RetargetError, match="lost_wait must be"):
         SourceConditioner("ibug68", 3, settings, lost_wait=-1.0)
+
+
+@pytest.mark.parametrize("head_pose", ["keep", "remove"])
+def test_a_point_missed_past_the_wait_joins_when_it_shows(head_pose):
+    """Past `lost_wait` the capture is taken without the points it never saw (Woodward's
+    temples, seen only when the head turns): they come out NaN, ``waiting_`` names them,
+    and each joins once seen for the capture's span, at its median place then (in the head
+    frame: a late anchor anchors too), in a new ``neutral_`` array."""
+    temple = IBUG.index("eye_left_outer")   # a stable point of ibug68: it anchors the head
+    assert temple in stable_indices(IBUG)
+    rng = np.random.default_rng(3)
+    turn = Rotation.from_rotvec([0.0, 0.3, 0.05]).as_matrix()
+    frames = np.repeat(NEUTRAL[None], 30, axis=0) + rng.normal(0, 0.01, (30, *NEUTRAL.shape))
+    frames[20:] = frames[20:] @ turn.T + [1.0, 0.5, -2.0]   # the head turns, the face still
+    frames[:12, temple] = np.nan   # seen from 1.2 s in at 10 fps
+    settings = {"neutral": {"mode": "first_seconds", "seconds": 0.2}, "head_pose": head_pose}
+    late = SourceConditioner("ibug68", 3, settings, lost_wait=0.2)
+    out, waiting, neutrals = [], [], []
+    for i, f in enumerate(frames):
+        out.append(late.push(f, i / 10))
+        waiting.append(late.waiting_)
+        neutrals.append(late.neutral_)
+    first = next(i for i, o in enumerate(out) if o is not None)
+    assert first == 5 and waiting[first:15] == [("eye_left_outer",)] * (15 - first)
+    captured = neutrals[first]
+    assert all(n is captured for n in neutrals[first:15])
+    assert np.isnan(captured[temple]).all() and np.isfinite(np.delete(captured, temple, axis=0)).all()
+    # seen from 1.2 s, it joins at the first frame past its 0.2 s span, as the capture did
+    assert all(np.isnan(o[temple]).all() for o in out[first:15])
+    assert waiting[15] == () and neutrals[15] is not captured
+    assert np.isfinite(out[15][temple]).all()
+    np.testing.assert_allclose(late.neutral_[temple], NEUTRAL[temple], atol=0.05)
+    np.testing.assert_allclose(np.delete(late.neutral_, temple, axis=0), np.delete(captured, temple, axis=0))
+    # after the turn, the face is still: with the head removed, every point is at its neutral
+    if head_pose == "remove":
+        np.testing.assert_allclose(out[-1], late.neutral_, atol=0.1)
+    assert np.isfinite(out[-1]).all()
+    late.reset()
+    assert late.waiting_ == () and late.neutral_ is None
 
 
 def test_settings_round_trip_through_json_and_defaults():

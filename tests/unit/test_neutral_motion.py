@@ -94,3 +94,24 @@ def test_takes_are_not_checked_and_a_performance_refuses_pushed_frames():
 def test_max_neutral_motion_is_checked():
     with pytest.raises(Exception, match="max_neutral_motion must be a positive number"):
         SourceConditioner("ibug68", 3, SETTINGS, max_neutral_motion=0)
+
+
+@pytest.mark.parametrize("jolted, refused", [(5, False), (8, True)])
+def test_the_capture_judges_what_the_neutral_took(jolted, refused):
+    """The neutral is each point's median over the capture, so the check is a point's
+    median distance from it: a point jolted (here 0.3 eye distances) in 5 of the 17 frames
+    (a live tracker's depth spike, a pose jolted as an anchor turns away) leaves a still
+    face's neutral and is accepted; jolted in 8, half its frames, it has no still place
+    and the capture is refused."""
+    corner = IBUG.index("mouth_corner_left")
+    frames = [_head_moved(NEUTRAL, i) for i in range(16)]
+    for i in np.linspace(1, 15, jolted).round().astype(int):
+        frames[i] = _head_moved(NEUTRAL + np.where(np.arange(68)[:, None] == corner,
+                                                   [0, 0, 0.3 * eye_distance(NEUTRAL, IBUG)], 0), i)
+    if refused:
+        with pytest.raises(NeutralMoved) as refusal:
+            _capture(frames)
+        assert refusal.value.motion > LIVE_NEUTRAL_MOTION
+    else:
+        conditioner = _capture(frames)
+        np.testing.assert_allclose(conditioner.neutral_[corner], NEUTRAL[corner], atol=0.05)

@@ -255,7 +255,9 @@ export class StereoLivePanel {
 
 			const stickers = message.stickers === undefined ? ''
 				: ` · ${ message.stickers } stickers${ message.anchors.length ? `, anchors ${ message.anchors.join( ' ' ) }` : '' }`;
-			this.status( `${ message.found }/${ message.n_points } points${ stickers } · ${ this.rates() }${ message.detail ? ` · ${ message.detail }` : '' }` );
+			// points the neutral was taken without (a temple seen only as the head turns) join when they show
+			const waiting = message.waiting && message.waiting.length ? ` · waiting for ${ message.waiting.join( ', ' ) } to show` : '';
+			this.status( `${ message.found }/${ message.n_points } points${ stickers } · ${ this.rates() }${ waiting }${ message.detail ? ` · ${ message.detail }` : '' }` );
 
 		} else if ( message.type === 'calibrated' ) {
 
