@@ -343,6 +343,16 @@ class SourceConditioner:
         p[lost] = np.nan
         return p
 
+    def settled_neutral(self) -> np.ndarray:
+        """(N, D) float32 ``neutral_`` with each point still waiting to join at the median
+        of its positions so far (NaN for one not seen since the capture): the end of a
+        take that stops inside a late point's span."""
+        neutral = self.neutral_.copy()
+        for i, (_, positions) in self._late.items():
+            if positions:
+                neutral[i] = np.median(positions, axis=0)
+        return neutral
+
     def _per_point(self, entries: dict, default: float) -> np.ndarray:
         """(N,) float64 values from {selector: value}, later entries overriding."""
         out = np.full(self._n, default, dtype=np.float64)
@@ -407,6 +417,9 @@ def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: b
     frame is conditioned against it: no frame is left out, and the result has the take's
     own times (a 6.72 s take stays 6.72 s; an export keeps the mouth in sync with the
     take's sound). `RetargetError` when the take ends before its neutral capture does.
+    A point lost throughout the capture's span takes its place once seen, as in a live
+    capture with ``lost_wait`` (a stereo sticker take's temple, hidden until the head
+    turns); a neutral frame ("frame" mode) must still see every point.
 
     Points that are lost in every frame (a 21-marker take read into a 68-point layout)
     are left out of the conditioning, which runs on the sub-layout of the others
@@ -448,11 +461,16 @@ def condition_take(take: Take, settings=None, neutral=None, *, with_rotations: b
 
 def _captured_neutral(layout, dims: int, settings, points: np.ndarray,
                       times: np.ndarray) -> np.ndarray:
-    """The neutral a live capture of these frames would take (`SourceConditioner`)."""
-    capture = SourceConditioner(layout, dims, settings)
+    """The neutral a live capture of these frames would take (`SourceConditioner`), the
+    points lost throughout its span included as they join once seen (``lost_wait`` 0: a
+    take holds them all; a stereo sticker take's temple shows only when the head turns,
+    and no frame may see both temples)."""
+    capture = SourceConditioner(layout, dims, settings, lost_wait=0.0)
     for i in range(len(points)):
-        if capture.push(points[i], times[i]) is not None:
+        if capture.push(points[i], times[i]) is not None and not capture.waiting_:
             return capture.neutral_
+    if capture.neutral_ is not None:   # a point first seen in the take's last moments
+        return capture.settled_neutral()
     raise RetargetError(
         f"the take ({times[-1] - times[0]:.3f} s) ends before its neutral capture does "
         f"({settings.neutral['seconds']:g} s)")

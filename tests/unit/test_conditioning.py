@@ -194,8 +194,6 @@ def test_capture_errors_name_points_and_spans():
     _, moved = _performance(frames=20)
     moved[:8, IBUG.index("chin")] = np.nan
     take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
-    with pytest.raises(RetargetError, match="lost throughout the first 0.2 s: chin"):
-        condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.2}})
     with pytest.raises(RetargetError, match="neutral frame 2 has lost points: chin"):
         condition_take(take, {"neutral": {"mode": "frame", "frame": 2}})
     with pytest.raises(RetargetError, match="ends before its neutral capture does"):
@@ -225,6 +223,26 @@ def test_a_live_capture_waits_for_points_its_span_missed():
             at_once.push(f, i / 10)
     with pytest.raises(RetargetError, match="lost_wait must be"):
         SourceConditioner("ibug68", 3, settings, lost_wait=-1.0)
+
+
+@pytest.mark.parametrize("late_from", [8, 18])
+def test_a_take_point_lost_through_the_capture_takes_its_place_once_seen(late_from):
+    """A take plays though a point is lost through its neutral's span (a sticker take's
+    temple): the neutral holds it where it sits over its first span seen, in the head
+    frame; seen only in the take's last frames, at the median of those."""
+    _, moved = _performance(frames=20)
+    chin = IBUG.index("chin")
+    moved[:late_from, chin] = np.nan
+    take = Take(moved, IBUG.point_names, 30.0, layout="ibug68")
+    out, neutral = condition_take(take, {"neutral": {"mode": "first_seconds", "seconds": 0.2}})
+    assert np.isfinite(neutral).all() and np.isfinite(out.points[late_from:, chin]).all()
+    times = take.frame_times()
+    span = (times >= times[late_from]) & (times <= times[late_from] + 0.2)   # its first 0.2 s seen
+    assert span.sum() >= 2
+    np.testing.assert_allclose(neutral[chin], np.median(out.points[span, chin], axis=0), atol=1e-4)
+    with pytest.raises(RetargetError, match="ends before its neutral capture does"):
+        condition_take(Take(moved[:3], IBUG.point_names, 30.0, layout="ibug68"),
+                       {"neutral": {"mode": "first_seconds", "seconds": 0.2}})
 
 
 @pytest.mark.parametrize("head_pose", ["keep", "remove"])
