@@ -296,22 +296,25 @@ def face_mesh_take(path: Path, layout: str, max_frames: int, names: dict[Path, s
 
 
 def stereo_calibration(videos: list[Path], calibration: Path | None, boards: list[Path] | None,
-                       pattern: tuple, layout: str,
-                       names: dict[Path, str]) -> tuple[StereoCalibration, str]:
+                       pattern: tuple, layout, names: dict[Path, str],
+                       color="blue") -> tuple[StereoCalibration, str]:
     """(calibration, "file" | "checkerboard") of a stereo pair once everything that can be
     checked before tracking is (`retarget.sources.stereo.stereo_pair_calibration`): from
-    the .npz, or computed from the checkerboard videos, which takes a few seconds."""
+    the .npz, or computed from the checkerboard videos, which takes a few seconds. Layout
+    None: stickers of `color`."""
     with _naming(names):
         return stereo_pair_calibration(*videos, layout=layout, calibration=calibration,
-                                       boards=boards, pattern=pattern)
+                                       boards=boards, pattern=pattern, color=color)
 
 
-def stereo_take(videos: list[Path], cal: StereoCalibration, layout: str,
-                names: dict[Path, str], progress) -> Take:
-    """Colour markers tracked through a stereo pair (Woodward §5), head motion kept."""
+def stereo_take(videos: list[Path], cal: StereoCalibration, layout, names: dict[Path, str],
+                stickers: dict | None, progress) -> Take:
+    """Colour markers tracked through a stereo pair (Woodward §5), head motion kept; or, with
+    layout None and `stickers` ``{"color", "anchors"}``, every sticker of one colour in the
+    head frame (a layout made from the take keeps where each sits)."""
+    options = {"head_motion": "keep"} if stickers is None else {"head_motion": "remove", **stickers}
     with _naming(names):
-        take = track_stereo_videos(*videos, cal, layout=layout, head_motion="keep",
-                                   progress=progress)
+        take = track_stereo_videos(*videos, cal, layout=layout, progress=progress, **options)
     take.meta.update(videos=[names[v] for v in videos], calibration=cal.to_dict())
     return take
 

@@ -450,13 +450,14 @@ def track_stereo_videos(left, right, calibration: StereoCalibration | str | os.P
     return take
 
 
-def stereo_pair_calibration(left, right, *, layout: Layout | str, calibration=None,
-                            boards=None, pattern=None) -> tuple[StereoCalibration, str]:
+def stereo_pair_calibration(left, right, *, layout: Layout | str | None, calibration=None,
+                            boards=None, pattern=None, color="blue") -> tuple[StereoCalibration, str]:
     """(calibration, "file" | "checkerboard") for tracking a pair of colour-marker videos,
     once everything that can be checked before tracking is: both videos readable with
     equal sizes and frame counts (`video_pair_size`), a real calibration for that size and
-    the layout's markers in the first frame pair (tracking one pair costs about 0.2 s,
-    a whole pair of videos minutes).
+    the layout's markers in the first frame pair, or with layout None 3 stickers of
+    `color` seen by both cameras there (tracking one pair costs about 0.2 s, a whole pair
+    of videos minutes).
 
     left, right : the pair's video paths.
     calibration : a `StereoCalibration` or the path of one saved by `save`; else
@@ -482,14 +483,26 @@ def stereo_pair_calibration(left, right, *, layout: Layout | str, calibration=No
             f"the stereo videos are {size[0]}x{size[1]} but the calibration is for "
             f"{calibration.size[0]}x{calibration.size[1]}: calibrate the cameras at the size "
             "they film")
-    _check_first_markers(left, right, calibration, layout)
+    _check_first_markers(left, right, calibration, layout, color)
     return calibration, source
 
 
-def _check_first_markers(left, right, calibration: StereoCalibration, layout: Layout | str) -> None:
-    """Refuse a pair whose first frames show too few of the layout's colour markers."""
+def _check_first_markers(left, right, calibration: StereoCalibration, layout: Layout | str | None,
+                         color) -> None:
+    """Refuse a pair whose first frames show too few of the layout's colour markers (with
+    no layout, fewer than 3 stickers of `color` seen by both cameras)."""
     with VideoReader(left) as a, VideoReader(right) as b:
         first = (next(iter(a))[1], next(iter(b))[1])
+    if layout is None:
+        tracks = StickerTracks(calibration, color, confirm=1)
+        tracks(*first)
+        seen = int(np.isfinite(tracks.points()[-1]).all(axis=1).sum()) if tracks.n_frames else 0
+        if seen < 3:
+            raise RetargetError(
+                f"the first frames of {str(left)!r} and {str(right)!r} show {seen} sticker{'' if seen == 1 else 's'} of colour "
+                f"{tracks.color.name!r} seen by both cameras; at least 3 are needed (the head pose "
+                "takes 3): check the colour, or start the videos with the face in view")
+        return
     name = layout.name if isinstance(layout, Layout) else layout
     try:
         track_stereo_frames([first], calibration, layout=layout, head_motion="keep")

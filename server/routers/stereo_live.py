@@ -62,7 +62,6 @@ import asyncio
 import collections
 import json
 import logging
-import re
 import time
 
 import numpy as np
@@ -70,14 +69,14 @@ from fastapi import APIRouter, WebSocket
 
 from retarget.errors import RetargetError
 from retarget.sources.calibration import StereoCalibration
-from retarget.sources.color_markers import MARKER_COLORS
-from retarget.sources.stereo_live_stickers import MAX_STICKERS, sticker_points
+from retarget.sources.stereo_live_stickers import sticker_points
 from server.deps import HubDep, StoreDep
 from server.hub import StreamHub
 from server.players import LivePlayer
 from server.project_layouts import resolve_layout
 from server.routers.stream import GONE, POLICY_VIOLATION, source_from_message, target_points_of
 from server.stereo_worker import StereoWorker, WorkerDied
+from server.stickers import sticker_anchors, sticker_color
 from server.store import ProjectNotFound
 from server.wire import MAX_STEREO_JPEG, decode_stereo_pair
 
@@ -89,7 +88,6 @@ MAX_PAIRS_PER_SECOND = 60
 MAX_BYTES_PER_SECOND = 8 * 2**20
 MAX_SIZE = (1920, 1080)
 INTERNAL_ERROR = 1011
-_STICKER_NAME = re.compile(r"m(0[1-9]|[1-9][0-9])")
 
 
 @router.websocket("/api/projects/{project_id}/stereo/live")
@@ -243,44 +241,7 @@ def _stickers(msg: dict) -> dict | None:
     if markers != "stickers":
         raise ValueError(f'"markers" must be "layout" (the layout\'s colour markers) or "stickers" '
                          f'(unnamed stickers of one colour); got {markers!r:.40}')
-    return {"color": _sticker_color(msg.get("color", "blue")), "anchors": _anchors(msg.get("anchors"))}
-
-
-def _sticker_color(color):
-    """A colour as `sticker_color` takes it: a name, "B,G,R" (as three numbers) or "hsv:H,S,V"."""
-    if not isinstance(color, str) or len(color) > 40:
-        raise ValueError(f'"color" must be a colour name ({", ".join(MARKER_COLORS)}), "B,G,R" or "hsv:H,S,V"; '
-                         f"got {color!r:.40}")
-    text = color.strip().lower()
-    if text in MARKER_COLORS:
-        return text
-    hsv = text.startswith("hsv:")
-    parts = (text[4:] if hsv else text).split(",")
-    try:
-        values = [float(v) for v in parts]
-    except ValueError:
-        values = []
-    if len(values) != 3:
-        raise ValueError(f'unknown sticker colour {color!r}: a name ({", ".join(MARKER_COLORS)}), "B,G,R" '
-                         'or "hsv:H,S,V"')
-    tops = (179, 255, 255) if hsv else (255, 255, 255)
-    if not all(0 <= v <= top for v, top in zip(values, tops)):
-        raise ValueError(f"sticker colour {color!r}: " + ("hsv:H,S,V takes H 0-179, S and V 0-255 (OpenCV's 8-bit HSV)"
-                                                           if hsv else "B, G and R are 0-255"))
-    return text if hsv else tuple(values)
-
-
-def _anchors(anchors) -> list[str] | None:
-    if anchors is None:
-        return None
-    if not (isinstance(anchors, list) and all(isinstance(a, str) for a in anchors)):
-        raise ValueError('"anchors" must be a list of sticker names (m01, m02, ...) or null to choose them')
-    bad = [a for a in anchors if not _STICKER_NAME.fullmatch(a)]
-    if bad:
-        raise ValueError(f'"anchors" are sticker columns m01..m{MAX_STICKERS}; {bad[0]!r:.40} is none')
-    if len(set(anchors)) < 3 or len(anchors) > MAX_STICKERS:
-        raise ValueError(f'"anchors" must name at least 3 different stickers (the head frame needs 3); got {anchors!r:.80}')
-    return anchors
+    return {"color": sticker_color(msg.get("color", "blue")), "anchors": sticker_anchors(msg.get("anchors"))}
 
 
 def _pattern(pattern) -> tuple:

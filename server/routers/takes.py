@@ -37,7 +37,13 @@ calibration (a real one, for the videos' size; with checkerboards the calibratio
 which takes a few seconds) and the markers of the first frame pair. The take keeps the
 head motion and no temporal mean: the Performance panel's conditioning removes, filters
 or applies them when the take plays. Its points are in the left camera's frame, in the
-pattern's units (mm), and it carries its calibration for reuse.
+pattern's units (mm), and it carries its calibration for reuse. With layout ``*`` the pair
+shows Woodward's unnamed stickers of one colour (``color``, default blue; ``anchors``,
+e.g. "m01,m03,m04", the stickers that fix the head, default the most mutually rigid): every
+sticker in view is a column m01..mM, in the head frame of its first pose (the head motion
+removed on those anchors, as ``retarget track --method stereo`` does without a layout), so
+that a custom layout made from the take (``GET .../layouts/from-take/{take}``) keeps where
+each sticker sits, and live sticker sessions are named by it.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ from server.project_layouts import resolve_layout
 from server.readers import (face_mesh_take, marker_take, stereo_calibration, stereo_take,
                             take_from_upload, video_opens)
 from server.routers.meshes import read_capped, upload_extension
+from server.stickers import sticker_anchors, sticker_color
 
 router = APIRouter(prefix="/api/projects/{project_id}/takes", tags=["takes"],
                    responses=responses(404))
@@ -76,7 +83,8 @@ TRACK_METHODS = ("markerless", "markers", "stereo")
 a calibrated pair (Woodward §5)."""
 EVERY_MARKER = "*"
 """The layout form value that asks the marker tracker for every marker in view (columns
-m01..mM, `retarget.sources.markers.track_marker_video` with no layout)."""
+m01..mM, `retarget.sources.markers.track_marker_video` with no layout), and the stereo
+tracker for every sticker of one colour."""
 JOB_META = ("truncated", "frames_claimed", "frames_with_face")
 """What a tracking job's result repeats of its take's meta, for the page to say."""
 CALIBRATION_EXTENSIONS = ("npz",)
@@ -174,7 +182,13 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
                                         description="inner corners (circles) per pattern column"),
                 square: float | None = Form(default=None, gt=0, le=1000,
                                             description="square side (circle spacing), mm: the "
-                                            "unit of the take's points")) -> dict:
+                                            "unit of the take's points"),
+                color: str | None = Form(default=None, max_length=40,
+                                         description="stereo with layout '*': the stickers' colour, "
+                                         "a name, B,G,R or hsv:H,S,V (default blue)"),
+                anchors: str | None = Form(default=None, max_length=400,
+                                           description="stereo with layout '*': the stickers that fix "
+                                           "the head, e.g. m01,m03,m04 (default the most rigid)")) -> dict:
     """Track a video of a face (markerless), a ring-marker video, or a stereo pair of
     colour-marker videos into a take in the background; answers the job (poll
     ``GET /api/jobs/{job_id}``; its result names the take when done, with its frame
@@ -193,9 +207,17 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
     if layout is None:
         saved = project["landmarks"] and project["landmarks"]["layout"]
         layout = (saved or "ibug68") if method == "markerless" else "dutreve21"
-    if layout == EVERY_MARKER and method != "markers":
-        raise RetargetError(f"layout {EVERY_MARKER!r} (every marker in view) is for method "
-                            f"'markers'; {method!r} tracks a layout's points")
+    if layout == EVERY_MARKER and method == "markerless":
+        raise RetargetError(f"layout {EVERY_MARKER!r} (every marker in view) is for methods "
+                            "'markers' and 'stereo'; 'markerless' tracks a layout's points")
+    stickers = None
+    if method == "stereo" and layout == EVERY_MARKER:
+        stickers = {"color": sticker_color("blue" if color is None else color),
+                    "anchors": None if anchors is None else sticker_anchors(
+                        [a.strip() for a in anchors.split(",") if a.strip()])}
+    elif color is not None or anchors is not None:
+        raise RetargetError("'color' and 'anchors' are for method 'stereo' with layout '*' "
+                            "(stickers of one colour)")
     if layout == EVERY_MARKER:
         layout = None  # the library's "no layout"
     else:
@@ -211,7 +233,7 @@ def track_video(project: ProjectDep, store: StoreDep, limits: LimitsDep, jobs: J
         if method == "stereo":
             run, answer = _stereo_tracker(scratch, isolation, file, right, calibration,
                                           (calibration_left, calibration_right),
-                                          (pattern, cols, rows, square), layout)
+                                          (pattern, cols, rows, square), layout, stickers)
         else:
             stray = [f for f, v in zip(STEREO_FIELDS, (right, calibration, calibration_left,
                                                        calibration_right)) if v is not None]
@@ -306,10 +328,12 @@ def _face_mesh_tracker(scratch: _Scratch, isolation, video: UploadFile, layout: 
 
 
 def _stereo_tracker(scratch: _Scratch, isolation, left: UploadFile, right: UploadFile | None,
-                    calibration: UploadFile | None, boards: tuple, pattern: tuple, layout: str):
+                    calibration: UploadFile | None, boards: tuple, pattern: tuple, layout,
+                    stickers: dict | None):
     """The stereo job's work, ``run(progress) -> (take, None)``, once everything that can be
     checked before tracking is (see the module docstring, `retarget.sources.stereo.stereo_pair_calibration`);
-    and the answer's extras."""
+    and the answer's extras. `stickers` ``{"color", "anchors"}`` with layout None: unnamed
+    stickers of one colour."""
     _require_stereo_fields(right, calibration, boards, pattern)
     videos = [scratch.save(left, VIDEO_EXTENSIONS, "left video"),
               scratch.save(right, VIDEO_EXTENSIONS, "right video")]
@@ -321,11 +345,12 @@ def _stereo_tracker(scratch: _Scratch, isolation, left: UploadFile, right: Uploa
                         for v, side in zip(boards, ("left", "right"))]
     what = (f"the stereo pair {scratch.names[videos[0]]!r} and {scratch.names[videos[1]]!r} "
             "refused: not readable videos or calibration")
+    color = "blue" if stickers is None else stickers["color"]
     cal, source = isolation.call(stereo_calibration, videos, cal_file, board_videos, pattern,
-                                 layout, scratch.names, what=what)
+                                 layout, scratch.names, color, what=what)
 
     def run(progress) -> tuple[Take, None]:
-        return isolation.call(stereo_take, videos, cal, layout, scratch.names, what=what,
+        return isolation.call(stereo_take, videos, cal, layout, scratch.names, stickers, what=what,
                               progress=progress, job=True), None
 
     views = cal.meta.get("views")

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from retarget.sources.calibration import StereoCalibration
-from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, rig_calibration, stereo_cameras
+from retarget.testing.stereo_rig import (checkerboard_views, render_sticker_video, render_stereo_video, rig_calibration,
+                                         stereo_cameras)
 from tests.e2e.conftest import open_project
 from tests.waits import scaled_ms
 
@@ -180,3 +181,46 @@ def test_checkerboard_videos_calibrate_through_the_form(server, page, pair, boar
                if t["id"] not in {b["id"] for b in before}]
     points = np.load(io.BytesIO(server.read(f"/api/projects/{sample['id']}/takes/{take['id']}/points")))
     assert np.median(np.linalg.norm(points - rig[0].to_camera(truth.points3d), axis=2)) < 1.5  # mm
+
+
+def test_stickers_of_one_colour_through_the_form_make_a_take_and_its_layout_rows(server, page, tmp_path):
+    """Issue 17 §2: "stickers of one colour" in the form tracks every blue sticker of a
+    rendered vertical webcam pair (issue 17's take) into a take of m01..m13, and the custom
+    layout fold opens on it with a row per sticker and their places kept; a colour the
+    pair does not show is refused with its reason, nothing stored."""
+    truth = render_sticker_video(tmp_path / "stickers.mp4", n_frames=30, seed=2)
+    rig_calibration(*truth.cameras).save(tmp_path / "webcams.npz")
+    sample = next(p for p in server.api("GET", "/api/projects") if p["rig"])
+    open_project(page, server, sample["id"])
+    page.wait_for_function("() => window.app.face && window.app.face.nJoints === 68", timeout=scaled_ms(30_000))
+    before = server.api("GET", f"/api/projects/{sample['id']}/takes")
+    open_form(page)
+    assert page.is_hidden("#stereo-color")
+    page.check("input[name=stereo-markers][value=stickers]")
+    assert page.is_visible("#stereo-color") and page.input_value("#stereo-color") == "blue"
+    page.set_input_files("#stereo-left", str(truth.videos[0]))
+    page.set_input_files("#stereo-right", str(truth.videos[1]))
+    page.set_input_files("#stereo-calibration", str(tmp_path / "webcams.npz"))
+    page.fill("#stereo-color", "yellow")
+    page.click("#stereo-track")
+    page.wait_for_selector("#error", state="visible", timeout=scaled_ms(30_000))
+    assert "of colour 'yellow' seen by both cameras; at least 3 are needed" in page.inner_text("#error-text")
+    assert server.api("GET", f"/api/projects/{sample['id']}/takes") == before
+    page.click("#error-close")
+
+    open_form(page)
+    page.fill("#stereo-color", "blue")
+    page.click("#stereo-track")
+    page.wait_for_function("n => window.app.sources.takes.length === n", arg=len(before) + 1, timeout=scaled_ms(60_000))
+    (info,) = [t for t in server.api("GET", f"/api/projects/{sample['id']}/takes")
+               if t["id"] not in {b["id"] for b in before}]
+    assert (info["source"], info["n_frames"], info["n_points"], info["layout"]) == ("stereo", 30, 13, None)
+    page.wait_for_function("() => document.querySelector('#custom-layout').open", timeout=scaled_ms(20_000))
+    assert "Custom layout" in page.inner_text("#source-note")
+    markers = server.api("GET", f"/api/projects/{sample['id']}/layouts/from-take/{info['id']}")
+    assert markers["names"] == [f"m{k:02d}" for k in range(1, 14)] and markers["reference"] is not None
+    page.wait_for_function("() => document.querySelectorAll('#custom-points tbody tr').length === 13",
+                           timeout=scaled_ms(10_000))
+    rows = page.locator("#custom-points tbody tr").all_inner_texts()
+    assert [row.split()[0] for row in rows] == markers["names"], rows
+    server.api("DELETE", f"/api/projects/{sample['id']}/takes/{info['id']}")

@@ -2,9 +2,11 @@ import { api } from '../net/api.js';
 
 /**
  * The stereo colour-marker form (Woodward §5): the two synchronised videos of a face
- * wearing coloured stickers on the dutreve21 points, and the cameras' calibration, either
- * a .npz (`retarget calibrate`, or the calibration download of an earlier stereo take) or
- * both cameras' videos of a checkerboard with its pattern.
+ * wearing coloured stickers on the dutreve21 points, or stickers of one colour wherever the
+ * user put them (unnamed: a take of columns m01..mM in the head frame, from which the
+ * Landmarks panel makes a layout that keeps where each sticker sits), and the cameras'
+ * calibration, either a .npz (`retarget calibrate`, or the calibration download of an
+ * earlier stereo take) or both cameras' videos of a checkerboard with its pattern.
  *
  * The server checks the pair, calibrates when asked and tracks in a job; this form only
  * collects the files, shows the progress and what came out in the Performance panel's
@@ -18,6 +20,18 @@ const FORM = `<form method="dialog">
 	<p class="muted">Two videos filmed at the same time by two cameras side by side, of coloured markers on the dutreve21 points, and the cameras' calibration.</p>
 	<div class="row"><label for="stereo-left">Left</label><input id="stereo-left" type="file" accept="${ VIDEO_ACCEPT }"></div>
 	<div class="row"><label for="stereo-right">Right</label><input id="stereo-right" type="file" accept="${ VIDEO_ACCEPT }"></div>
+	<fieldset>
+		<legend>Markers</legend>
+		<div>
+			<label class="toggle"><input type="radio" name="stereo-markers" value="layout" checked> dutreve21's coloured markers</label>
+			<label class="toggle"><input type="radio" name="stereo-markers" value="stickers"> stickers of one colour</label>
+		</div>
+		<div data-markers="stickers" hidden>
+			<p class="muted">Every sticker of the colour in view becomes a point, m01, m02, … The head anchors (3 or more stickers that move only with the head: temples, forehead, nose bridge) are chosen as the most rigid unless you name them.</p>
+			<div class="row"><label for="stereo-color">Colour</label><input id="stereo-color" type="text" value="blue" maxlength="40" title="a name (blue, green, cyan, magenta, yellow), B,G,R picked from the video, or hsv:H,S,V"></div>
+			<div class="row"><label for="stereo-anchors">Anchors</label><input id="stereo-anchors" type="text" placeholder="m01,m03,m04 (empty: the most rigid)" maxlength="400"></div>
+		</div>
+	</fieldset>
 	<fieldset>
 		<legend>Calibration</legend>
 		<div>
@@ -52,12 +66,15 @@ export class StereoTrackDialog {
 	 * @param {import('./SourceStatus.js').SourceStatus} options.status - the panel's note and
 	 *   bar; the upload and tracking run as its task (controls wait, a failure is shown)
 	 * @param {(takeId: string) => Promise<void>} options.onTracked - select the new take
+	 * @param {(takeId: string) => Promise<void>} options.onStickers - then, for a take of
+	 *   unnamed stickers, show its markers for a layout of them
 	 */
-	constructor( { projectId, status, onTracked } ) {
+	constructor( { projectId, status, onTracked, onStickers } ) {
 
 		this.projectId = projectId;
 		this.status = status;
 		this.onTracked = onTracked;
+		this.onStickers = onStickers;
 		this.dialog = document.createElement( 'dialog' );
 		this.dialog.id = 'stereo-dialog';
 		this.dialog.innerHTML = FORM;
@@ -65,6 +82,12 @@ export class StereoTrackDialog {
 		for ( const radio of this.dialog.querySelectorAll( 'input[name=stereo-calibration]' ) ) {
 
 			radio.addEventListener( 'change', () => this._showCalibration() );
+
+		}
+
+		for ( const radio of this.dialog.querySelectorAll( 'input[name=stereo-markers]' ) ) {
+
+			radio.addEventListener( 'change', () => this._showMarkers() );
 
 		}
 
@@ -96,18 +119,21 @@ export class StereoTrackDialog {
 		const file = ( id ) => this._input( id ).files[ 0 ];
 		const left = file( 'stereo-left' ), right = file( 'stereo-right' );
 		if ( ! left || ! right ) return `Choose the ${ left ? 'right' : 'left' } camera's video.`;
+		// the server checks the colour and anchors, and says what is wrong with them
+		const markers = this._markersKind() === 'layout' ? {} : { layout: '*', color: this._input( 'stereo-color' ).value.trim() || 'blue',
+			...( this._input( 'stereo-anchors' ).value.trim() ? { anchors: this._input( 'stereo-anchors' ).value.trim() } : {} ) };
 		if ( this._calibrationKind() === 'file' ) {
 
 			const calibration = file( 'stereo-calibration' );
 			if ( ! calibration ) return 'Choose the calibration file (.npz), or calibrate from checkerboard videos.';
-			return { left, fields: { right, calibration } };
+			return { left, fields: { right, calibration, ...markers } };
 
 		}
 
 		const boardLeft = file( 'stereo-board-left' ), boardRight = file( 'stereo-board-right' );
 		if ( ! boardLeft || ! boardRight ) return `Choose the ${ boardLeft ? 'right' : 'left' } camera's checkerboard video.`;
 		const [ cols, rows, square ] = [ 'stereo-cols', 'stereo-rows', 'stereo-square' ].map( ( id ) => this._input( id ).value );
-		return { left, fields: { right, calibration_left: boardLeft, calibration_right: boardRight, cols, rows, square } };
+		return { left, fields: { right, calibration_left: boardLeft, calibration_right: boardRight, cols, rows, square, ...markers } };
 
 	}
 
@@ -120,6 +146,19 @@ export class StereoTrackDialog {
 	_calibrationKind() {
 
 		return this.dialog.querySelector( 'input[name=stereo-calibration]:checked' ).value;
+
+	}
+
+	_markersKind() {
+
+		return this.dialog.querySelector( 'input[name=stereo-markers]:checked' ).value;
+
+	}
+
+	_showMarkers() {
+
+		const kind = this._markersKind();
+		for ( const block of this.dialog.querySelectorAll( '[data-markers]' ) ) block.hidden = block.dataset.markers !== kind;
 
 	}
 
@@ -173,7 +212,9 @@ export class StereoTrackDialog {
 		}, { what: 'Stereo tracking' } );
 		if ( id !== this.projectId() ) return;
 		await this.onTracked( detail.take );
-		note( `Tracked ${ detail.frames } stereo frames of ${ left.name } and ${ fields.right.name } (${ calibrated }). ` );
+		const stickers = fields.layout === '*';
+		const made = stickers ? ` Each sticker is a point m01, m02, …: make your layout of them under Landmarks › Custom layout (it keeps where each sticker sits, so live sessions of the same stickers are named by it).` : '';
+		note( `Tracked ${ detail.frames } stereo frames of ${ left.name } and ${ fields.right.name } (${ calibrated }).${ made } ` );
 		if ( cal.source !== 'file' ) {
 
 			// calibrate once: the next pairs from these cameras can reuse the file
@@ -184,6 +225,8 @@ export class StereoTrackDialog {
 			this.status.element.append( link );
 
 		}
+
+		if ( stickers ) await this.onStickers( detail.take );
 
 	}
 

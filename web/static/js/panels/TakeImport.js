@@ -31,6 +31,8 @@ export class TakeImport {
 			projectId: () => this.app.projectId,
 			status,
 			onTracked: onTake,
+			// unnamed stickers: their layout is made from the take, as for ring markers
+			onStickers: ( takeId ) => this.app.customLayout.showTake( takeId ),
 		} );
 		this._events = new AbortController();
 		// after "ring markers" (the page's markup lists the layouts' trackers); once per page
