@@ -126,7 +126,10 @@ class Performance:
     kernel, smoothing : the space transform's (`retarget.pipeline.Retargeter`).
 
     State: ``neutral_`` (N, D) the neutral frames are retargeted against (None until it is
-    set, cued or captured), ``mask_`` (N,) bool the active points, ``settings``, ``regions``.
+    set, cued or captured), ``mask_`` (N,) bool the active points, ``settings``, ``regions``,
+    ``max_neutral_motion`` the still check of a neutral captured from pushed frames
+    (`LIVE_NEUTRAL_MOTION` eye distances; None: none, for a source whose points jitter
+    more than a performer's moves, set before the first push).
     """
 
     def __init__(self, target_points, layout: str | Layout | None = None, settings=None,
@@ -146,6 +149,7 @@ class Performance:
         self.set_regions(regions)
         self.neutral_ = self._retargeter = self._conditioner = self._captured = None
         self._recording: list | None = None
+        self.max_neutral_motion: float | None = LIVE_NEUTRAL_MOTION
 
     @property
     def n_points(self) -> int:
@@ -217,7 +221,7 @@ class Performance:
         self._record(points, t)
         if self._conditioner is None:
             self._conditioner = SourceConditioner(self.layout, self.dims, self.settings,
-                                                  max_neutral_motion=LIVE_NEUTRAL_MOTION,
+                                                  max_neutral_motion=self.max_neutral_motion,
                                                   lost_wait=LIVE_LOST_WAIT)
         conditioned = self._conditioner.push(points, t)
         if conditioned is None:
