@@ -192,10 +192,20 @@ def module_server(tmp_path_factory, sample_data_dir):
 def browser():
     """Chromium for one test module: Playwright's sync API keeps an asyncio loop running
     while it is open, which would break later tests that run their own loop."""
+    yield from chromium()
+
+
+def chromium(camera: Path | None = None):
+    """Yield a Chromium browser, closed after; with `camera` (a Y4M file, `fake_camera`) its
+    only camera plays that file, granted without asking. A module's `browser` fixture
+    yields from it."""
     if not os.path.exists(CHROMIUM):
         pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
+    args = CHROMIUM_ARGS if camera is None else [
+        *CHROMIUM_ARGS, "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
+        f"--use-file-for-fake-video-capture={camera}"]
     with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        b = p.chromium.launch(executable_path=CHROMIUM, args=args)
         yield b
         b.close()
 

@@ -13,20 +13,18 @@ page shows it and starts on it.
 from __future__ import annotations
 
 import json
-import os
 
 import cv2
 import httpx
 import numpy as np
 import pytest
-from playwright.sync_api import sync_playwright
 from websockets.sync.client import connect
 
 from retarget.layouts import get_layout
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
 from server.wire import encode_stereo_pair
-from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS, Server, open_project, wait_face_moves
+from tests.e2e.conftest import Server, open_project, wait_face_moves, chromium
 from tests.e2e.fake_camera import write_y4m
 from tests.waits import scaled, scaled_ms, wait_job
 
@@ -61,14 +59,7 @@ def server(module_server):
 @pytest.fixture(scope="module")
 def browser(material):
     """Chromium whose one camera plays the side-by-side pair, granted without asking."""
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=[
-            *CHROMIUM_ARGS, "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
-            f"--use-file-for-fake-video-capture={material[0]}"])
-        yield b
-        b.close()
+    yield from chromium(material[0])
 
 
 def dutreve21_project(server: Server) -> str:

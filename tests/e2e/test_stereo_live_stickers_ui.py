@@ -17,12 +17,10 @@ tests/unit/test_stereo_stickers.py and bench/stereo.py.
 
 from __future__ import annotations
 
-import os
 
 import httpx
 import numpy as np
 import pytest
-from playwright.sync_api import sync_playwright
 
 from retarget.custom_layouts import take_reference
 from retarget.layouts import get_layout
@@ -30,7 +28,7 @@ from retarget.sources.stereo import track_stereo_frames
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (STICKER_ANCHORS, checkerboard_views, render_sticker_video,
                                          rig_calibration, sticker_scores)
-from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS, Server, open_project, wait_face_moves
+from tests.e2e.conftest import Server, open_project, wait_face_moves, chromium
 from tests.e2e.fake_camera import write_y4m
 from tests.e2e.test_stereo_live import calibrate
 from tests.waits import scaled, scaled_ms, wait_job
@@ -73,14 +71,7 @@ def server(module_server):
 @pytest.fixture(scope="module")
 def browser(material):
     """Chromium whose one camera plays the side-by-side pair, granted without asking."""
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=[
-            *CHROMIUM_ARGS, "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
-            f"--use-file-for-fake-video-capture={material[0]}"])
-        yield b
-        b.close()
+    yield from chromium(material[0])
 
 
 def sticker_project(server: Server, take, anchors: list[str]) -> str:

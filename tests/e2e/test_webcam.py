@@ -15,16 +15,14 @@ recorded take is compared with the points sent while recording.
 from __future__ import annotations
 
 import io
-import os
 from pathlib import Path
 
 import httpx
 import numpy as np
 import pytest
-from playwright.sync_api import sync_playwright
 
 from retarget.layouts import get_layout
-from tests.e2e.conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, Server, open_project, write_face_file, sample_copy
+from tests.e2e.conftest import ARTIFACTS, Server, open_project, write_face_file, sample_copy, chromium
 from tests.e2e.fake_camera import checkerboard, video_frames, write_y4m
 from tests.waits import scaled_ms, wait_job
 
@@ -90,14 +88,7 @@ def camera(request, tmp_path_factory) -> Path:
 def browser(camera):
     """Chromium whose only camera is the `camera` file, granted without asking; the
     conftest `page` fixture (console errors fail the test, screenshots) runs on it."""
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"{CHROMIUM} is missing: the README's test command installs it with apt-get install chromium")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=[
-            *CHROMIUM_ARGS, "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
-            f"--use-file-for-fake-video-capture={camera}"])
-        yield b
-        b.close()
+    yield from chromium(camera)
 
 
 def open_sample(server, page) -> dict:
