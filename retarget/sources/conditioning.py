@@ -135,9 +135,10 @@ class SourceConditioner:
         capture, in eye distances (`eye_distance`): a point's motion is its median distance
         from the captured neutral, or between its medians over the capture's two halves,
         whichever is larger (`_capture_motion`; registered on the stable points when head
-        motion is removed, so moving the head is allowed, as Woodward §5.1 has it). A capture that moved more raises `NeutralMoved`, and no
-        neutral is taken (`push` gives None) until `reset()`: a live performer is asked
-        to capture again rather than have a grimace become the rest pose.
+        motion is removed, so moving the head is allowed, as Woodward §5.1 has it). A
+        capture that moved more raises `NeutralMoved`, and no neutral is taken (`push`
+        gives None) until `reset()`: a live performer is asked to capture again rather
+        than have a grimace become the rest pose.
     lost_wait : None, or seconds a "first_seconds" capture goes on past its span while a
         point has been lost in every frame of it (a live tracker that finds the last
         markers a few frames in, or a stalled camera that gave only a frame or two).

@@ -499,9 +499,10 @@ def _check_first_markers(left, right, calibration: StereoCalibration, layout: La
         seen = int(np.isfinite(tracks.points()[-1]).all(axis=1).sum()) if tracks.n_frames else 0
         if seen < 3:
             raise RetargetError(
-                f"the first frames of {str(left)!r} and {str(right)!r} show {seen} sticker{'' if seen == 1 else 's'} of colour "
-                f"{tracks.color.name!r} seen by both cameras; at least 3 are needed (the head pose "
-                "takes 3): check the colour, or start the videos with the face in view")
+                f"the first frames of {str(left)!r} and {str(right)!r} show {seen} "
+                f"sticker{'' if seen == 1 else 's'} of colour {tracks.color.name!r} seen by both "
+                "cameras; at least 3 are needed (the head pose takes 3): check the colour, or "
+                "start the videos with the face in view")
         return
     name = layout.name if isinstance(layout, Layout) else layout
     try:
