@@ -143,13 +143,17 @@ def test_a_layout_made_of_the_markers_names_them_in_the_next_video(client, proje
     np.testing.assert_array_equal(_followed(points(again), truth), _followed(points(own_take), video[1]))
 
 
-def test_every_marker_is_for_ring_markers_only(client, project):
-    for method in ("markerless", "stereo"):
-        r = client.post(f"/api/projects/{project}/takes/track", files={"file": ("v.mkv", b"x")},
-                        data={"method": method, "layout": "*"})
-        assert r.status_code == 422, r.text
-        assert r.json()["detail"] == (f"layout '*' (every marker in view) is for method 'markers'; "
-                                      f"'{method}' tracks a layout's points")
+def test_every_marker_is_for_ring_markers_and_stereo_stickers(client, project):
+    r = client.post(f"/api/projects/{project}/takes/track", files={"file": ("v.mkv", b"x")},
+                    data={"method": "markerless", "layout": "*"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == ("layout '*' (every marker in view) is for methods 'markers' and 'stereo'; "
+                                  "'markerless' tracks a layout's points")
+    # stereo: every sticker of one colour (tests/api/test_api_track_stickers.py); here the
+    # pair's own checks refuse it
+    r = client.post(f"/api/projects/{project}/takes/track", files={"file": ("v.mkv", b"x")},
+                    data={"method": "stereo", "layout": "*"})
+    assert r.status_code == 422 and "'right', which is missing" in r.json()["detail"], r.text
 
 
 def test_takes_without_a_preview_and_bad_ids_are_404(client, project):
