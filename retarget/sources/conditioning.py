@@ -277,8 +277,8 @@ class SourceConditioner:
         in it: a smile begun, which the median may take as the rest pose); 0 for one frame.
 
         Medians, not the largest distance: the neutral is each point's median, which a
-        point away for a few frames (a blink, a live tracker's depth spike, a pose jolted
-        as an anchor turns away) leaves as the still face's. The largest distance refused
+        point away for a few frames (a blink, a live tracker's depth spike) leaves as the
+        still face's. The largest distance refused
         live stickers on a still face (issue 17's take at 10 pairs/s: 0.33 eye distances
         at most, 0.11-0.19 at the 75th percentile, 0.07 at the median)."""
         if self.removes_head:

@@ -184,10 +184,10 @@ class _Session:
         player = await source_from_message({"source": "live", "dims": 3, "fps": 30.0, "settings": settings}, self.hub,
                               self.store, self.project_id, self.target_points, self.layout)
         if stickers is not None:
-            # Live sticker points jitter more than a performer moves: when a temple turns
-            # away the pose, fitted to 3 anchors, jolts the face 6-12 mm, so a still face's
-            # capture moved 0.12-0.19 eye distances (issue 17's take at 10 pairs/s) and any
-            # still check a webcam needs refused it. The neutral is the medians all the same.
+            # Live sticker points jitter more than a performer moves: on a still face, points
+            # moved up to 12 mm in a capture as a temple turned away, 0.12-0.19 eye distances
+            # by the still check's measure (issue 17's take at 10 pairs/s), and any check a
+            # webcam needs refused it. The neutral is the points' medians all the same.
             player.performance.max_neutral_motion = None
         self.hub.start_source(self.project_id, player)
         self.player, self.mode = player, "track"
