@@ -100,10 +100,9 @@ def test_max_neutral_motion_is_checked():
 def test_the_capture_judges_what_the_neutral_took(moved, refused):
     """The neutral is each point's median over the capture, so a point away from it for a
     few frames does not count: a mouth corner jolted (0.3 eye distances) in 3 of the 17
-    frames (a live tracker's depth spike) leaves a
-    still face's neutral and is accepted, where the largest distance refused it; moved
-    through the capture's last 10 frames (a smile begun, which the median would take as
-    the rest pose) it is refused."""
+    frames (a live tracker's depth spike) leaves a still face's neutral and is accepted,
+    where the largest distance refused it; moved through the capture's last 10 frames (a
+    smile begun, which the median would take as the rest pose) it is refused."""
     corner = IBUG.index("mouth_corner_left")
     frames = [_head_moved(NEUTRAL, i) for i in range(16)]
     for i in moved:
