@@ -44,9 +44,9 @@ _SELECTORS = set(REGIONS) | set(GROUPS) | {p for lay in LAYOUTS.values() for p i
 
 class NeutralMoved(RetargetError):
     """A neutral capture refused because the performer moved during it; ``motion`` is the
-    largest point motion found (`SourceConditioner._capture_motion`: a point's median
-    distance from its neutral, or between its medians over the capture's two halves), in
-    eye distances (`SourceConditioner`'s ``max_neutral_motion``)."""
+    largest point motion found (`SourceConditioner._capture_motion`: how far apart the
+    middle half of a point's positions in the capture lie), in eye distances
+    (`SourceConditioner`'s ``max_neutral_motion``)."""
 
     def __init__(self, motion: float, allowed: float):
         self.motion = motion
@@ -132,10 +132,10 @@ class SourceConditioner:
     settings : `ConditionSettings` (or its dict form); default `ConditionSettings()`.
     neutral : (N, dims) float, the neutral for mode "given" (refused otherwise).
     max_neutral_motion : None, or the most a point may move during a "first_seconds"
-        capture, in eye distances (`eye_distance`): a point's motion is its median distance
-        from the captured neutral, or between its medians over the capture's two halves,
-        whichever is larger (`_capture_motion`; registered on the stable points when head
-        motion is removed, so moving the head is allowed, as Woodward §5.1 has it). A
+        capture, in eye distances (`eye_distance`): a point's motion is how far apart the
+        middle half of its positions in the capture lie (`_capture_motion`; registered on
+        the stable points when head motion is removed, so moving the head is allowed, as
+        Woodward §5.1 has it). A
         capture that moved more raises `NeutralMoved`, and no neutral is taken (`push`
         gives None) until `reset()`: a live performer is asked to capture again rather
         than have a grimace become the rest pose.
@@ -269,32 +269,31 @@ class SourceConditioner:
         return neutral
 
     def _capture_motion(self, frames: np.ndarray, neutral: np.ndarray, seen: np.ndarray) -> float:
-        """How far the face moved during the capture, in eye distances, over the points
-        `seen` ((K,) indices) of (F, K, D) `frames` (head motion taken out first when it
-        is removed) against their `neutral` (K, D): the largest of a point's median
-        distance from it (a face that kept moving: a word) and the distance between the
-        point's medians over the capture's first and second halves (a face that changed
-        in it: a smile begun, which the median may take as the rest pose); 0 for one frame.
+        """How far the face moved during the capture, in eye distances: the largest, over
+        the points `seen` ((K,) indices) of (F, K, D) `frames` (head motion taken out
+        first when it is removed against `neutral` (K, D)), of how far apart the middle
+        half of a point's positions lie (the length of its per-axis interquartile range,
+        the quartiles taken as frames, not between them); 0 for one frame.
 
-        Medians, not the largest distance: the neutral is each point's median, which a
-        point away for a few frames (a blink, a live tracker's depth spike) leaves as the
-        still face's. The largest distance refused
-        live stickers on a still face (issue 17's take at 10 pairs/s: 0.33 eye distances
-        at most, 0.11-0.19 at the 75th percentile, 0.07 at the median)."""
+        The middle half, not the largest distance from the neutral: a point away for
+        under a quarter of the frames (a blink, a live tracker's depth spike) leaves each
+        point's median, the neutral, as the still face's, while one away for a quarter or
+        more (a word, a smile begun, which the median may take as the rest pose) spreads
+        its middle half. Quartiles as frames, so that a capture of 3 or 4 frames (a page
+        tracking a frame a second), half of them a grimace, spans the grimace, where an
+        interpolated quartile or median halves it. (The largest distance refused live
+        stickers on a still face: issue 17's take at 10 pairs/s, 0.33 eye distances.)"""
         if self.removes_head:
             frames = remove_head_motion(frames, neutral, np.flatnonzero(np.isin(seen, self._stable)))[0]
-        spread = np.linalg.norm(frames - neutral, axis=2)  # (F, K), NaN where lost
-        if not np.isfinite(spread).any():
+        if not np.isfinite(frames).any():
             return 0.0
-        half = len(frames) // 2
-        with warnings.catch_warnings():   # a point lost in every registered frame (or half)
+        with warnings.catch_warnings():   # a point lost in every registered frame
             warnings.simplefilter("ignore", RuntimeWarning)
-            typical = np.nanmedian(spread, axis=0)
-            drift = np.zeros(len(seen)) if half == 0 else np.linalg.norm(
-                np.nanmedian(frames[:half], axis=0) - np.nanmedian(frames[half:], axis=0), axis=1)
+            low, high = np.nanpercentile(frames, [25, 75], axis=0, method="nearest")
+        spread = np.linalg.norm(high - low, axis=1)   # (K,), NaN for a point never seen
         full = np.full((self._n, neutral.shape[1]), np.nan)
         full[seen] = neutral
-        return float(np.nanmax(np.fmax(typical, drift))) / eye_distance(full, self.layout)
+        return float(np.nanmax(spread)) / eye_distance(full, self.layout)
 
     def _start(self, neutral: np.ndarray) -> None:
         """Set S0 and build the per-frame steps that depend on it."""
