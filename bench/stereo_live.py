@@ -385,10 +385,9 @@ def browser_run(frames, boards, n_frames: int, folder: Path) -> None:
     from bench.stream import ServerProcess, machine
     from retarget.layouts import get_layout
     from server.wire import encode_stereo_pair
-    from tests.e2e.fake_camera import write_y4m
+    from tests.e2e.fake_camera import stereo_loop_y4m
 
-    pairs = [np.hstack(pair) for pair in frames]
-    camera = write_y4m(folder / "pair.y4m", pairs + pairs[-2:0:-1], 30)  # forth and back: no jump
+    camera = stereo_loop_y4m(folder / "pair.y4m", frames, 30)
     with ServerProcess() as server:
         http = httpx.Client(base_url=server.url, timeout=120)
         sample = next(p for p in http.get("/api/projects").json() if p["rig"])["id"]

@@ -34,6 +34,15 @@ def write_y4m(path: Path, frames_bgr, fps: int) -> Path:
     return Path(path)
 
 
+def stereo_loop_y4m(path: Path, pairs, fps: int) -> Path:
+    """Write the (left, right) BGR image `pairs` as one camera's Y4M file, the two views side
+    by side in each frame, played forth and back (the camera loops the file, and a jump
+    from the last frame's expression to the first's would be no performer's motion); the
+    path."""
+    frames = [np.hstack(pair) for pair in pairs]
+    return write_y4m(path, frames + frames[-2:0:-1], fps)
+
+
 def video_frames(video: Path, n_frames: int, size: int | None = None) -> list[np.ndarray]:
     """The first `n_frames` frames of `video` as (H, W, 3) uint8 BGR, resized to
     `size` x `size` pixels when given (area interpolation)."""

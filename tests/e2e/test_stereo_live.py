@@ -25,7 +25,7 @@ from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import checkerboard_views, render_stereo_video, stereo_cameras
 from server.wire import encode_stereo_pair
 from tests.e2e.conftest import Server, open_project, wait_face_moves, chromium
-from tests.e2e.fake_camera import write_y4m
+from tests.e2e.fake_camera import stereo_loop_y4m
 from tests.waits import scaled, scaled_ms, wait_job
 
 FPS = 30
@@ -43,10 +43,7 @@ def material(tmp_path_factory):
     rig = stereo_cameras()
     truth = render_stereo_video(folder / "take.mkv", n_frames=12, cameras=rig, start=0.8, seed=2)
     with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
-        pairs = [np.hstack([left, right]) for (_, left), (_, right) in zip(a, b)]
-    # played forth and back: the camera loops the file, and a jump from the last frame's
-    # expression to the first's would be no performer's motion
-    camera = write_y4m(folder / "pair.y4m", pairs + pairs[-2:0:-1], FPS)
+        camera = stereo_loop_y4m(folder / "pair.y4m", [(left, right) for (_, left), (_, right) in zip(a, b)], FPS)
     return camera, checkerboard_views(*rig, n_views=10, seed=4)
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 
 import httpx
-import numpy as np
 import pytest
 
 from retarget.custom_layouts import take_reference
@@ -29,7 +28,7 @@ from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (STICKER_ANCHORS, checkerboard_views, render_sticker_video,
                                          rig_calibration, sticker_scores)
 from tests.e2e.conftest import Server, open_project, wait_face_moves, chromium
-from tests.e2e.fake_camera import write_y4m
+from tests.e2e.fake_camera import stereo_loop_y4m
 from tests.e2e.test_stereo_live import calibrate
 from tests.waits import scaled, scaled_ms, wait_job
 
@@ -49,8 +48,7 @@ def material(tmp_path_factory):
     truth = render_sticker_video(folder / "take.mp4", n_frames=FRAMES, seed=0, start=NEUTRAL / 30)
     with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
         frames = [(left, right) for (_, left), (_, right) in zip(a, b)]
-    pairs = [np.hstack(pair) for pair in frames]
-    camera = write_y4m(folder / "pair.y4m", pairs + pairs[-2:0:-1], FPS)
+    camera = stereo_loop_y4m(folder / "pair.y4m", frames, FPS)
     calibration = rig_calibration(*truth.cameras)
     take = track_stereo_frames(frames, calibration, layout=None)
     # each column's sticker, from its camera-frame points (the same tracks, head kept)
