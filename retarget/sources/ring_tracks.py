@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.sources.markers import _fit, _gray
+from retarget.sources.markers import _gray
 
 __all__ = ["ring_template", "ring_score", "ring_contrast", "score_peaks", "RingTracks"]
 
@@ -25,8 +25,6 @@ _BIRTH_SCORE = 0.55    # correlation that starts a track, with a dot brighter th
 _MIN_DOT_CONTRAST = 8.0  # grey levels by which a new marker's dot outshines its ring all round
 _APART = 4.0           # px: two markers' centres are at least this far apart (a marker
                        # of 3 mm radius at 60 cm is 5.5 px across)
-_JOIN = 0.45           # a track that starts this near (times the spacing of the markers
-                       # there) where one that ended would be now continues it
 _CLEAR_DOT = 40.0      # grey levels of a dot over its ring that start a track whatever the
                        # correlation (skin features never passed 35 on the hard material)
 _KEEP_SCORE = 0.25     # correlation of a peak that keeps a track near its prediction
@@ -45,6 +43,14 @@ _PAIR_DRIFT = 0.1      # cost (correlation) per px that a close pair's distance 
                        # frame (a ghost peak between two markers halves it)
 _PAIR_GAIN = 0.05      # cost by which the fit must beat the matched peaks to move them
 _PAIR_SNAP = 1.0       # px: a fitted centre this near a peak takes the peak (sharper)
+_LINK = 8.0            # px: median distance between two tracks' sightings and where the
+                       # other carries it, under which they are one marker's (`_linked`)
+_LINK_AGE = 10         # frames from its sighting within which a track is carried for that
+_LINK_SHARED = 0.02    # share of the shorter's frames two tracks of one marker may share
+_FILL = 2.0            # px: a gap's peak this near where the clip carries its track fills it
+_FILL_AGE = 5          # frames from a sighting within which gaps are filled
+_FAINT_SLACK = 0.25    # px a frame from its bright sightings by which a track's faint point
+                       # may stray from where they carry it (a marker turning edge-on)
 
 
 def ring_template(ring_radius: float, *, dot_share: float = 0.5, skin_reach: float = 1.6,
@@ -174,11 +180,14 @@ class RingTracks:
     peak (`ring_score` over `birth` with a bright dot, or a clear dot whatever the score)
     that no track claims starts a new track, at any frame, and the clip is then walked
     backward from there, so that a marker found late (uncovered, turned into view) is
-    followed back to where it appeared. A track that starts where one that ended would
-    be by now (its neighbours carrying it; within `join` times the local spacing)
-    continues it (`_joined`). Tracks matched in fewer than `min_frames` frames, or with a
-    median score under `min_score` and no clear dot, are dropped (skin features that
-    looked like a marker for a moment).
+    followed back to where it appeared. Tracks matched in fewer than `min_frames` frames,
+    or with a median score under `min_score` and no clear dot, are dropped (skin features
+    that looked like a marker for a moment). Then the whole clip is looked at once: the
+    tracks of bright peaks that took one marker in turns (one lost, a new one born on the
+    marker, the old one taking it back later) become one column (`_linked`: each one's
+    sightings lie where the other's carry it, and the two are hardly ever seen together),
+    and each track keeps its faint points, or takes a peak in a gap, only where its bright
+    sightings on either side carry it (`_gap_filled`).
 
     `fit(frames)` takes the grey frames; learned: ``points_`` (F, M, 2) float32 pixels
     (x right, y down; NaN where a marker is not seen), ``scores_`` and ``contrasts_``
@@ -187,37 +196,33 @@ class RingTracks:
 
     On issue 17's webcam material (`render_webcam_marker_video`, 150 frames, four seeds
     each on the sample face and on the ICT face; ``python bench/markers.py
-    --only-webcam``): every marker in clear view found, median error 0.12-0.15 px, 99.5-100
-    % within 3 px; no identity switch on any of the eight (one ICT clip had 6 before the
-    faint-peak rule above, another 1 before the pair fit, where a lip marker's track
-    followed the ghost peak between it and one 8 px below for a dozen frames); the faint
-    peaks' limits above cost some oblique frames there (a marker turning edge-on moves off
-    where its neighbours carry it): 98.9-100 % within 3 px and 47-99 % of the oblique
-    frames, against 99.5-100 % and 60-99 % before.
+    --only-webcam``): every marker in clear view found, median error 0.12-0.15 px,
+    99.3-100 % within 3 px, 43-100 % of the oblique frames; no identity switch on any of
+    the eight (one ICT clip had 6 before the faint-peak rule above, another 1 before the
+    pair fit, where a lip marker's track followed the ghost peak between it and one 8 px
+    below for a dozen frames).
 
     On real footage (``python bench/markers_real.py``: 27 markers 5.4 px across drawn on a
-    real face video, JPEG q40 + MPEG-4, 840 frames), before -> after the lost tracks were
-    carried by their neighbours' fit, a marker followed twice merged and faint peaks held
-    near the neighbours' guess and the last bright sighting: 215 -> 56 tracks, 2569 -> 112
-    identity switches, clear view 37.6 -> 66.5 % within 3 px, 49.0 -> 29.2 % missed, median
-    0.153 px where held; on the first 150 frames 43 -> 30 tracks, 70 -> 1 switches, 76.7 ->
-    90.5 % within 3 px, 15.0 -> 9.0 % missed. Lost tracks used to coast with their
-    neighbours' summed flow, drift off (a new track born on the marker, the two taking it in
-    turns) or hold a faint skin peak that stayed put while the marker, a lip with the jaw,
-    moved on. What still fails there: markers faint for long (the lower lip in shadow) or
-    everything blurred by fast head turns, where tracks break and faint peaks still lead
-    them onto the skin beside.
+    real face video, JPEG q40 + MPEG-4, 840 frames): 56 -> 42 tracks, 112 -> 72 identity
+    switches, clear view 66.5 -> 80.5 % within 3 px, 29.2 -> 17.4 % missed, median 0.13
+    px where held, once the whole clip was looked at (`_linked`, `_gap_filled`); the
+    first 150 frames 30 -> 27 tracks, 1 switch, 90.5 -> 92.7 % within 3 px (before that,
+    lost tracks carried by their neighbours' fit, a marker followed twice merged and faint
+    peaks held near the last bright sighting had taken 215 tracks, 2569 switches, 37.6 %
+    to 56, 112, 66.5 %). Of the faint points the forward pass holds there, under 40 % are
+    on a marker (95 % of the bright ones). What still fails: markers faint for long (the
+    lower lip in shadow) or everything blurred by fast head turns, where tracks break.
     """
 
     def __init__(self, *, radii=_SCORE_RADII, birth: float = _BIRTH_SCORE, keep: float = _KEEP_SCORE,
                  snap: float = _SNAP, reacquire: float = _REACQUIRE, neighbours: int = _NEIGHBOURS,
                  min_frames: int = 3, min_score: float = 0.4, min_spread: float = _MIN_SPREAD,
-                 min_contrast: float = _MIN_DOT_CONTRAST, join: float = _JOIN) -> None:
+                 min_contrast: float = _MIN_DOT_CONTRAST) -> None:
         self.radii = tuple(float(r) for r in radii)
         self.birth, self.keep = float(birth), float(keep)
         self.snap, self.reacquire = float(snap), float(reacquire)
         self.neighbours, self.min_frames, self.min_score = int(neighbours), int(min_frames), float(min_score)
-        self.min_spread, self.min_contrast, self.join = float(min_spread), float(min_contrast), float(join)
+        self.min_spread, self.min_contrast = float(min_spread), float(min_contrast)
 
     def fit(self, frames) -> RingTracks:
         """Track the markers through frames, a sequence of (h, w) uint8 grey images."""
@@ -357,14 +362,22 @@ class RingTracks:
         born = np.array(born, dtype=np.int64)
         for m in np.flatnonzero(born > 0):
             self._backward(peaks, pts, sc, ct, m, born[m])
-        pts, sc, ct = _joined(pts, sc, ct, self.join, self.neighbours)
         seen = np.isfinite(pts[..., 0])
         with np.errstate(all="ignore"):
             quality = np.nanmedian(np.where(seen, sc, np.nan), 0)
             clear = np.nanmedian(np.where(seen, ct, np.nan), 0)
         good = (seen.sum(0) >= min(self.min_frames, n)) & (
             (np.nan_to_num(quality) >= self.min_score) | (np.nan_to_num(clear) >= _CLEAR_DOT))
-        pts, sc, seen = pts[:, good], sc[:, good], seen[:, good]
+        pts, sc, ct = pts[:, good], sc[:, good], ct[:, good]
+        # the whole clip in view: faint peaks held a track through, but are skin more often
+        # than not; the bright ones tell which tracks are one marker's, and the faint
+        # peaks where the clip says a marker is come back
+        bright = ct >= self.min_contrast
+        pts, sc, ct, bright = _linked(pts, sc, ct, bright, self.neighbours)
+        pts, sc, ct = _gap_filled(pts, sc, ct, bright, peaks, self.neighbours)
+        seen = np.isfinite(pts[..., 0])
+        good = seen.sum(0) >= min(self.min_frames, n)
+        pts, sc, ct, seen = pts[:, good], sc[:, good], ct[:, good], seen[:, good]
         first = np.where(seen.any(0), seen.argmax(0), n)
         y0 = pts[np.minimum(first, n - 1), np.arange(pts.shape[1]), 1]
         order = np.lexsort((pts[np.minimum(first, n - 1), np.arange(pts.shape[1]), 0], y0, first))
@@ -432,22 +445,47 @@ class RingTracks:
 
 def _carried(pts: np.ndarray, hit: np.ndarray, pos: np.ndarray, k: int) -> np.ndarray:
     """(M, 2) pos (M, 2) with each track not matched now (hit (M,) False) that was seen
-    before moved to its last sighting carried to the last frame of pts (T, M, 2) by the
-    similarity that takes its `k` nearest tracks seen both then and now from the one
-    frame to the other (kept where fewer than 3 are)."""
+    before moved to its last sighting carried to the last frame of pts (T, M, 2) by its
+    `k` nearest tracks (`_carried_to`; kept where fewer than 3 are seen both then and now)."""
     pos = pos.copy()
     seen = np.isfinite(pts[..., 0])
+    now = np.array([len(pts) - 1])
     for a in np.flatnonzero(~hit & seen.any(0)):
         then = len(pts) - 1 - int(seen[::-1, a].argmax())
-        common = seen[then] & seen[-1]
-        common[a] = False
-        if common.sum() < 3:
-            continue
-        src, dst = pts[then, common], pts[-1, common]
-        near = np.argsort(np.linalg.norm(src - pts[then, a], axis=1))[:k]
-        A, b = _fit(src[near], dst[near], affine=False)
-        pos[a] = pts[then, a] @ A.T + b
+        p = _carried_to(pts, seen, a, then, now, k)[0]
+        if np.isfinite(p).all():
+            pos[a] = p
     return pos
+
+
+def _carried_to(pts: np.ndarray, seen: np.ndarray, a: int, then: int, frames: np.ndarray, k: int,
+                least: int = 3) -> np.ndarray:
+    """(T, 2) float64 track a's point at frame `then` carried to each of `frames` (T,) by
+    the similarity (rotation, uniform scale, shift; least squares) that takes its `k`
+    nearest tracks at `then` among those seen both then and in that frame from the one to
+    the other: where the skin round a marker went. NaN where fewer than `least` are seen.
+    pts (F, M, 2) px, seen (F, M) bool."""
+    frames = np.asarray(frames, dtype=np.int64)
+    out = np.full((len(frames), 2), np.nan)
+    others = np.flatnonzero(seen[then])
+    others = others[others != a]
+    if len(others) < least or not len(frames):
+        return out
+    others = others[np.argsort(np.linalg.norm(pts[then, others] - pts[then, a], axis=1))]
+    # complex numbers: a 2D similarity is z -> alpha z + beta
+    src = pts[then, others, 0] + 1j * pts[then, others, 1]                   # (K,)
+    w = seen[frames][:, others]
+    w &= np.cumsum(w, 1) <= k                                                 # the k nearest seen
+    dst = np.where(w, np.nan_to_num(pts[frames][:, others, 0] + 1j * pts[frames][:, others, 1]), 0)
+    n = w.sum(1)
+    ok = n >= least
+    sm = (w * src).sum(1) / np.maximum(n, 1)
+    dm = dst.sum(1) / np.maximum(n, 1)
+    s, d = np.where(w, src - sm[:, None], 0), np.where(w, dst - dm[:, None], 0)
+    alpha = (d * np.conj(s)).sum(1) / np.maximum((np.abs(s) ** 2).sum(1), 1e-12)
+    z = alpha * (pts[then, a, 0] + 1j * pts[then, a, 1] - sm) + dm
+    out[ok] = np.stack([z.real, z.imag], 1)[ok]
+    return out
 
 
 def _followed_twice(pos: np.ndarray, hit: np.ndarray, seen: np.ndarray, near: float):
@@ -467,50 +505,126 @@ def _followed_twice(pos: np.ndarray, hit: np.ndarray, seen: np.ndarray, near: fl
     return int(lost[i[latest]]), int(held[j[latest]])
 
 
-def _joined(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, gate: float, k: int):
-    """(pts, sc, ct) with the tracks of one marker that was lost for a while (hidden,
-    edge-on) and found again as a new track joined into one column.
-
-    pts (F, M, 2), sc and ct (F, M): tracks, their scores and contrasts. A track b that
-    starts after a track a ends continues a when b's first position lies within `gate`
-    times the distance to the nearest other track (at either end) of a's last position
-    carried to b's first frame by the similarity that takes a's `k` nearest neighbours
-    (tracks seen in both frames) from the one frame to the other; the closest such pair
-    (relative to that spacing) is joined first, and again until none is left.
-    """
+def _filled(pts: np.ndarray, seen: np.ndarray, a: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(where (F, 2) float64 px, age (F,) frames): track a's point in every frame, its own
+    where seen (age 0), else its sightings on either side carried there by their
+    neighbours (`_carried_to`, with 2 neighbours enough) and blended by how near in time
+    each lies (one side only before its first and after its last), age the frames to the
+    nearer sighting; NaN (age inf) where nothing carries it. pts (F, M, 2), seen (F, M)."""
     n = len(pts)
-    while pts.shape[1] > 1:
-        seen = np.isfinite(pts[..., 0])
-        if not seen.any():
+    where = np.full((n, 2), np.nan)
+    age = np.full(n, np.inf)
+    at = np.flatnonzero(seen[:, a])
+    if not at.size:
+        return where, age
+    where[at], age[at] = pts[at, a], 0
+    ends = [(np.arange(at[0]), at[0]), (np.arange(at[-1] + 1, n), at[-1])]
+    for frames, then in ends:
+        where[frames] = _carried_to(pts, seen, a, then, frames, k, least=2)
+        age[frames] = np.abs(frames - then)
+    for s1, s2 in zip(at[:-1], at[1:]):
+        if s2 - s1 < 2:
+            continue
+        frames = np.arange(s1 + 1, s2)
+        p1 = _carried_to(pts, seen, a, s1, frames, k, least=2)
+        p2 = _carried_to(pts, seen, a, s2, frames, k, least=2)
+        w = ((frames - s1) / (s2 - s1))[:, None]
+        where[frames] = np.where(np.isnan(p1), p2, np.where(np.isnan(p2), p1, (1 - w) * p1 + w * p2))
+        age[frames] = np.minimum(frames - s1, s2 - frames)
+    age[np.isnan(where[:, 0])] = np.inf
+    return where, age
+
+
+def _linked(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, bright: np.ndarray, k: int):
+    """(pts, sc, ct, bright) with the tracks that are one marker's joined into one column,
+    over the whole clip: a marker lost and found again (dim in shadow, blurred by a fast
+    turn) becomes a new track while the old one, carried by its neighbours, waits beside it
+    and may take it back later, so one marker's frames end up dealt among several tracks
+    that take it in turns.
+
+    pts (F, M, 2) px, sc and ct (F, M): tracks; bright (F, M) bool: their points on bright
+    peaks, the only ones looked at (on real footage such a point is its marker about 95 %
+    of the time, a faint one under 40 %). Two tracks are one marker's when each one's
+    sightings lie near where the other would be (`_filled`, within `_LINK_AGE` frames of
+    its own sighting): median distance under `_LINK` px over at least 3 such frames, and
+    both are seen in at most `_LINK_SHARED` of the frames of the shorter (two markers are
+    seen together all the time). The nearest pair is joined first (in a frame both hold, a
+    bright point over a faint one, else the longer track's), and again until none is left."""
+    pts, sc, ct, bright = pts.copy(), sc.copy(), ct.copy(), bright.copy()
+    seen = np.where(bright[..., None], pts, np.nan)
+    m = pts.shape[1]
+    filled = [_filled(seen, bright, a, k) for a in range(m)]
+    cost = np.full((m, m), np.inf)
+
+    def costs(a):
+        for b in range(m):
+            if b == a or not bright[:, b].any():
+                continue
+            shared = (bright[:, a] & bright[:, b]).sum()
+            mine = bright[:, b] & ~bright[:, a] & (filled[a][1] <= _LINK_AGE)
+            theirs = bright[:, a] & ~bright[:, b] & (filled[b][1] <= _LINK_AGE)
+            e = np.concatenate([np.linalg.norm(pts[mine, b] - filled[a][0][mine], axis=1),
+                                np.linalg.norm(pts[theirs, a] - filled[b][0][theirs], axis=1)])
+            ok = len(e) >= 3 and shared <= _LINK_SHARED * min(bright[:, a].sum(), bright[:, b].sum())
+            cost[a, b] = cost[b, a] = np.median(e) if ok else np.inf
+
+    for a in range(m):
+        costs(a)
+    while m > 1:
+        a, b = np.unravel_index(np.argmin(cost), cost.shape)
+        if not cost[a, b] < _LINK:
             break
-        first = np.where(seen.any(0), seen.argmax(0), n)
-        last = np.where(seen.any(0), n - 1 - seen[::-1].argmax(0), -1)
-        best = (np.inf, -1, -1)
-        for a in np.flatnonzero(last < n - 1):
-            for b in np.flatnonzero(first > last[a]):
-                if first[b] >= n:
-                    continue
-                ta, tb = last[a], first[b]
-                common = seen[ta] & seen[tb]
-                common[[a, b]] = False
-                if common.sum() < 3:
-                    continue
-                src, dst = pts[ta, common], pts[tb, common]
-                apart = np.linalg.norm(src - pts[ta, a], axis=1)
-                near = np.argsort(apart)[:k]
-                A, t = _fit(src[near], dst[near], affine=False)
-                d = np.linalg.norm(pts[ta, a] @ A.T + t - pts[tb, b])
-                # a marker alone (a cheek) may be looked for further than one in a row
-                spacing = min(apart.min(), np.linalg.norm(dst - pts[tb, b], axis=1).min())
-                if d < gate * spacing and d / spacing < best[0]:
-                    best = (d / spacing, a, b)
-        _, a, b = best
-        if a < 0:
-            break
-        later = seen[:, b]
-        pts[later, a], sc[later, a], ct[later, a] = pts[later, b], sc[later, b], ct[later, b]
-        keep = np.arange(pts.shape[1]) != b
-        pts, sc, ct = pts[:, keep], sc[:, keep], ct[:, keep]
+        if bright[:, b].sum() > bright[:, a].sum():
+            a, b = b, a
+        more = np.isfinite(pts[:, b, 0]) & ~bright[:, a] & (bright[:, b] | np.isnan(pts[:, a, 0]))
+        pts[more, a], sc[more, a], ct[more, a], bright[more, a] = pts[more, b], sc[more, b], ct[more, b], bright[more, b]
+        pts[:, b], sc[:, b], ct[:, b], bright[:, b] = np.nan, np.nan, np.nan, False
+        seen[:, a] = np.where(bright[:, a, None], pts[:, a], np.nan)
+        seen[:, b] = np.nan
+        cost[b], cost[:, b] = np.inf, np.inf
+        filled[a] = _filled(seen, bright, a, k)
+        costs(a)
+    keep = bright.any(0)
+    return pts[:, keep], sc[:, keep], ct[:, keep], bright[:, keep]
+
+
+def _gap_filled(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, bright: np.ndarray, peaks, k: int):
+    """(pts, sc, ct): each track's frames without a bright point (bright (F, M) bool) kept
+    or filled where its bright sightings on either side carry it (`_filled`): its own faint
+    point if within `_SNAP` px of there, plus `_FAINT_SLACK` px a frame from the nearer
+    sighting (before its first bright sighting and after its last, whatever: one side
+    alone carries a marker turning edge-on too loosely), else (at most `_FILL_AGE` frames
+    from a sighting) the peak of that frame's `peaks` (centres (K, 2), scores (K,),
+    contrasts (K,)) within `_FILL` px, one to one, none within `_APART` px of another
+    track's point; else none. Faint peaks held a track through the clip, but many were
+    skin beside a marker that moved on; the whole clip tells which were the marker."""
+    seen = np.where(bright[..., None], pts, np.nan)
+    want = np.full(pts.shape, np.nan)
+    out = (seen, np.where(bright, sc, np.nan), np.where(bright, ct, np.nan))
+    for a in range(pts.shape[1]):
+        where, age = _filled(seen, bright, a, k)
+        inside = np.zeros(len(pts), bool)
+        at = np.flatnonzero(bright[:, a])
+        inside[at[0]:at[-1]] = True
+        own = ~bright[:, a] & np.isfinite(pts[:, a, 0]) & (
+            ~inside | (np.linalg.norm(pts[:, a] - where, axis=1) < _SNAP + _FAINT_SLACK * age))
+        for o, v in zip(out, (pts, sc, ct)):
+            o[own, a] = v[own, a]
+        gap = ~bright[:, a] & ~own & (age <= _FILL_AGE)
+        want[gap, a] = where[gap]
+    pts, sc, ct = out
+    for t in np.flatnonzero(np.isfinite(want[..., 0]).any(1)):
+        cand, val, contrast = peaks[t]
+        rows = np.flatnonzero(np.isfinite(want[t, :, 0]))
+        if not len(cand):
+            continue
+        d = np.linalg.norm(want[t, rows][:, None] - cand[None], axis=2)
+        held = pts[t, np.isfinite(pts[t, :, 0])]
+        if len(held):
+            d[:, np.linalg.norm(cand[:, None] - held[None], axis=2).min(1) < _APART] = np.inf
+        take = _matched(d, _FILL)
+        got = take >= 0
+        pts[t, rows[got]], sc[t, rows[got]], ct[t, rows[got]] = cand[take[got]], val[take[got]], contrast[take[got]]
     return pts, sc, ct
 
 

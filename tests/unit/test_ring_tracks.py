@@ -66,3 +66,41 @@ def test_a_marker_held_beside_one_that_closes_in_and_parts_keeps_its_track():
     for marker in (HELD, BELOW):
         col = int(np.flatnonzero(owner == marker)[0])
         assert seen[:, col].all() and d[:, col, marker].max() < 1.0
+
+
+def _grid_tracks(seed: int, n: int = 60):
+    """(truth (F, 12, 2) px): a 4 x 3 grid of markers 15 px apart turning, scaling and
+    moving as a face does (up to 6 px a frame), each with a little motion of its own."""
+    rng = np.random.default_rng(seed)
+    grid = np.stack(np.meshgrid(np.arange(4) * 15.0, np.arange(3) * 15.0), -1).reshape(-1, 2)
+    t = np.arange(n)[:, None]
+    angle = 0.2 * np.sin(t / 9.0)[..., None]
+    scale = 1.0 + 0.1 * np.sin(t / 13.0)[..., None]
+    rot = np.concatenate([np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)], 2).reshape(n, 1, 2, 2)
+    shift = np.column_stack([100 + 40 * np.sin(t[:, 0] / 7.0), 80 + 30 * np.cos(t[:, 0] / 11.0)])
+    own = np.cumsum(rng.normal(0, 0.3, (n, 12, 2)), 0)
+    return (rot @ (grid - grid.mean(0))[None, :, :, None])[..., 0] * scale + shift[:, None] + own
+
+
+def test_the_tracks_that_took_one_marker_in_turns_are_one_column():
+    """Over the whole clip, a marker whose frames went to two tracks in turns (lost in
+    shadow, found again as a new track while the old one waited beside it) is one column
+    again; two markers about 20 px apart here that are never seen together stay two."""
+    from retarget.sources.ring_tracks import _linked
+
+    truth = _grid_tracks(seed=3)
+    n = len(truth)
+    pts = np.concatenate([truth, np.full((n, 1, 2), np.nan)], 1)              # column 12: B
+    turns = (np.arange(n) // 15) % 2 == 1                                      # frames 15-29, 45-59
+    pts[turns, 12], pts[turns, 5] = truth[turns, 5], np.nan
+    pts[[14, 30, 44], 5] = np.nan                                              # lost between turns
+    pts[:30, 11] = np.nan                                                      # 11 and 10 are never
+    pts[30:, 10] = np.nan                                                      # seen together
+    sc = np.where(np.isfinite(pts[..., 0]), 0.8, np.nan)
+    out, _, _, bright = _linked(pts, sc, sc * 50, np.isfinite(pts[..., 0]), 6)
+    assert out.shape[1] == 12 and bright.any(0).all()
+    d = np.linalg.norm(out[:, :, None] - truth[:, None], axis=3)               # (F, 12, 12)
+    owner = np.nanargmin(np.nanmean(d, 0), 1)
+    assert sorted(owner) == list(range(12))
+    col = int(np.flatnonzero(owner == 5)[0])
+    assert np.isfinite(out[:, col, 0]).sum() == n - 3 and np.nanmax(d[:, col, 5]) < 1e-9
