@@ -49,36 +49,47 @@ degrees, and those 60-75 degrees off (each marker's track as `unnamed_track_scor
 picks it); identity switches (a track whose nearest true marker
 changes); tracking frames/s (decode included, one core).
 
-Figures (2-core machine shared with others, so the frames/s are low and vary; before ->
-after `RingTracks` carried its lost tracks by their neighbours' fit, merged a marker
-followed twice and kept faint peaks near the neighbours' guess and its last bright
-sighting; ``bench/markers.py --only-webcam`` with these changes: all 8 clips 0 switches,
-every clear-view marker found, median 0.120-0.154 px, 98.9-100 % within 3 px, oblique
-47-99 %, against 0 switches, 0.120-0.154 px, 99.5-100 %, oblique 60-99 % before):
+Figures (2-core machine shared with others, so the frames/s are low and vary), before ->
+after `RingTracks` looked at the whole clip once its forward pass was done (`_linked`:
+the tracks of bright peaks that took one marker in turns joined into one column;
+`_gap_filled`: faint points kept, and gaps filled from the frame's peaks, only where the
+bright sightings on either side carry the track); ``bench/markers.py --only-webcam``
+with it: all 8 clips 0 switches, every clear-view marker found, median 0.120-0.154 px,
+99.3-100 % within 3 px, oblique 43-100 %, against 0 switches, 0.120-0.154 px,
+98.9-100 %, oblique 47-99 % before:
 
     python bench/markers_real.py        # all 840 frames, radius 1.5 mm, JPEG q40, seed 0
 
     840 frames, 27 markers of 1.5 mm radius (5.4 px across, 1.81 px/mm)
     marker motion, px/frame: median 2.36, p95 8.8, max 26.4; less its 6 neighbours':
         median 0.78, p95 3.4, 6.8 % over 3 px
-    first frame: 25/27 markers found; 215 -> 56 tracks, 2569 -> 112 identity switches;
-        14-18 -> 25 frames/s
-    visible (within 75 deg): 34.9 -> 61.8 % within 3 px, 50.9 -> 34.0 % missed
-    clear view (within 60 deg, 91.6 %): median 72 -> 0.153 px, 37.6 -> 66.5 % within 3 px,
-        49.0 -> 29.2 % missed
-    oblique (60-75 deg): 6.3 -> 11.4 % within 3 px, 72.5 -> 86.0 % missed
-    tracked share of each marker's clear-view frames: 2/27 -> 8/27 >= 99 %; lowest now
-        brow_left_outer 0, brow_right_outer 4.7, lip_lower_center 21.8, lip_lower_left
-        26.4, mouth_corner_right 30.7
+    first frame: 25/27 markers found; 56 -> 42 tracks, 112 -> 72 identity switches;
+        41 -> 35-47 frames/s
+    visible (within 75 deg): 61.8 -> 74.8 % within 3 px, 34.0 -> 23.1 % missed
+    clear view (within 60 deg, 91.6 %): median 0.153 -> 0.128 px, 66.5 -> 80.5 % within
+        3 px, 29.2 -> 17.4 % missed
+    oblique (60-75 deg): 11.4 -> 11.7 % within 3 px, 86.0 -> 85.5 % missed
+    tracked share of each marker's clear-view frames: 8/27 -> 12/27 >= 99 %; lowest now
+        brow_left_outer 0 (36 clear-view frames, never a bright peak), brow_right_outer
+        4.7, mouth_corner_right 30.7, lip_lower_right 33.0, lip_lower_left 36.8
 
     python bench/markers_real.py --frames 150        (the first 150: first jaw drops)
-    first frame 25/27; 43 -> 30 tracks, 70 -> 1 switches; clear view median 0.132 ->
-    0.116 px, 76.7 -> 90.5 % within 3 px, 15.0 -> 9.0 % missed; 14/26 markers held >= 99 %;
-    lowest now lip_lower_right 45.3, lip_lower_center 54.1, jaw_right 60.1,
-    mouth_corner_right 67.3, jaw_left 75.0; 51 -> 43 frames/s
-    (before: ... --frames 150 --quality 90: 52 switches, clear median 0.099 px, 77.9 %,
-    15.3 % missed; ... --radius-mm 3 (10.7 px across): 26/27 first, 32 tracks, 21
-    switches, clear median 0.065 px, 80.9 % within 3 px, 4.0 % missed; not rerun)
+    first frame 25/27; 30 -> 27 tracks, 1 -> 1 switch; clear view median 0.116 -> 0.114
+    px, 90.5 -> 92.7 % within 3 px, 9.0 -> 6.9 % missed; 14/26 -> 15/26 markers held >=
+    99 %; lowest now lip_lower_right 47.3, lip_lower_center 66.2, mouth_corner_right
+    67.3, jaw_left 75.9, lip_lower_left 79.3
+
+Earlier steps, same commands: `RingTracks` carrying its lost tracks by their neighbours'
+fit, merging a marker followed twice and keeping faint peaks near the neighbours' guess
+and its last bright sighting took 840 frames from 215 tracks, 2569 switches, 37.6 %
+within 3 px and 49.0 % missed in clear view to 56, 112, 66.5 % and 29.2 %, and the first
+150 from 43 tracks, 70 switches, 76.7 % to 30, 1, 90.5 % (``--frames 150 --quality 90``
+then: 52 switches, 77.9 %; ``--radius-mm 3``, 10.7 px across: 21 switches, 80.9 %; not
+rerun). Of the faint points the forward pass holds on 840 frames, 38.6 % lie within 3 px
+of a marker, against 94.6 % of the bright ones: what the whole-clip pass builds on.
+Cutting tracks where a sighting after a gap lies far from where the track's last one
+carries it, so that `_linked` could rejoin the pieces, gained nothing (8-12 px: 72-80 %
+within 3 px); the pieces lost across long gaps stay apart.
 
 So issue 17's mono targets (every marker found, median <= 0.5 px, >= 95 % within 3 px, 0
 switches) are met on the rendered webcam clips but not here. What was wrong is the
@@ -102,12 +113,15 @@ three kept changes is needed (all 840 frames, the other two kept): without the c
 123 tracks, 595 switches, 41.0 % within 3 px; without the merge 90, 200, 51.3 %; without
 the faint peaks' limits 126, 2411, 44.8 % (against 56, 112, 66.5 % with all three).
 
-What is still wrong on all 840 frames: the tracks break (56 for 27 markers) where a marker
+What is still wrong on all 840 frames: one track holds two markers in turn (the lower
+lip's and the mouth corner's, 10-30 px apart: a lost lower-lip track, carried by its
+neighbours while the jaw drops, lands on the corner, whose own track is lost then), which
+no joining of whole tracks can undo; and the tracks break (42 for 27 markers) where a marker
 is faint for long (the lower lip in its own shadow: its dot a few to 20 grey levels over
 its ring after JPEG, a bright peak in only 40-60 % of its clear-view frames against 87 %
 over all markers) or everything moves fast (head turns of 6-8 px a frame, motion-blurred:
 a bright peak for 68 % of the markers), and faint peaks still lead tracks onto the skin
-beside them there (the 112 switches: lips, chin, jaw). Keeping faint peaks near the last
+beside them there (lips, chin, jaw). Keeping faint peaks near the last
 bright sighting cost the rendered clips oblique frames (a marker turning edge-on rightly
 moves off where its neighbours carry it: a 2 px gate gave 48-74 % on five clips; 5 px, the
 one kept, 47-99 % on all 8 against 60-99 %). Markers more than about 50 degrees off the
