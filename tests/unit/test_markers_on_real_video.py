@@ -7,10 +7,11 @@ samples the ring at a fixed radius, which on a foreshortened ring lies on the sk
 
 The 38 frames are the video's first 46 less its repeated frames (`repeated_frames`: 25 fps
 content at 30 fps); the span ends before the first fast jaw drop (source frames 48-51: the
-lower lip moves 8-14 px a frame). The first 80 frames take in two jaw drops: there the
-tracks must stay few and on their markers (before the lost tracks were carried by their
-neighbours' fit and kept off faint peaks away from their last bright sighting: 36 tracks,
-14 identity switches, 84.6 % within 3 px; now 31, 1, 91.6 %). The real video
+lower lip moves 8-14 px a frame). The first 150 frames take in the first jaw drops: there
+the tracks must stay few and on their markers (before the lost tracks were carried by their
+neighbours' fit and kept off faint peaks away from their last bright sighting: 43 tracks,
+70 identity switches, 76.7 % within 3 px; before the whole-clip pass joined the tracks that
+took a marker in turns, 30, 1, 90.5 %; now 27, 1, 92.7 %). The real video
 is ``../shared/data/video/face_expressions_480.mp4``; the test skips only when ../shared is
 absent.
 """
@@ -25,7 +26,7 @@ import pytest
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 VIDEO = SHARED / "data" / "video" / "face_expressions_480.mp4"
 FRAMES = 38
-JAW_FRAMES = 80
+JAW_FRAMES = 150
 
 
 def _tracked(tmp_path_factory, frames: int):
@@ -55,7 +56,7 @@ def tracked(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def tracked_jaw(tmp_path_factory):
-    """`_tracked` on the first 80 frames (two fast jaw drops)."""
+    """`_tracked` on the first 150 frames (fast jaw drops)."""
     return _tracked(tmp_path_factory, JAW_FRAMES)
 
 
@@ -92,14 +93,14 @@ def test_markers_found_in_the_first_frame_are_followed_on_their_own_marker(track
 
 
 def test_tracks_hold_their_markers_through_fast_jaw_drops(tracked_jaw):
-    """Through two jaw drops (the lower lip 8-14 px a frame, its neighbours still): at most
-    32 tracks for the 27 markers, at most 3 identity switches, >= 88 % of the clear-view
-    marker-frames within 3 px (36, 14 and 84.6 % before)."""
+    """Through the jaw drops (the lower lip 8-14 px a frame, its neighbours still): at most
+    28 tracks for the 27 markers, at most 2 identity switches, >= 92 % of the clear-view
+    marker-frames within 3 px (the module doc has the figures before)."""
     s, _ = tracked_jaw
     e = s["err"][s["clear"]]
-    assert s["tracks"] <= 32, s["tracks"]
-    assert s["switches"] <= 3, s["switches"]
-    assert (e < 3.0).mean() >= 0.88, (e < 3.0).mean()
+    assert s["tracks"] <= 28, s["tracks"]
+    assert s["switches"] <= 2, s["switches"]
+    assert (e < 3.0).mean() >= 0.92, (e < 3.0).mean()
 
 
 def test_repeated_frames_are_every_sixth_when_that_phase_stands_still():
