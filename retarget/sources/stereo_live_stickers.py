@@ -19,17 +19,22 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    after the set-up: 1 s, mostly of the neutral face, 1.61 / 4.50 mm, 3 s 1.01 / 3.43).
    The head may move. The head frame is that of the span's first pair seeing 3 anchors
    (`anchored_poses`). Every pair of the span comes out NaN;
-3. after it, each pair's head pose is the rigid fit of the anchors it sees onto their
-   places, each column's place being the median of its first `_KEEP` registrations in the
-   head frame (the span's, then those of pairs whose pose 3 anchors fixed): a median,
-   since a temple's first sightings, half hidden at a grazing angle, are millimetres off
-   (on issue 17's take, pose error 2.2 mm with a running mean, 1.9 with the median),
-   and frozen once full, so the head frame cannot drift in a long session. An anchor not seen in
-   the span (or a named column not tracked yet) joins with its first registration,
-   weighted by its count until its place is steady: the pose never jumps when the
-   visible set changes. A pair short of placed anchors (a temple turned away) is fitted
-   to every column it sees, weighted by 1 / its spread squared (as `anchored_poses`
-   offline), and a pair with no fit holds the last pose;
+3. after it, each pair's head pose is the rigid fit of every column it sees onto its
+   place, weighted by the column's steadiness, then twice reweighted by how far each
+   lies off its place (Cauchy, 1 mm: `_fit`), so that the stickers an expression moves
+   count little and the nose, brows at rest and anchors carry it. Each column's place is
+   the median of its first `_KEEP` registrations in the head frame (the span's, then
+   those of pairs where 3 placed anchors are seen): a median, since a temple's first
+   sightings, half hidden at a grazing angle, are millimetres off, and frozen once full,
+   so the head frame cannot drift in a long session. The anchors fix the head frame and
+   decide which pairs are learned from; a column not seen in the span joins with its
+   first registration, loose (`_PRIOR_SPREAD`) until it has more: the pose never jumps
+   when the visible set changes, and a pair with no fit holds the last pose. Fitted to
+   the 3-4 anchors alone, the pose took their triangulation noise with it (at 1 m with
+   an 80 mm baseline, a tenth of a pixel is about 1.6 mm along the line of sight):
+   1.24 / 4.08 mm against 0.89 / 3.17 on the bench below (3 seeds), 1.28 / 5.26 against
+   0.95 / 3.84 on seeds 3-5; weighing the columns by steadiness alone, with no
+   reweighting, 0.94 / 3.42 and 1.20 / 4.07;
 4. the depth is steadied causally: in the head frame, each sticker's component along
    its line of sight moves to the weighted median of its last `depth_window` positions
    (and this one) along that line, each weighted by how near it lay across the line
@@ -38,19 +43,19 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    it the position is a tenth of a pixel sure, and an expression's move shows there).
    Measured on issue 17's take (seed 0, 120 pairs, named anchors, median / p95 mm):
    window 1 (none) 1.65 / 5.43, 15 1.37 / 3.71, 30 1.21 / 3.55, 45 1.17 / 3.33, 60
-   1.17 / 3.11. Fitting the pose again to the steadied anchors, or weighing the anchors'
-   depth less in it (`anchored_poses`' sight ratio 6), gained nothing live (1.18 / 3.28
-   and 1.31 / 3.48 at 45), so neither is done;
+   1.17 / 3.11 (with the pose fitted to the anchors alone). The window starts filled
+   with the set-up span's positions, posed by `anchored_poses`;
 5. Woodward's causal 3-frame mean (`temporal_window`).
 
 How far this is from offline (`bench/stereo_live.py --stickers`: issue 17's sticker take,
 150 pairs, 3 seeds, shape error median / p95 over the pairs after the set-up): named
-anchors live 1.26 / 4.18 mm, offline 0.63 / 2.81; anchors chosen live 1.77 / 4.75,
-offline 0.77 / 3.53 (targets 1 / 3). The gap is the pose: fitted to one pair's anchors it
-is 1.9 mm off at the median (the stickers' truth mapped with it), where offline's centred
-depth smoothing steadies the anchors first; a causal alpha-beta filter of the pose lagged
-the head's turns and did worse (1.5-2.6 mm), and weighing the columns by their spread in
-the fit gained nothing.
+anchors live 0.89 / 3.17 mm, offline 0.64 / 2.63; anchors chosen live 1.31 / 4.06,
+offline 0.93 / 3.50 (targets 1 / 3). What is left is mostly a sticker's first pairs in
+view (a temple turning in, half hidden: 5-6 mm off for a few pairs, where offline's
+centred windows see its later pairs) and the lip stickers that merge. Before the pose
+took every column (above), the gap was the pose: fitted to one pair's anchors it was 1.9
+mm off at the median; a causal alpha-beta filter of it lagged the head's turns and did
+worse (1.5-2.6 mm).
 
 A live player needs points in its target's layout order: `by_name` picks the columns of
 a layout's points by name (NaN for a point no column has yet). Given a `layout` with a 3D
@@ -99,10 +104,10 @@ MAX_STICKERS = 99
 a column's name never changes while the session runs; later stickers are not followed."""
 
 _SIGHT_RATIO = 6.0   # depth noise over cross-ray noise of the set-up span's anchors, as offline
-_STEADY = 0.5   # mm, spreads below this count as this in the fit short of anchors
 _PRIOR_SPREAD, _PRIOR_HITS = 5.0, 10   # mm, pairs: a column's spread before it has registrations
 _KEEP = 30   # registrations kept per column for its place (1 s at 30 fps; 90: 1.25 / 3.19 mm against 1.17 / 3.33)
-_JOIN = 10   # registrations at which a late anchor's place counts half   # mm: a sticker seen in few posed pairs counts as this loose
+_ROBUST = 1.0   # mm: the pose's Cauchy scale; a sticker this far off its place counts half
+_ROBUST_STEPS = 2   # reweighted fits after the first
 _PLACED = 3   # registrations before a column is named by place (a median of 3 outvotes a bad one; one pair names well)
 _NAME = re.compile(r"m(\d{2,3})")
 
@@ -313,6 +318,8 @@ class LiveStickerTracker:
         self._hits = np.zeros(m)
         for head in registered[seen.any(axis=1)]:
             self._register(head)
+        if self.depth_window > 1:
+            self._steady = list(registered[-(self.depth_window - 1):])
         self._setup = []
         self.anchored_ = True
         self.setup_error_ = ""
@@ -366,34 +373,36 @@ class LiveStickerTracker:
         return self._places
 
     def _fit(self, xyz: np.ndarray):
-        """(R, t, full) of this pair (``head = p @ R.T + t``), full when 3 placed anchors
-        fixed it; None when nothing does. Short of anchors (a temple turned away while
-        another is not yet placed), every column seen is fitted to its place, weighted by
-        its steadiness (1 / its spread squared, spreads under `_STEADY` mm counting as
-        that and a sticker seen little as `_PRIOR_SPREAD`: the anchors weigh most, the
-        lips least), as `anchored_poses` does offline."""
+        """(R, t, full) of this pair (``head = p @ R.T + t``); None when nothing fixes it.
+
+        Every column seen that has a place is fitted to it, weighted by its steadiness (1 /
+        its spread squared, a sticker seen in few posed pairs counting as `_PRIOR_SPREAD`
+        mm loose: the anchors and the nose weigh most, the lips least), then again
+        `_ROBUST_STEPS` times with each weight times the Cauchy weight of its residual
+        (1 / (1 + (r / `_ROBUST`)^2)): an expression moves the lips and brows off their
+        places, and the fit follows the stickers that stayed. `full` when 3 placed anchors
+        are among them: then the pair's positions are learned (`_learn`). Fitted to the
+        anchors alone, a pair's pose took their triangulation noise (at 1 m with an 80 mm
+        baseline, millimetres along each line of sight) with it (module doc)."""
         m = len(xyz)
         places, spread2 = self._place_all()
         n = len(places)
         k = self.anchors_[self.anchors_ < min(m, n)]
-        ok = np.isfinite(xyz[k]).all(axis=1) & np.isfinite(places[k]).all(axis=1)
-        k = k[ok]
+        full = (np.isfinite(xyz[k]).all(axis=1) & np.isfinite(places[k]).all(axis=1)).sum() >= 3
+        hits = np.minimum(self._hits, _KEEP)
+        spread2 = (np.nan_to_num(spread2) * hits + _PRIOR_HITS * _PRIOR_SPREAD**2) / (hits + _PRIOR_HITS)
+        use = np.isfinite(xyz[:n]).all(axis=1) & np.isfinite(places).all(axis=1)
+        if use.sum() < 3:
+            return None
+        src, dst, weight = xyz[:n][use], places[use], 1.0 / spread2[use]
         try:
-            if k.size >= 3:
-                # A place is the mean of the anchor's registrations: one that joined a few
-                # pairs ago has a noisy place, and counts less until it has more.
-                weight = self._hits[k] / (self._hits[k] + _JOIN)
-                return (*rigid_transform(xyz[k], places[k], weight), True)
-            # A sticker seen in few posed pairs counts as loose.
-            hits = np.minimum(self._hits, _KEEP)
-            spread2 = (np.nan_to_num(spread2) * hits + _PRIOR_HITS * _PRIOR_SPREAD**2) / (hits + _PRIOR_HITS)
-            weight = 1.0 / np.maximum(spread2, _STEADY**2)
-            use = np.isfinite(xyz[:n]).all(axis=1) & np.isfinite(places).all(axis=1)
-            if use.sum() < 3:
-                return None
-            return (*rigid_transform(xyz[:n][use], places[use], weight[use]), False)
+            rot, trans = rigid_transform(src, dst, weight)
+            for _ in range(_ROBUST_STEPS):
+                r = np.linalg.norm(src @ rot.T + trans - dst, axis=1)
+                rot, trans = rigid_transform(src, dst, weight / (1.0 + (r / _ROBUST) ** 2))
         except RetargetError:   # collinear
             return None
+        return rot, trans, full
 
     def _learn(self, xyz: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> None:
         """After a pair whose pose 3 anchors fixed, every column's place and spread take
