@@ -43,6 +43,8 @@ _PAIR_DRIFT = 0.1      # cost (correlation) per px that a close pair's distance 
                        # frame (a ghost peak between two markers halves it)
 _PAIR_GAIN = 0.05      # cost by which the fit must beat the matched peaks to move them
 _PAIR_SNAP = 1.0       # px: a fitted centre this near a peak takes the peak (sharper)
+_MAX_MARKERS = 200     # tracks matched in one frame past which a clip is not of markers (the
+                       # work per frame grows with tracks x peaks; a face carries < 100)
 _LINK = 8.0            # px: median distance between two tracks' sightings and where the
                        # other carries it, under which they are one marker's (`_linked`)
 _LINK_AGE = 10         # frames from its sighting within which a track is carried for that
@@ -189,6 +191,10 @@ class RingTracks:
     and each track keeps its faint points, or takes a peak in a gap, only where its bright
     sightings on either side carry it (`_gap_filled`).
 
+    A clip where over `_MAX_MARKERS` (200) tracks hold a peak in one frame is refused
+    (`RetargetError`): noise or a fine texture, whose ring-like peaks would else pile up
+    tracks and the work per frame with them.
+
     `fit(frames)` takes the grey frames; learned: ``points_`` (F, M, 2) float32 pixels
     (x right, y down; NaN where a marker is not seen), ``scores_`` and ``contrasts_``
     (F, M) float32 (the matched peaks' `ring_score` and `ring_contrast`), in a stable
@@ -307,6 +313,10 @@ class RingTracks:
             else:
                 strong_t, bright_t = strong[t], bright[t]
             hit = take >= 0
+            if hit.sum() > _MAX_MARKERS:
+                raise RetargetError(f"frame {t}: over {_MAX_MARKERS} ring-marker-like spots followed at "
+                                    "once; this does not look like a video of ring markers (noise or a "
+                                    "fine texture?)")
             pts[t, hit] = cand[take[hit]]
             sc[t, hit] = val[take[hit]]
             ct[t, hit] = contrast[take[hit]]
@@ -344,11 +354,12 @@ class RingTracks:
             if new.size:
                 # two strong peaks of one marker: keep the stronger
                 new = new[np.argsort(-val[new])]
-                keep_new = []
-                for k in new:
-                    if all(np.linalg.norm(cand[k] - cand[j]) > 2.0 * self.snap for j in keep_new):
-                        keep_new.append(k)
-                new = np.array(keep_new)
+                alone = np.ones(len(new), bool)
+                close = np.linalg.norm(cand[new, None] - cand[new][None], axis=2) <= 2.0 * self.snap
+                for i in range(len(new)):
+                    if alone[i]:
+                        alone[i + 1:] &= ~close[i, i + 1:]
+                new = new[alone]
                 add = np.full((n, len(new), 2), np.nan)
                 add[t] = cand[new]
                 pts = np.concatenate([pts, add], 1)
@@ -430,11 +441,12 @@ class RingTracks:
             if len(cand) == 0:
                 return
             d = np.linalg.norm(cand - p, axis=1)
+            near = np.flatnonzero(d <= self.snap)
             others = np.isfinite(pts[t, :, 0])
             others[m] = False
-            if others.any():
-                taken = np.linalg.norm(cand[:, None] - pts[t, others][None], axis=2).min(1) < 1.5
-                d[taken] = np.inf
+            if others.any() and near.size:
+                taken = np.linalg.norm(cand[near, None] - pts[t, others][None], axis=2).min(1) < 1.5
+                d[near[taken]] = np.inf
             k = int(d.argmin())
             if d[k] > self.snap:
                 return
@@ -672,6 +684,8 @@ def _split_pairs(gray: np.ndarray, pos: np.ndarray, last: np.ndarray, take: np.n
         ends, offset = pos[[i, j]], last[j] - last[i]
         lo = np.maximum(np.floor(ends.min(0) - margin), 0).astype(int)
         hi = np.minimum(np.ceil(ends.max(0) + margin), [w - 1, h - 1]).astype(int)
+        if (hi - lo < 2).any():   # both predicted off the picture (carried out of view)
+            continue
         ys, xs = np.mgrid[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1]
         xy = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
         patch = gray[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1].ravel().astype(np.float64)

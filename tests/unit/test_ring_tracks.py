@@ -3,6 +3,7 @@
 
 import cv2
 import numpy as np
+import pytest
 
 from retarget.sources.ring_tracks import RingTracks
 
@@ -104,3 +105,16 @@ def test_the_tracks_that_took_one_marker_in_turns_are_one_column():
     assert sorted(owner) == list(range(12))
     col = int(np.flatnonzero(owner == 5)[0])
     assert np.isfinite(out[:, col, 0]).sum() == n - 3 and np.nanmax(d[:, col, 5]) < 1e-9
+
+
+def test_a_video_of_noise_is_refused_not_tracked_for_ever():
+    """Blurred noise is thousands of faint ring-like peaks a frame and dozens of strong
+    ones: every track holds one, the tracks pile up and the work per frame with them
+    (100 such frames took 6 minutes). Past 200 tracks held in one frame the clip is
+    refused by name."""
+    from retarget.errors import RetargetError
+
+    rng = np.random.default_rng(0)
+    frames = [cv2.GaussianBlur(rng.integers(0, 256, (480, 640)).astype(np.uint8), (0, 0), 1.0) for _ in range(20)]
+    with pytest.raises(RetargetError, match="does not look like a video of ring markers"):
+        RingTracks().fit(frames)
