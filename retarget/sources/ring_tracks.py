@@ -562,14 +562,16 @@ def _linked(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, bright: np.ndarray,
     both are seen in at most `_LINK_SHARED` of the frames of the shorter (two markers are
     seen together all the time). The nearest pair is joined first (in a frame both hold, a
     bright point over a faint one, else the longer track's), and again until none is left."""
-    pts, sc, ct, bright = pts.copy(), sc.copy(), ct.copy(), bright.copy()
-    seen = np.where(bright[..., None], pts, np.nan)
     m = pts.shape[1]
-    filled = [_filled(seen, bright, a, k) for a in range(m)]
+    if m < 2:
+        return pts, sc, ct, bright
+    pts, sc, ct, bright = pts.copy(), sc.copy(), ct.copy(), bright.copy()
+    sighted = np.where(bright[..., None], pts, np.nan)     # the bright points alone
+    filled = [_filled(sighted, bright, a, k) for a in range(m)]
     cost = np.full((m, m), np.inf)
 
-    def costs(a):
-        for b in range(m):
+    def costs(a, others):
+        for b in others:
             if b == a or not bright[:, b].any():
                 continue
             shared = (bright[:, a] & bright[:, b]).sum()
@@ -581,8 +583,8 @@ def _linked(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, bright: np.ndarray,
             cost[a, b] = cost[b, a] = np.median(e) if ok else np.inf
 
     for a in range(m):
-        costs(a)
-    while m > 1:
+        costs(a, range(a + 1, m))
+    while True:
         a, b = np.unravel_index(np.argmin(cost), cost.shape)
         if not cost[a, b] < _LINK:
             break
@@ -591,11 +593,11 @@ def _linked(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, bright: np.ndarray,
         more = np.isfinite(pts[:, b, 0]) & ~bright[:, a] & (bright[:, b] | np.isnan(pts[:, a, 0]))
         pts[more, a], sc[more, a], ct[more, a], bright[more, a] = pts[more, b], sc[more, b], ct[more, b], bright[more, b]
         pts[:, b], sc[:, b], ct[:, b], bright[:, b] = np.nan, np.nan, np.nan, False
-        seen[:, a] = np.where(bright[:, a, None], pts[:, a], np.nan)
-        seen[:, b] = np.nan
+        sighted[:, a] = np.where(bright[:, a, None], pts[:, a], np.nan)
+        sighted[:, b] = np.nan
         cost[b], cost[:, b] = np.inf, np.inf
-        filled[a] = _filled(seen, bright, a, k)
-        costs(a)
+        filled[a] = _filled(sighted, bright, a, k)
+        costs(a, range(m))
     keep = bright.any(0)
     return pts[:, keep], sc[:, keep], ct[:, keep], bright[:, keep]
 
@@ -610,11 +612,11 @@ def _gap_filled(pts: np.ndarray, sc: np.ndarray, ct: np.ndarray, bright: np.ndar
     contrasts (K,)) within `_FILL` px, one to one, none within `_APART` px of another
     track's point; else none. Faint peaks held a track through the clip, but many were
     skin beside a marker that moved on; the whole clip tells which were the marker."""
-    seen = np.where(bright[..., None], pts, np.nan)
+    sighted = np.where(bright[..., None], pts, np.nan)     # the bright points alone
     want = np.full(pts.shape, np.nan)
-    out = (seen, np.where(bright, sc, np.nan), np.where(bright, ct, np.nan))
+    out = (sighted, np.where(bright, sc, np.nan), np.where(bright, ct, np.nan))
     for a in range(pts.shape[1]):
-        where, age = _filled(seen, bright, a, k)
+        where, age = _filled(sighted, bright, a, k)
         inside = np.zeros(len(pts), bool)
         at = np.flatnonzero(bright[:, a])
         inside[at[0]:at[-1]] = True
