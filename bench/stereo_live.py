@@ -37,9 +37,9 @@ camera's own delay (sensor to the page) comes on top. 0 skips it.
 sticker take of `retarget.testing.stereo_rig.render_sticker_video` (13 blue stickers,
 vertical 80 mm webcam pair at 1 m, head turns, blur, JPEG + MPEG-4; the exact
 calibration), per seed: the shape error (`sticker_scores`: head-frame points against the
-truth held at the first pose, after one rigid alignment) of `LiveStickerTracker` (causal,
-the 3-frame mean) and of the offline `track_stereo_frames` (centred windows over the
-whole take, the 3-frame mean) over the same pairs, those after the live set-up span, with
+truth held at the first pose, after one rigid alignment) of `LiveStickerTracker` (causal)
+and of the offline `track_stereo_frames` (centred windows over the whole take), both
+without Woodward's 3-frame mean (their default), over the same pairs, those after the live set-up span, with
 the anchors named (temples, forehead, nose bridge: 1 s set-up) and chosen (3 s set-up);
 the library's time per pair on one core; and the server's time per pair (``ms`` of the
 "tracked" answers: JPEG decoding at quality 80 and tracking in the session's child) over
@@ -261,7 +261,7 @@ def sticker_figures(truth, frames, data: Path) -> dict:
                         for seq in (live, camera))
         after = np.isfinite(live).any(axis=(1, 2))
         after[:int(np.argmax(after))] = False
-        offline = track_stereo_frames(frames, cal, layout=None, anchors=anchors, temporal_window=3)
+        offline = track_stereo_frames(frames, cal, layout=None, anchors=anchors)
         for name, seen, points in (("live", camera, live), ("offline", kept.points, offline.points)):
             err = sticker_scores(seen, np.where(after[:, None, None], points, np.nan), truth)["error"]
             err = err[np.isfinite(err)]

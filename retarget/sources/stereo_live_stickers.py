@@ -34,7 +34,7 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    an 80 mm baseline, a tenth of a pixel is about 1.6 mm along the line of sight):
    1.24 / 4.08 mm against 0.89 / 3.17 on the bench below (3 seeds), 1.28 / 5.26 against
    0.95 / 3.84 on seeds 3-5; weighing the columns by steadiness alone, with no
-   reweighting, 0.94 / 3.42 and 1.20 / 4.07;
+   reweighting, 0.94 / 3.42 and 1.20 / 4.07 (all with the 3-frame mean of step 5);
 4. the depth is steadied causally: in the head frame, each sticker's component along
    its line of sight moves to the weighted median of its last `depth_window` positions
    (and this one) along that line, each weighted by how near it lay across the line
@@ -45,14 +45,21 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    window 1 (none) 1.65 / 5.43, 15 1.37 / 3.71, 30 1.21 / 3.55, 45 1.17 / 3.33, 60
    1.17 / 3.11 (with the pose fitted to the anchors alone). The window starts filled
    with the set-up span's positions, posed by `anchored_poses`;
-5. Woodward's causal 3-frame mean (`temporal_window`).
+5. Woodward's causal 3-frame mean (`temporal_window`) is off by default, as offline
+   (`track_stereo_frames`): a causal mean lags the motion by a pair, and the lower lip
+   and chin move 5-10 mm a pair when the jaw drops or the performer talks (issue 17's
+   take at 30 fps). The depth median above already steadies what the mean would. On
+   the bench below (3 seeds, named anchors, median / p95 mm) the mean gave 0.89 / 3.17
+   against 0.90 / 2.77 without; on seeds 3-5 0.95 / 3.84 against 0.93 / 3.19; a causal
+   one-euro filter in its place 0.85 / 2.91-3.40.
 
 How far this is from offline (`bench/stereo_live.py --stickers`: issue 17's sticker take,
 150 pairs, 3 seeds, shape error median / p95 over the pairs after the set-up): named
-anchors live 0.89 / 3.17 mm, offline 0.64 / 2.63; anchors chosen live 1.31 / 4.06,
-offline 0.93 / 3.50 (targets 1 / 3). What is left is mostly a sticker's first pairs in
-view (a temple turning in, half hidden: 5-6 mm off for a few pairs, where offline's
-centred windows see its later pairs) and the lip stickers that merge. Before the pose
+anchors live 0.90 / 2.77 mm (seed 0 alone 1.07 / 3.62), offline 0.62 / 1.69; anchors
+chosen live 1.19 / 3.38, offline 0.84 / 2.66 (targets 1 / 3). What is left is mostly
+the lower lip and chin while the jaw moves fast, a sticker's first pairs in view (a
+temple turning in, half hidden: 5-6 mm off for a few pairs, where offline's centred
+windows see its later pairs) and the lip stickers that merge. Before the pose
 took every column (above), the gap was the pose: fitted to one pair's anchors it was 1.9
 mm off at the median; a causal alpha-beta filter of it lagged the head's turns and did
 worse (1.5-2.6 mm).
@@ -164,7 +171,8 @@ class LiveStickerTracker:
         with named anchors, 3 s to choose them.
     depth_window : pairs of the causal depth median (1: none); across : its weight's
         width across the line of sight (calibration units).
-    temporal_window : pairs of the causal mean (Woodward §5: 3; 1 = none).
+    temporal_window : pairs of the causal mean (Woodward §5 use 3; 1 = none, the default:
+        module doc, step 5).
     max_epipolar : px, as `StickerTracks`.
     setup_frames : pairs the set-up may take (performer not in view, too few stickers,
         named anchors not seen) before `push` raises.
@@ -188,7 +196,7 @@ class LiveStickerTracker:
     def __init__(self, calibration: StereoCalibration, color="blue", *,
                  anchors: Sequence[int | str] | None = None, setup_seconds: float | None = None,
                  depth_window: int = 45, across: float = 2.0,
-                 temporal_window: int = 3, max_epipolar: float = 3.0, setup_frames: int = 300,
+                 temporal_window: int = 1, max_epipolar: float = 3.0, setup_frames: int = 300,
                  history: int = 900, layout: Layout | None = None):
         self.calibration = calibration
         self.tracks = StickerTracks(calibration, color, max_epipolar=max_epipolar)
