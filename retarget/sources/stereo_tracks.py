@@ -63,6 +63,8 @@ _DARK = 0.78   # a dark candidate's pixels are below this share of the local ski
 _DARK_AREA = 30   # px, largest dark region that may be a sticker (brows, nostrils are more)
 _TINT_SAT = 20.0   # saturation floor of a dark candidate's tint (skin's hue is far off)
 _DARK_3D = 12.0   # mm, furthest a pairing with a dark candidate may land from its track
+_MAX_TRACKS = 200   # tracks held at once past which a take is not of stickers (the work per
+                    # pair grows with tracks x candidates; a face carries < 100, 13 in §5)
 # Frames kept to follow a track that has just started backwards (`_extend_back`). Issue
 # 17, worst sticker found, seeds 0-6: 0.971, 0.963, 0.976, 0.911, 0.925, 0.971, 0.944 ->
 # 1.000, 0.975, 0.993, 0.975, 0.986, 1.000, 0.972, no switches (extrapolated by the first
@@ -313,7 +315,10 @@ class StickerTracks:
 
     Call with each frame pair (left, right) (H, W, 3) uint8 BGR; `points()` then gives
     (F, M, 3) float64, NaN where a sticker was not seen, and `left_px()` (F, M, 2) its
-    left-image positions, columns in the stable order.
+    left-image positions, columns in the stable order. A pair after which over
+    `_MAX_TRACKS` (200) tracks are held raises `RetargetError`, its new tracks dropped:
+    colour noise or a patterned cloth, whose spots would else each become a track (0.5 s
+    a pair).
     """
 
     def __init__(self, calibration: StereoCalibration, color: str | MarkerColor = "blue", *,
@@ -413,7 +418,14 @@ class StickerTracks:
         # Faint candidates (those after the first `counts`) only continue tracks.
         used_l[counts[0]:] = True
         used_r[counts[1]:] = True
+        held = len(self._born)
         self._spawn(frame, bl, br, used_l, used_r)
+        if len(self._born) > _MAX_TRACKS:
+            # This pair's new tracks go again: a live session goes on once the spots leave.
+            self._drop(np.arange(len(self._born)) >= held)
+            raise RetargetError(f"frame pair {frame}: {len(self._born)} {self.color.name} spots followed at "
+                                f"once (a face carries under 100 stickers); this does not look like a take of "
+                                f"{self.color.name} stickers (colour noise or a patterned cloth?)")
 
     def _extend_back(self) -> None:
         """Each track seen in the last two frames and not before (new, or back after being

@@ -155,6 +155,31 @@ def test_a_sticker_hidden_at_the_start_gets_a_column_when_it_appears():
     assert np.linalg.norm(take.points[8:, 5] - truth, axis=1).max() < 8.0
 
 
+def test_a_take_of_colour_noise_is_refused_not_tracked_at_half_a_second_a_pair():
+    """Blurred colour noise is hundreds of blue spots a frame: each pairing became a track
+    and every pair took 0.5 s (tracks x candidates). Past 200 tracks it is refused by name,
+    offline and live alike."""
+    from retarget.sources.stereo_live_stickers import LiveStickerTracker
+
+    cal = rig_calibration(*webcam_cameras())
+    rng = np.random.default_rng(0)
+    noise = [tuple(cv2.GaussianBlur(rng.integers(0, 256, (480, 640, 3)).astype(np.uint8), (0, 0), 1.5)
+                   for _ in range(2)) for _ in range(3)]
+    with pytest.raises(RetargetError, match="frame pair 0: .* does not look like a take of blue stickers"):
+        track_stereo_frames(noise, cal, layout=None)
+    live = LiveStickerTracker(cal)
+    for i, pair in enumerate(noise[:2]):
+        with pytest.raises(RetargetError, match="does not look like a take of blue stickers"):
+            live.push(*pair, i / 30)
+        assert len(live.tracks.latest()[0]) == 0   # the spots' tracks went with the refusal
+    # A take of stickers is not: the six of the nodding head above.
+    cams, cal, n, points = _six_stickers()
+    tracks = StickerTracks(cal)
+    for pair in _disc_frames(cams, points[:3]):
+        tracks(*pair)
+    assert tracks.points().shape == (3, 6, 3)
+
+
 def test_head_pose_does_not_jump_when_the_visible_anchors_change():
     rng = np.random.default_rng(4)
     head = np.array([[-65, 20, -50], [65, 20, -50], [0, 70, 0], [0, 30, 20]], dtype=np.float64)
