@@ -242,7 +242,7 @@ class LiveStickerTracker:
         return tuple(self._layout.point_names[k] if k >= 0 else "" for k in named)
 
     def push(self, left: np.ndarray, right: np.ndarray, time: float) -> np.ndarray:
-        """(M, 3) float32 head-frame points of this pair, after the temporal mean."""
+        """(M, 3) float32 head-frame points of this pair (steadied: module doc, steps 3-5)."""
         self._time = checked_pair(self.calibration, left, right, time, self._time)
         self.frames_ += 1
         self.tracks(left, right)
