@@ -420,10 +420,11 @@ class StickerTracks:
         used_r[counts[1]:] = True
         held = len(self._born)
         self._spawn(frame, bl, br, used_l, used_r)
-        if len(self._born) > _MAX_TRACKS:
+        spots = len(self._born)
+        if spots > _MAX_TRACKS:
             # This pair's new tracks go again: a live session goes on once the spots leave.
-            self._drop(np.arange(len(self._born)) >= held)
-            raise RetargetError(f"frame pair {frame}: {len(self._born)} {self.color.name} spots followed at "
+            self._drop(np.arange(spots) >= held)
+            raise RetargetError(f"frame pair {frame}: {spots} {self.color.name} spots followed at "
                                 f"once (a face carries under 100 stickers); this does not look like a take of "
                                 f"{self.color.name} stickers (colour noise or a patterned cloth?)")
 
