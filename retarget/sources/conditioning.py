@@ -260,7 +260,9 @@ class SourceConditioner:
             neutral[seen] = head_neutral(frames[:, seen], stable)
         else:
             neutral[seen] = frames[0, seen] if len(frames) == 1 else np.nanmedian(frames[:, seen], axis=0)
-        self.waiting_ = tuple(self._names(lost, every=True))
+        # A point seen only in frames whose anchors fixed no pose has no place either: it
+        # waits and joins once seen, as a point never seen does.
+        self.waiting_ = tuple(self._names(np.isnan(neutral[:, 0]), every=True))
         if self.max_neutral_motion is not None:
             motion = self._capture_motion(frames[:, seen], neutral[seen], seen)
             if motion > self.max_neutral_motion:

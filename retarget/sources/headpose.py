@@ -230,7 +230,8 @@ def head_neutral(frames, stable, iterations: int = 2) -> np.ndarray:
     (first the first frame whose anchors fix a pose), and the per-point median of the
     registered frames is the next estimate; its head frame is the first such frame's.
     frames : (F, N, 3) float; stable : (K,) int. `RetargetError` if no frame has a
-    pose, or a point is lost in every frame.
+    pose, or a point is lost in every frame; a point seen only in frames with no pose
+    comes out NaN.
     """
     f = np.asarray(frames, dtype=np.float64)
     if f.ndim != 3 or f.shape[2] != 3 or f.shape[0] == 0:
@@ -247,7 +248,9 @@ def head_neutral(frames, stable, iterations: int = 2) -> np.ndarray:
     estimate = f[int(np.argmax(posed))]
     for _ in range(max(1, iterations)):
         registered, _, _ = remove_head_motion(f, estimate, k)
-        estimate = np.nanmedian(registered, axis=0)
+        with warnings.catch_warnings():   # a point seen only in frames with no pose: NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            estimate = np.nanmedian(registered, axis=0)
     return estimate.astype(np.float32)
 
 

@@ -284,6 +284,27 @@ def test_a_point_missed_past_the_wait_joins_when_it_shows(head_pose):
     assert late.waiting_ == () and late.neutral_ is None
 
 
+def test_a_point_seen_only_before_the_head_pose_is_fixed_waits_and_joins():
+    """A point seen in the capture only in frames whose anchors fix no head pose (two of
+    them in view) has no registered place: its neutral is NaN. It waits (``waiting_``) and
+    joins once seen, as a point never seen does, instead of staying undriven for good."""
+    mouth = IBUG.index("mouth_corner_right")
+    stable = stable_indices(IBUG)
+    frames = np.repeat(NEUTRAL[None], 30, axis=0)
+    frames[0, stable[2:]] = np.nan          # frame 0: 2 anchors, no pose
+    frames[1:12, mouth] = np.nan            # the mouth corner seen in frame 0 only, then from 1.2 s
+    settings = {"neutral": {"mode": "first_seconds", "seconds": 0.2}, "head_pose": "remove"}
+    late = SourceConditioner("ibug68", 3, settings, lost_wait=0.2)
+    out, waiting = [], []
+    for i, f in enumerate(frames):
+        out.append(late.push(f, i / 10))
+        waiting.append(late.waiting_)
+    first = next(i for i, o in enumerate(out) if o is not None)
+    assert waiting[first] == ("mouth_corner_right",)
+    assert np.isfinite(out[-1]).all()
+    np.testing.assert_allclose(late.neutral_[mouth], NEUTRAL[mouth], atol=1e-5)
+
+
 def test_settings_round_trip_through_json_and_defaults():
     settings = ConditionSettings(neutral={"mode": "frame", "frame": 4}, head_pose="keep", apply_rotation=True,
                                  filter="one_euro", one_euro={"mouth": {"min_cutoff": 2, "beta": 1}, "d_cutoff": 2},
