@@ -93,6 +93,30 @@ def test_stickers_are_tracked_live_into_the_stream_by_name(app, project, materia
         assert ws.receive_json()["type"] == "stopped"
 
 
+def test_a_patterned_cloth_in_view_is_refused_and_the_session_goes_on(app, project, material):
+    # A blue polka-dot cloth held up to both cameras: 20 x 27 dots, hundreds of pairings.
+    frames, _, anchors = material
+    cloth = np.full_like(frames[0][0], (120, 150, 200))
+    for y in range(12, cloth.shape[0], 24):
+        for x in range(12, cloth.shape[1], 24):
+            cv2.circle(cloth, (x, y), 4, (230, 80, 30), -1)
+    with TestClient(app) as client, client.websocket_connect(f"/api/projects/{project}/stereo/live") as ws:
+        ws.receive_json()
+        ws.send_json({"type": "start", "markers": "stickers", "color": "blue", "anchors": anchors})
+        assert ws.receive_json()["type"] == "started"
+        ws.send_bytes(pair(cloth, cloth, 0))
+        refused = ws.receive_json()
+        assert refused["type"] == "error", refused
+        assert "blue spots followed at once" in refused["detail"] and "does not look like a take" in refused["detail"]
+        tracked = []
+        for i, (left, right) in enumerate(frames, start=1):
+            ws.send_bytes(pair(left, right, i))
+            tracked.append(ws.receive_json())
+        assert {t["type"] for t in tracked} == {"tracked"}, [t for t in tracked if t["type"] != "tracked"][:2]
+        last = tracked[-1]
+        assert last["anchored"] and last["stickers"] == 13 and sorted(last["anchors"]) == anchors, last
+
+
 @pytest.fixture(scope="module")
 def placed_project(app, sample_id, material) -> tuple[str, np.ndarray]:
     """The sample face with landmarks in a layout made from an offline take of the
