@@ -40,11 +40,12 @@ vertical 80 mm webcam pair at 1 m, head turns, blur, JPEG + MPEG-4; the exact
 calibration), per seed: the shape error (`sticker_scores`: head-frame points against the
 truth held at the first pose, after one rigid alignment) of `LiveStickerTracker` (causal)
 and of the offline `track_stereo_frames` (centred windows over the whole take), both
-without Woodward's 3-frame mean (their default), over the same pairs, those after the live set-up span, with
-the anchors named (temples, forehead, nose bridge: 1 s set-up) and chosen (3 s set-up);
-the library's time per pair on one core; and the server's time per pair (``ms`` of the
-"tracked" answers: JPEG decoding at quality 80 and tracking in the session's child) over
-``WS .../stereo/live`` for a project whose landmarks are a custom layout m01..m13.
+without Woodward's 3-frame mean (their default), over the same pairs, those after the live
+set-up span, with the anchors named (temples, forehead, nose bridge: 1 s set-up) and
+chosen (3 s set-up); the library's time per pair on one core; and the server's time per
+pair (``ms`` of the "tracked" answers: JPEG decoding at quality 80 and tracking in the
+session's child) over ``WS .../stereo/live`` for a project whose landmarks are a custom
+layout m01..m13.
 Then the naming (issue 17 §2): a layout is made from the offline take of the whole clip
 (`take_reference`: each sticker's median head-frame place; its anchors the columns of the
 temples, forehead and nose bridge), and a live session (the layout's anchors found by
@@ -211,8 +212,8 @@ def sticker_bench(seeds: range, n_frames: int) -> None:
         print(f"seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in row.items()), flush=True)
     med = {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
     print(f"\nLive single-colour stickers (13 blue, vertical 80 mm webcam pair at 1 m; {n_frames} frames, "
-          f"median over seeds {seeds.start}-{seeds.stop - 1}), shape error after head removal, mm (median / p95), over the "
-          "pairs after the live set-up:")
+          f"median over seeds {seeds.start}-{seeds.stop - 1}), shape error after head removal, mm "
+          "(median / p95), over the pairs after the live set-up:")
     for label, what in (("named", "anchors named (temples, forehead, nose bridge), 1 s set-up"),
                         ("auto", "anchors chosen (rigid_anchors), 3 s set-up")):
         print(f"  {what}: live {med[label + '_live_median']:.2f} / {med[label + '_live_p95']:.2f}, "

@@ -5,6 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
+from retarget.errors import RetargetError
 from retarget.sources.ring_tracks import RingTracks
 
 HELD = 0               # the marker that stays put
@@ -112,8 +113,6 @@ def test_a_video_of_noise_is_refused_not_tracked_for_ever():
     ones: every track holds one, the tracks pile up and the work per frame with them
     (100 such frames took 6 minutes). Past 200 tracks held in one frame the clip is
     refused by name."""
-    from retarget.errors import RetargetError
-
     rng = np.random.default_rng(0)
     frames = [cv2.GaussianBlur(rng.integers(0, 256, (480, 640)).astype(np.uint8), (0, 0), 1.0) for _ in range(20)]
     with pytest.raises(RetargetError, match="does not look like a video of ring markers"):

@@ -14,6 +14,7 @@ from retarget.sources.color_markers import color_blobs, refined_centres, sticker
 from retarget.sources.headpose import anchored_poses, rigid_anchors
 from retarget.sources.stereo import track_stereo_frames, track_stereo_videos
 from retarget.sources.stereo_depth import expression_depth, sight_smoothed
+from retarget.sources.stereo_live_stickers import LiveStickerTracker
 from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (
@@ -159,8 +160,6 @@ def test_a_take_of_colour_noise_is_refused_not_tracked_at_half_a_second_a_pair()
     """Blurred colour noise is hundreds of blue spots a frame: each pairing became a track
     and every pair took 0.5 s (tracks x candidates). Past 200 tracks it is refused by name,
     offline and live alike."""
-    from retarget.sources.stereo_live_stickers import LiveStickerTracker
-
     cal = rig_calibration(*webcam_cameras())
     rng = np.random.default_rng(0)
     noise = [tuple(cv2.GaussianBlur(rng.integers(0, 256, (480, 640, 3)).astype(np.uint8), (0, 0), 1.5)
