@@ -279,7 +279,7 @@ class RingTracks:
         anchor = np.zeros((0, 2))               # where its neighbours carry its last bright match
         rel = np.zeros((0, 2))                  # its motion last frame, less its neighbours'
         born = []
-        places, sightings = [], []              # pos after each frame, and which were bright matches
+        places, sightings = [], []              # the last frames' pos, and which were bright matches
         for t in range(n):
             live = np.isfinite(pts[t - 1, :, 0]) if t > 0 else np.zeros(len(pos), bool)
             cand, val, contrast = peaks[t]
@@ -337,7 +337,7 @@ class RingTracks:
                 strong_t, bright_t = strong[t], bright[t]
             # a track lost now may be where the shape model of the markers bright now puts
             # it: a bright peak no track took within `snap` px of there is its marker
-            model = _shape_places(places[-_MODEL_WINDOW:], sightings[-_MODEL_WINDOW:], take, cand, bright_t)
+            model = _shape_places(places, sightings, take, cand, bright_t)
             if model is not None:
                 cols, where = model
                 lost = take[cols] < 0
@@ -407,8 +407,9 @@ class RingTracks:
                 anchor = np.concatenate([anchor, cand[new]])
                 rel = np.concatenate([rel, np.zeros((len(new), 2))])
                 born += [t] * len(new)
-            places.append(pos.copy())
-            sightings.append(np.isfinite(pts[t, :, 0]) & (np.nan_to_num(ct[t]) >= self.min_contrast))
+            places = [*places[-(_MODEL_WINDOW - 1):], pos.copy()]
+            sightings = [*sightings[-(_MODEL_WINDOW - 1):],
+                         np.isfinite(pts[t, :, 0]) & (np.nan_to_num(ct[t]) >= self.min_contrast)]
         born = np.array(born, dtype=np.int64)
         for m in np.flatnonzero(born > 0):
             self._backward(peaks, pts, sc, ct, m, born[m])
