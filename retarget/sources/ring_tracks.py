@@ -57,7 +57,7 @@ _MODEL_FRAMES = 30     # frames before it is used
 _MODEL_BRIGHT = 0.5    # share of those frames a track must be bright in to count in it
 _MODEL_FILLS = 2       # times its places where a track was not bright are filled from the modes
 _MODEL_NOISE = 1.0     # px: a bright peak's noise against the model
-_MODEL_FIT = 3.0       # px: no model where it puts a bright marker farther from its peak
+_MODEL_FIT = _SNAP     # px: no model where it puts a bright marker farther from its peak
 _FAINT_SLACK = 0.25    # px a frame from its bright sightings by which a track's faint point
                        # may stray from where they carry it (a marker turning edge-on)
 
@@ -341,9 +341,7 @@ class RingTracks:
             if model is not None:
                 cols, where = model
                 lost = take[cols] < 0
-                free = np.ones(len(cand), bool)
-                free[take[take >= 0]] = False
-                _hand_back(take, cols[lost], where[lost], cand, free & bright_t, np.full(lost.sum(), self.snap))
+                _hand_back(take, cols[lost], where[lost], cand, bright_t, np.full(lost.sum(), self.snap))
             hit = take >= 0
             if hit.sum() > _MAX_MARKERS:
                 raise RetargetError(f"frame {t}: over {_MAX_MARKERS} ring-marker-like spots followed at "
