@@ -72,7 +72,7 @@ up, the columns placed in `_PLACED` posed pairs are matched to the reference tog
 (`retarget.sources.place_names.matched_places`: similarity and assignment), and a column
 placed later against the fit to those named; ``names_`` then gives each column its
 layout point's name, "" for one that matches none (an extra sticker, or one not placed
-yet). When such a layout marks head anchors and none are named, they are the anchors:
+yet; it is matched again as its place firms up). When such a layout marks head anchors and none are named, they are the anchors:
 at the span's end its columns are named at their median places in a head frame fitted
 to them all, and a layout anchor named later joins them. A column not yet placed also
 takes registrations from pairs posed short of anchors, so that a temple hidden through
@@ -220,7 +220,7 @@ class LiveStickerTracker:
         self.setup_frames, self.history = int(setup_frames), int(history)
         self._rows = np.zeros(0, np.int64)      # the tracks' row of each column
         self._named = np.zeros(0, np.int64)     # each column's layout point, -1 for none
-        self._tried = np.zeros(0, bool)         # the columns matched so far
+        self._tried = np.zeros(0)               # each column's registrations when last matched
         self._time = -np.inf
         self._setup: list[np.ndarray] = []       # camera-frame points of the set-up span
         self._setup_start: float | None = None
@@ -350,7 +350,7 @@ class LiveStickerTracker:
             wanted = ", ".join(self._layout.point_names[k] for k in self._layout.anchors)
             raise RetargetError(f"{anchors.size} of the layout's head anchors ({wanted}) were found by "
                                 "place in the set-up span; 3 are needed: keep them in view")
-        self._named, self._tried = named, seen
+        self._named, self._tried = named, np.full(len(named), -1.0)
         return anchors
 
     def _register(self, head: np.ndarray, keep: int = _KEEP) -> None:
@@ -420,21 +420,25 @@ class LiveStickerTracker:
         self._register(xyz @ rot.T + trans)
 
     def _name_placed(self) -> None:
-        """Name by place the columns placed (`_PLACED` registrations) since the last call:
-        the first 3 or more together, later ones against the fit to those named (a name,
-        once given, stays); those named as the layout's anchors join the anchors."""
+        """Name by place the columns placed (`_PLACED` registrations) and not named yet,
+        each time one of them has more registrations than when last matched: the first 3
+        or more together, later ones against the fit to those named (a name, once given,
+        stays); those named as the layout's anchors join the anchors. A column left
+        unnamed is matched again as its place firms up: a sticker's first registrations
+        (a temple half hidden, posed short of anchors) can put it past the gate, and one
+        matched once for good stayed unnamed, its point never driven."""
         m = len(self._hits)
-        tried = np.pad(self._tried, (0, m - len(self._tried)))
-        ready = (self._hits >= _PLACED) & ~tried
-        use = tried | ready
-        if not ready.any() or use.sum() < 3:
-            return
         named = np.pad(self._named, (0, m - len(self._named)), constant_values=-1)
+        tried = np.pad(self._tried, (0, m - len(self._tried)), constant_values=-1.0)
+        unnamed = (self._hits >= _PLACED) & (named < 0)
+        use = (named >= 0) | unnamed
+        if not (unnamed & (self._hits > tried)).any() or use.sum() < 3:
+            return
         places = stereo_reference(self._place_all()[0][use])
         if places is None:   # the placed columns coincide: no shape to match yet
             return
         named[use] = matched_places(places, self._layout.reference_points(), known=named[use])
-        self._named, self._tried = named, use
+        self._named, self._tried = named, np.where(use, self._hits, tried)
         if self._by_layout:   # a layout anchor named late joins the anchors, as a named one met late
             self.anchors_ = np.union1d(self.anchors_, np.flatnonzero(np.isin(named, self._layout.anchors)))
 

@@ -194,6 +194,42 @@ def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout
     assert sorted(owners[anchors[-1]]) == [0, 1, 2, 3]
 
 
+def test_a_column_first_placed_off_its_sticker_is_named_once_its_place_firms_up():
+    # A temple turning into view is half hidden for its first pairs: its triangulation
+    # is millimetres to centimetres off, and so is the place its first registrations
+    # give, past the naming gate. Here a cheek sticker hidden for the first 12 pairs shows
+    # 30 mm too deep for its first 8 (along the left camera's line of sight: the same
+    # image there, the depth wrong), then where it is. Its column is left unnamed at
+    # first and named once its place (the median of its registrations) is right. Before,
+    # a column was matched once, and this one stayed unnamed: its point was never driven
+    # (the browser e2e's live session waited for it to its end).
+    cams = webcam_cameras()
+    cal = rig_calibration(*cams)
+    face = sample_face(1)
+    stickers = face.vertices[sticker_vertices(face)] * MM_PER_CM
+    take = track_stereo_frames(_disc_frames(cams, np.repeat(stickers[None], 10, axis=0)), cal, layout=None)
+    layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
+                                          for name, xyz in zip(take.names, take_reference(take))]})
+    took = _owners(take.points[-1], cams[0].to_camera(stickers))
+    cheek = STICKER_ANCHORS + 2          # a sticker that is no head anchor
+    n, hidden, off = 44, 12, 8
+    live = np.stack([_turned(stickers, 10.0 + 0.2 * i, -5.0) for i in range(n)])
+    live[:hidden, cheek] = np.nan
+    ray = live[hidden:hidden + off, cheek] - cams[0].center
+    live[hidden:hidden + off, cheek] += 30.0 * ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    tracker = LiveStickerTracker(cal, setup_seconds=0.2, depth_window=9, layout=layout)
+    names = []
+    for i, pair in enumerate(_disc_frames(cams, live)):
+        tracker.push(*pair, i / 30)
+        names.append(tracker.names_)
+    owners = _owners(tracker.camera_, cams[0].to_camera(live[-1]))
+    column = int(np.flatnonzero(owners == cheek)[0])
+    wanted = take.names[list(took).index(cheek)]
+    assert names[hidden + off][column] == ""          # placed off its sticker: left unnamed
+    assert tracker.names_[column] == wanted            # then named as its sticker
+    assert tracker.names_ == tuple(take.names[list(took).index(k)] for k in owners)
+
+
 def test_bad_inputs_are_refused_precisely():
     cal = rig_calibration(*webcam_cameras())
     for anchors, match in ((["m01", "m02"], "at least 3 different"), (["m01", "m02", "m01"], "at least 3"),
