@@ -42,7 +42,8 @@ built-in face (scaled to mm), 150 mm apart, verged; 8 mm coloured stickers on th
   switches, worst sticker found; before `flow_moved`, seeds 0/1/2: 18/23/13 tracks,
   12/25/3 switches, found 0.56/0.38/0.78; after: 13/13/13, 0/0/0, 1.00/0.91/0.96), and on
   pairs 2 to 5 frames apart at random (a page sends a pair when its encoder is free:
-  14/13/13 tracks, 2/0/0 switches, found 0.90/0.86/0.89).
+  14/13/13 tracks, 2/0/0 switches, found 0.90/0.91/0.89; 0.90/0.86/0.89 before the last
+  positions stood in for the velocity at a reversal and pairings off the face were none).
   Targets: every sticker in >= 95 % of frames, median <= 1 mm, p95 <= 3 mm, 0 switches.
   On this 2-core machine (``--only-stickers``, 3 seeds x 150 frames): worst sticker found
   in 0.971 of its clear frames (worst seed 0.963; 0.81 over every frame it is visible in,

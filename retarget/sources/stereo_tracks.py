@@ -15,14 +15,18 @@ Identity here comes from time instead (the "marker template" of §5, Algorithm 1
    one moves with its neighbours since it was last seen (the image motion of the nearest
    tracks seen then and now: rigid head motion plus the local expression); then every
    prediction moves by the residual its neighbours show against this frame's candidates
-   (`flow_moved`), which keeps pairs sent far apart (a slow client) on their tracks;
+   (`flow_moved`), which keeps pairs sent far apart (a slow client) on their tracks, from
+   the last positions instead when those land far more of them on a candidate (a
+   reversal between two pairs: `StickerTracks._flowed`);
 3. a blob that holds two predicted tracks and is big enough for two (two touching lip
    stickers) is split by 2-means of its pixels, started at the predictions;
 4. every left/right candidate pair within `max_epipolar` of each other's epipolar line is
    a 3D hypothesis; tracks take hypotheses by the Hungarian method on the distance of the
    hypothesis from the prediction in both images (px) and in 3D (mm), each candidate
    serving one track: the hypothesis that continues a track wins, not the epipolar
-   distance;
+   distance. A hypothesis more than `_FACE_DEPTH` from the tracks' median depth is none,
+   and a track off the face (born on a swapped pairing) takes the on-face pairing that
+   one of its images continues (`StickerTracks._on_face`);
 5. the pairs taken are triangulated from finer centres (`refined_centres`: luma contrast
    times chroma share round each blob's centre; JPEG halves the chroma's resolution and a
    tenth of a pixel of disparity is 1.6 mm of depth), the blobs' own centres kept for the
@@ -57,12 +61,15 @@ __all__ = ["StickerTracks", "flow_moved", "split_blobs", "rejoined_tracks"]
 _BIG = 1e6   # cost of a forbidden pairing in the assignments
 _FAINT = 0.85   # floors of the colour predicate near a prediction, times the usual ones
 _DAMPING = 0.6   # share of last frame's image velocity carried into the prediction
+_NEAR = 3.0   # px, a moved prediction this near a candidate counts as on it (`_flowed`)
+_OVERSHOT = 1.2   # the last positions replace the velocity's guess when this many times as good
 _STRAY = 1.0   # px, furthest a refined centre may move from its blob's centre
 _DARK_GATE = 4.0   # px, furthest a dark faint candidate may lie from its prediction
 _DARK = 0.78   # a dark candidate's pixels are below this share of the local skin's luma
 _DARK_AREA = 30   # px, largest dark region that may be a sticker (brows, nostrils are more)
 _TINT_SAT = 20.0   # saturation floor of a dark candidate's tint (skin's hue is far off)
 _DARK_3D = 12.0   # mm, furthest a pairing with a dark candidate may land from its track
+_FACE_DEPTH = 100.0   # mm, furthest a sticker may lie in depth from the median of the tracks
 _MAX_TRACKS = 200   # tracks held at once past which a take is not of stickers (the work per
                     # pair grows with tracks x candidates; a face carries < 100, 13 in §5)
 # Frames kept to follow a track that has just started backwards (`_extend_back`). Issue
@@ -352,11 +359,10 @@ class StickerTracks:
     def __call__(self, left: np.ndarray, right: np.ndarray) -> None:
         frame = len(self._xyz)
         n = len(self._born)
-        pred, both_px = self._predicted(frame)
+        pred, both_px, still_px = self._predicted(frame)
         # Only touching components are one blob: stickers 2-4 px apart stay apart.
         found = [color_blobs(img, self.color, merge_distance=1.5) for img in (left, right)]
-        pred_px = [flow_moved(both_px[:, 2 * cam:2 * cam + 2], found[cam].centroids, self._confirmed,
-                              3.0 * self.gate) for cam in (0, 1)]
+        pred_px = self._flowed((both_px, still_px), [f.centroids for f in found])
         blobs, counts, darks = [], [], []
         for cam, img in enumerate((left, right)):
             b = split_blobs(img, found[cam], self.color, pred_px[cam], self._area)
@@ -516,7 +522,8 @@ class StickerTracks:
     def _assigned(self, pred, pred_px, lpx, rpx, li, ri, hyp):
         """(tracks, hypotheses) index pairs: one hypothesis per track, one track per
         candidate in each image; the Hungarian method on 2D + 3D distance from the
-        predictions, a candidate claimed twice going to the cheaper claim."""
+        predictions, a candidate claimed twice going to the cheaper claim; hypotheses off
+        the face are none (`_on_face`)."""
         lost = ~np.isfinite(self._xyz[-1][:, 0]) if self._xyz else np.ones(len(pred), bool)
         gate = np.where(lost, 1.5, 1.0) * self.gate
         dl = np.linalg.norm(pred_px[0][:, None] - lpx[None], axis=2)
@@ -528,6 +535,15 @@ class StickerTracks:
         # Tentative tracks yield to confirmed ones over a contested candidate.
         cost = cost + np.where(self._confirmed, 0.0, 2.0)[:, None]
         ok = (dl <= gate[:, None]) & (dr <= gate[:, None]) & (d3 <= np.where(lost, 2.0, 1.0)[:, None] * self.gate_3d)
+        # A track off the face followed a swapped pairing (`_on_face`): one image of it is
+        # its sticker, the other image's blob another's, so it takes the pairing that one
+        # image continues and that lands on the face.
+        off = ~self._on_face(pred[:, 2])
+        if off.any():
+            near = np.minimum(dl[off], dr[off])
+            ok[off] = near <= gate[off, None]
+            cost[off] = near + np.where(self._confirmed[off], 0.0, 2.0)[:, None]
+        ok &= self._on_face(hyp[:, 2])[None]
         ok &= np.isfinite(cost)
         for _ in range(len(pred) + 1):
             if not ok.any():
@@ -550,22 +566,62 @@ class StickerTracks:
                 return rows, cols
         return rows, cols
 
-    def _predicted(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
+    def _predicted(self, frame: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Each track's expected place this frame: 3D (T, 3) and px (T, 4) (left x, y,
-        right x, y). Seen last frame: its image positions moved on by its image velocity
-        (constant velocity), in 3D its last position; lost: carried by the head's motion
-        since it was last seen, and projected."""
+        right x, y), and px (T, 4) with no velocity. Seen last frame: its image positions
+        moved on by its image velocity (constant velocity), in 3D its last position; lost:
+        carried by the head's motion since it was last seen, and projected."""
         n = len(self._born)
         if frame == 0 or n == 0:
-            return np.zeros((n, 3)), np.zeros((n, 4))
+            return np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 4))
         pred = self._xyz[-1].copy()
-        # Damped: a jaw reversing within a frame or two overshoots a full-velocity guess.
-        px = self._px[-1] + _DAMPING * self._vel
+        still = self._px[-1].copy()
         lost = ~np.isfinite(pred[:, 0])
         if lost.any():
-            px[lost] = self._carried(lost)
-            pred[lost] = self.calibration.triangulate(px[lost, :2], px[lost, 2:])
-        return pred, px
+            still[lost] = self._carried(lost)
+            pred[lost] = self.calibration.triangulate(still[lost, :2], still[lost, 2:])
+        # Damped: a jaw reversing within a frame or two overshoots a full-velocity guess.
+        return pred, still + _DAMPING * self._vel, still
+
+    def _on_face(self, z: np.ndarray) -> np.ndarray:
+        """(H,) bool: depths `z` (H,) within `_FACE_DEPTH` of the median depth of the
+        confirmed tracks seen last frame (all True with fewer than 3). With a vertical
+        baseline two stickers above one another (the lips) lie on one epipolar line, and
+        pairing each with the other's image lands 110-160 mm off at 1 m; a track born so
+        (at the first frame, the two lips a pixel apart in height) follows that pairing
+        while the head turns, its depth drifting off the face, and pulls the head pose
+        with it. A face's stickers lie within 90 mm of their median depth (issue 17's
+        take, seeds 0-3: 32 in front, 88 behind for a temple)."""
+        if not self._xyz:
+            return np.ones(len(z), bool)
+        last = self._xyz[-1][self._confirmed, 2]
+        last = last[np.isfinite(last)]
+        if last.size < 3:
+            return np.ones(len(z), bool)
+        return np.abs(z - np.median(last)) <= _FACE_DEPTH
+
+    def _flowed(self, guesses, found) -> list[np.ndarray]:
+        """Per camera (T, 2) px: the predictions moved by the image motion
+        (`flow_moved`), from the first of `guesses` (each (T, 4) px), unless a later one
+        then brings at least `_OVERSHOT` times as many confirmed tracks within `_NEAR` px
+        of a candidate in both images (`found`: each camera's (K, 2) candidates). Pairs
+        sent far apart (a slow client) that catch a reversal (a head turning back, a jaw
+        closing, a camera's looped file) are a few frames apart one way in the velocity
+        and as many the other way in the motion: the shift between them passed the reach,
+        where the last positions' is half as far (issue 17's take, 5 frames apart across
+        a reversal: 2 of 26 predictions on a candidate from the velocity, 16 from the last
+        positions). Away from reversals the two bring about as many (11 to 20 of 28), and
+        taking the last positions for one more lost a turning temple's track (pairs 2-5
+        frames apart, seed 1: found in 51 % of its frames, against 91 %)."""
+        best, score = None, 0
+        for guess in guesses:
+            moved = [flow_moved(guess[:, 2 * cam:2 * cam + 2], found[cam], self._confirmed, 3.0 * self.gate)
+                     for cam in (0, 1)]
+            near = sum(int((cKDTree(found[cam]).query(moved[cam][self._confirmed & np.isfinite(moved[cam][:, 0])])[0]
+                            <= _NEAR).sum()) if len(found[cam]) else 0 for cam in (0, 1))
+            if best is None or near >= _OVERSHOT * max(score, 1):
+                best, score = moved, near
+        return best
 
     def _carried(self, lost: np.ndarray) -> np.ndarray:
         """(L, 4) px: lost tracks' last image positions moved by their neighbours' image
@@ -627,10 +683,12 @@ class StickerTracks:
             return
         l, r = bl.centroids[fl[pairs[:, 0]]], br.centroids[fr[pairs[:, 1]]]
         xyz = self.calibration.triangulate(l.astype(np.float64), r.astype(np.float64))
+        on = self._on_face(xyz[:, 2])
+        l, r, xyz, pairs = l[on], r[on], xyz[on], pairs[on]
         area = np.minimum(bl.areas[fl[pairs[:, 0]]], br.areas[fr[pairs[:, 1]]]).astype(np.float64)
         # Not a sticker already tracked (a lost one reappearing is re-taken by its track).
         if len(self._born):
-            _, pred_px = self._predicted(frame + 1)
+            _, pred_px, _ = self._predicted(frame + 1)
             near = np.zeros(len(xyz), bool)
             for cam, at in ((0, l), (1, r)):
                 d = np.linalg.norm(at[:, None] - pred_px[None, :, 2 * cam:2 * cam + 2], axis=2)
