@@ -152,18 +152,25 @@ def _owners(camera_points: np.ndarray, truth_camera: np.ndarray) -> np.ndarray:
     return d.argmin(axis=1)
 
 
-def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout():
-    # The 13 stickers of the sticker material on the still built-in face; a take of them
-    # (every one in view, the face still) makes a layout m01..m13 with their places.
+def _still_take_layout():
+    """The 13 stickers of the sticker material on the still built-in face, and a layout
+    m01..m13 with their places made from a take of them (every one in view, the face
+    still): (cameras, calibration, (13, 3) world mm stickers, the take, the layout, (13,)
+    each take column's sticker)."""
     cams = webcam_cameras()
     cal = rig_calibration(*cams)
     face = sample_face(1)
     stickers = face.vertices[sticker_vertices(face)] * MM_PER_CM
     take = track_stereo_frames(_disc_frames(cams, np.repeat(stickers[None], 10, axis=0)), cal, layout=None)
-    reference = take_reference(take)
     layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
-                                          for name, xyz in zip(take.names, reference)]})
+                                          for name, xyz in zip(take.names, take_reference(take))]})
     took = _owners(take.points[-1], cams[0].to_camera(stickers))   # head frame = camera frame: still
+    return cams, cal, stickers, take, layout, took
+
+
+def test_live_columns_are_named_by_place_as_the_stereo_take_that_made_the_layout():
+    # A layout made from a take of the 13 stickers on the still face (`_still_take_layout`).
+    cams, cal, stickers, take, layout, took = _still_take_layout()
     # Live, the head turned (15 to 23 degrees) and rolled 10, and the first sticker the take met (the
     # forehead's, the top one) under a finger for the first 12 pairs: the tracker meets
     # the stickers in another order, and the forehead's last.
@@ -203,14 +210,7 @@ def test_a_column_first_placed_off_its_sticker_is_named_once_its_place_firms_up(
     # first and named once its place (the median of its registrations) is right. Before,
     # a column was matched once, and this one stayed unnamed: its point was never driven
     # (the browser e2e's live session waited for it to its end).
-    cams = webcam_cameras()
-    cal = rig_calibration(*cams)
-    face = sample_face(1)
-    stickers = face.vertices[sticker_vertices(face)] * MM_PER_CM
-    take = track_stereo_frames(_disc_frames(cams, np.repeat(stickers[None], 10, axis=0)), cal, layout=None)
-    layout = layout_from_spec({"points": [{"name": name, "region": "cheeks", "side": "center", "reference": xyz}
-                                          for name, xyz in zip(take.names, take_reference(take))]})
-    took = _owners(take.points[-1], cams[0].to_camera(stickers))
+    cams, cal, stickers, take, layout, took = _still_take_layout()
     cheek = STICKER_ANCHORS + 2          # a sticker that is no head anchor
     n, hidden, off = 44, 12, 8
     live = np.stack([_turned(stickers, 10.0 + 0.2 * i, -5.0) for i in range(n)])
