@@ -7,9 +7,11 @@ depth along its line of sight over a centred window (`sight_smoothed`). Here eve
 is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`):
 
 1. the stickers are followed frame by frame by the same `StickerTracks`; each confirmed
-   track is a column, m01..mM in the offline order (by the frame first seen, then top to
+   track is a column, m01..mM in the order confirmed (those confirmed in one pair top to
    bottom, then left to right), so a sticker that appears later gets a new column at the
-   end and M only grows;
+   end and M only grows. Offline orders the same tracks by the pair first seen, and a
+   track confirmed after others may have been seen first (issue 17's take, seeds 0 and
+   5: a brow and a cheek), so a sticker's live name need not be its offline one;
 2. a **set-up span** (`setup_seconds` of capture time from the first pair showing 3
    stickers) fixes the head frame. The anchors are the named ones (1 s is enough), or a
    layout's own found by place (below; 1 s), or
@@ -55,8 +57,9 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
 
 How far this is from offline (`bench/stereo_live.py --stickers`: issue 17's sticker take,
 150 pairs, 3 seeds, shape error median / p95 over the pairs after the set-up): named
-anchors live 0.90 / 2.77 mm (seed 0 alone 1.07 / 3.62), offline 0.62 / 1.69; anchors
-chosen live 1.19 / 3.38, offline 0.84 / 2.66 (targets 1 / 3). What is left is mostly
+anchors live 0.90 / 2.77 mm (seed 0 alone 1.17 / 3.64), offline 0.62 / 1.81; anchors
+chosen live 1.19 / 3.38, offline 0.83 / 2.84 (targets 1 / 3); held-out seeds 3-5 named
+0.93 / 2.90 live (seed 5 0.79 / 2.88), offline 0.63 / 2.14. What is left is mostly
 the lower lip and chin while the jaw moves fast, a sticker's first pairs in view (a
 temple turning in, half hidden: 5-6 mm off for a few pairs, where offline's centred
 windows see its later pairs) and the lip stickers that merge. Before the pose
@@ -266,8 +269,8 @@ class LiveStickerTracker:
 
         `StickerTracks` keeps its tracks in the order they were born and confirms them in
         that order (a new track after `confirm` pairs in a row, or dropped), so confirmed
-        tracks are the first rows and keep their rows; the ones confirmed this pair (born
-        together) are ordered top to bottom, then left to right, as offline."""
+        tracks are the first rows and keep their rows; the ones confirmed this pair are
+        ordered top to bottom, then left to right (module doc, step 1)."""
         confirmed, xyz, px = self.tracks.latest()
         confirmed = np.flatnonzero(confirmed)
         new = confirmed[len(self._rows):][: MAX_STICKERS - len(self._rows)]

@@ -53,6 +53,7 @@ __all__ = [
     "render_sticker_video",
     "sticker_truth",
     "sticker_scores",
+    "live_sticker_anchors",
 ]
 
 MM_PER_CM = 10.0
@@ -442,3 +443,28 @@ def sticker_scores(points, stabilised, truth: GroundTruth, facing: float = 0.5) 
     rot, trans = rigid_transform(a[ok], b[ok])
     error[:, have] = np.linalg.norm(a @ rot.T + trans - b, axis=2)
     return {"owner": owner, "switches": switches, "found": found, "error": error}
+
+
+def live_sticker_anchors(frames, calibration: StereoCalibration, truth: GroundTruth,
+                         color="blue") -> list[str]:
+    """The names (m01..) of the truth's head-anchor stickers (the first `STICKER_ANCHORS`)
+    among a live session's own columns, for `LiveStickerTracker(anchors=...)`.
+
+    frames : the take's (left, right) BGR pairs. A live tracker names its columns in the
+    order their tracks are confirmed; `StickerTracks.points()` orders the same tracks by
+    the pair each was first seen in, and a track confirmed after others can have been
+    seen first (issue 17's take, seeds 0 and 5: a brow and a cheek came out where a
+    temple and the nose bridge were, so a session "named" by that order was anchored on
+    them). So the columns are taken from a live session that never leaves its set-up."""
+    from retarget.sources.stereo_live_stickers import LiveStickerTracker
+
+    tracker = LiveStickerTracker(calibration, color, setup_seconds=float(len(frames)),
+                                 setup_frames=len(frames) + 1)
+    rows = []
+    for i, (left, right) in enumerate(frames):
+        tracker.push(left, right, i / 30)
+        rows.append(tracker.camera_)
+    m = len(rows[-1])
+    seen = np.stack([np.pad(r, ((0, m - len(r)), (0, 0)), constant_values=np.nan) for r in rows])
+    owner = sticker_scores(seen, seen, truth)["owner"]
+    return [name for name, k in zip(tracker.names_, owner) if 0 <= k < STICKER_ANCHORS]

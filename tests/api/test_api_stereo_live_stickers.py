@@ -13,13 +13,11 @@ from fastapi.testclient import TestClient
 from retarget.layouts import get_layout
 from retarget.similarity import similarity_transform
 from retarget.sources.stereo import track_stereo_frames
-from retarget.sources.stereo_tracks import StickerTracks
 from retarget.sources.video import VideoReader
 from retarget.testing.stereo_rig import (
-    STICKER_ANCHORS,
+    live_sticker_anchors,
     render_sticker_video,
     rig_calibration,
-    sticker_scores,
 )
 from server.wire import encode_stereo_pair
 
@@ -36,17 +34,12 @@ def pair(left, right, index: int) -> bytes:
 @pytest.fixture(scope="module")
 def material(tmp_path_factory):
     """The sticker take (seed 1), its calibration, and the named anchors (the columns the
-    temples, forehead and nose bridge have offline)."""
+    temples, forehead and nose bridge have live)."""
     truth = render_sticker_video(tmp_path_factory.mktemp("stickers") / "take.mp4", n_frames=N_FRAMES, seed=1)
     with VideoReader(truth.videos[0]) as a, VideoReader(truth.videos[1]) as b:
         frames = [(left, right) for (_, left), (_, right) in zip(a, b)]
     cal = rig_calibration(*truth.cameras)
-    tracks = StickerTracks(cal, "blue")
-    for left, right in frames:
-        tracks(left, right)
-    kept = tracks.points()   # the live tracker's columns (tests/unit/test_live_sticker_tracker.py)
-    owner = sticker_scores(kept, kept, truth)["owner"]
-    return frames, cal, [f"m{m + 1:02d}" for m in range(kept.shape[1]) if owner[m] < STICKER_ANCHORS]
+    return frames, cal, live_sticker_anchors(frames, cal, truth)
 
 
 @pytest.fixture(scope="module")
