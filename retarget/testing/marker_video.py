@@ -464,7 +464,8 @@ def unnamed_track_scores(points, truth: GroundTruth, facing: float = 0.5) -> dic
     median and p95 (px, lost included), within3 (share within 3 px), lost (share), oblique
     (share within 3 px of the visible marker-frames not facing the camera; NaN if none),
     err (F, N) each truth marker's distance to its track (the longest of those it owns;
-    inf where that track has no point or the marker none).
+    inf where that track has no point or the marker none), owner (M,) each track's truth
+    marker (-1 for a track with no point).
     """
     p = np.asarray(points, dtype=np.float64)
     gt = truth.points2d[:, 0]
@@ -492,5 +493,5 @@ def unnamed_track_scores(points, truth: GroundTruth, facing: float = 0.5) -> dic
         "p95": float(np.percentile(e, 95)), "within3": float((e < 3.0).mean()),
         "lost": float(np.isinf(e).mean()),
         "oblique": float((err[oblique] < 3.0).mean()) if oblique.any() else float("nan"),
-        "err": err,
+        "err": err, "owner": owner,
     }
