@@ -10,8 +10,9 @@ is causal, one frame pair in, that pair's points out (`LiveStickerTracker.push`)
    track is a column, m01..mM in the order confirmed (those confirmed in one pair top to
    bottom, then left to right), so a sticker that appears later gets a new column at the
    end and M only grows. Offline orders the same tracks by the pair first seen, and a
-   track confirmed after others may have been seen first (issue 17's take, seeds 0 and
-   5: a brow and a cheek), so a sticker's live name need not be its offline one;
+   track confirmed after others may have been seen first (issue 17's take, seed 0: the
+   right brow's, seen from the first pair and confirmed at the seventh), so a sticker's
+   live name need not be its offline one;
 2. a **set-up span** (`setup_seconds` of capture time from the first pair showing 3
    stickers) fixes the head frame. The anchors are the named ones (1 s is enough), or a
    layout's own found by place (below; 1 s), or

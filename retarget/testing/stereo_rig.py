@@ -453,9 +453,9 @@ def live_sticker_anchors(frames, calibration: StereoCalibration, truth: GroundTr
     frames : the take's (left, right) BGR pairs. A live tracker names its columns in the
     order their tracks are confirmed; `StickerTracks.points()` orders the same tracks by
     the pair each was first seen in, and a track confirmed after others can have been
-    seen first (issue 17's take, seeds 0 and 5: a brow and a cheek came out where a
-    temple and the nose bridge were, so a session "named" by that order was anchored on
-    them). So the columns are taken from a live session that never leaves its set-up."""
+    seen first (issue 17's take, seeds 0 and 5: the left cheek came out where the nose
+    bridge is live, so a session "named" by that order was anchored on the cheek). So
+    the columns are taken from a live session that never leaves its set-up."""
     from retarget.sources.stereo_live_stickers import LiveStickerTracker
 
     tracker = LiveStickerTracker(calibration, color, setup_seconds=float(len(frames)),
