@@ -481,8 +481,7 @@ def miss_causes(path: Path, points: np.ndarray, s: dict, truth: SimpleNamespace)
     track `RingTracks` did not join), "other marker's track" and "stray track" (a track
     given to another marker, or to none). Re-detects the peaks of the missed frames of
     the video at `path`."""
-    from retarget.sources.ring_tracks import (_KEEP_SCORE, _MIN_DOT_CONTRAST, _MIN_SPREAD, _SCORE_RADII,
-                                              _ring_scores, ring_contrast, score_peaks)
+    from retarget.sources.ring_tracks import _MIN_DOT_CONTRAST, _frame_peaks
     from retarget.sources.video import VideoReader
 
     err, owner = s["err"], s["owner"]
@@ -493,20 +492,15 @@ def miss_causes(path: Path, points: np.ndarray, s: dict, truth: SimpleNamespace)
         for f, (_, frame) in enumerate(reader):
             if f >= len(missed) or not missed[f].any():
                 continue
-            gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-            score, radius = _ring_scores(gray, _SCORE_RADII, _MIN_SPREAD)
-            cand, _ = score_peaks(score, _KEEP_SCORE)
+            cand, _, contrast, _ = _frame_peaks(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
             for k in np.flatnonzero(missed[f]):
                 d = np.linalg.norm(cand - truth.points2d[f, 0, k], axis=1) if len(cand) else np.zeros(0)
                 if not len(d) or d.min() > 1.0:
                     causes["no peak"] += 1
                     continue
-                peak = cand[d.argmin()]
-                held = np.nan_to_num(np.linalg.norm(points[f] - peak, axis=1), nan=np.inf)
+                held = np.nan_to_num(np.linalg.norm(points[f] - cand[d.argmin()], axis=1), nan=np.inf)
                 if held.min() > 1.5:
-                    ix = np.rint(peak).astype(np.int64)
-                    bright = ring_contrast(gray, peak[None], radius[ix[1], ix[0]][None])[0] >= _MIN_DOT_CONTRAST
-                    causes["free bright" if bright else "free faint"] += 1
+                    causes["free bright" if contrast[d.argmin()] >= _MIN_DOT_CONTRAST else "free faint"] += 1
                 else:
                     holder = owner[held.argmin()]
                     causes["own other track" if holder == k else "stray track" if holder < 0

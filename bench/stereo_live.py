@@ -91,8 +91,9 @@ seeds 0-2 named 0.90 / 2.77 mm live, 0.62 / 1.81 offline, chosen 1.19 / 3.38 and
 and 0.63 / 2.14, chosen 1.08 / 2.89 and 0.69 / 2.15. The live session's named anchors are
 its own columns' (`live_sticker_anchors`): before, they were taken in
 `StickerTracks.points()`'s order, which on seeds 0 and 5 put the left cheek where the
-nose bridge is live, and anchored those sessions on the cheek (seed 5 0.85 / 4.03 -> 0.79 / 2.88; seed 0 1.09 / 3.63 -> 1.17 / 3.64, its p95 the left
-temple, seen only at grazing angles, 3.3 mm off at the median).
+nose bridge is live, and anchored those sessions on the cheek (seed 5 0.85 / 4.03 ->
+0.79 / 2.88; seed 0 1.09 / 3.63 -> 1.17 / 3.64, its p95 the left temple, seen only at
+grazing angles, 3.3 mm off at the median).
 """
 
 from __future__ import annotations

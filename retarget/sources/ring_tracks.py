@@ -158,6 +158,18 @@ def score_peaks(score: np.ndarray, threshold: float) -> tuple[np.ndarray, np.nda
     return centres.astype(np.float64), c
 
 
+def _frame_peaks(gray: np.ndarray, radii=_SCORE_RADII, keep: float = _KEEP_SCORE,
+                 min_spread: float = _MIN_SPREAD):
+    """(centres (K, 2) float64 px, scores (K,), dot contrasts (K,), ring radii (K,) px): the
+    candidates of one grey frame (h, w) uint8, its `ring_score` peaks over `keep` with the
+    `ring_contrast` of each at the radius of the template that matched it best."""
+    score, radius = _ring_scores(gray, radii, min_spread)
+    cand, val = score_peaks(score, keep)
+    ix = np.rint(cand).astype(np.int64)
+    peak_radius = radius[ix[:, 1], ix[:, 0]]
+    return cand, val, ring_contrast(gray, cand, peak_radius), peak_radius
+
+
 class RingTracks:
     """Every ring marker in view tracked through a whole clip, without a layout (issue 17
     §1; Dutreve et al. 2008, §5's markers on other people's footage: a few pixels across,
@@ -186,8 +198,8 @@ class RingTracks:
     frames, seeds 0-4, clear view within 3 px / identity switches) it took 80.9 / 48,
     84.4 / 69, 80.3 / 93, 78.2 / 106, 80.1 / 79 (mean 80.8 %, 395 switches) to 87.8 / 35,
     85.2 / 45, 84.5 / 43, 86.7 / 60, 82.3 / 47 (85.3 %, 230), and the first 150 frames of
-    those clips of seeds 0-2 from 28 tracks / 1 switch / 93.0 %, 29 / 13 / 91.0, 29 / 3 / 91.8 to 27 / 2 /
-    93.7, 27 / 1 / 93.9, 27 / 2 / 93.8; the rendered webcam clips keep 0 switches, but
+    those clips of seeds 0-2 from 28 tracks / 1 switch / 93.0 %, 29 / 13 / 91.0, 29 / 3 /
+    91.8 to 27 / 2 / 93.7, 27 / 1 / 93.9, 27 / 2 / 93.8; the rendered webcam clips keep 0 switches, but
     three ICT ones hold fewer oblique frames (77 -> 69, 65 -> 53, 100 -> 89 %): a marker
     turning edge-on is lost often and comes back on a weak peak. Without the grace (a
     frame lost already doubted) the first 150 frames of seed 0 had 9 switches; the cost
@@ -278,11 +290,7 @@ class RingTracks:
         n = len(grays)
         peaks, bright, strong, ring = [], [], [], []
         for g in grays:
-            score, radius = _ring_scores(g, self.radii, self.min_spread)
-            cand, val = score_peaks(score, self.keep)
-            ix = np.rint(cand).astype(np.int64)
-            peak_radius = radius[ix[:, 1], ix[:, 0]]
-            contrast = ring_contrast(g, cand, peak_radius)
+            cand, val, contrast, peak_radius = _frame_peaks(g, self.radii, self.keep, self.min_spread)
             peaks.append((cand, val, contrast))
             bright.append(contrast >= self.min_contrast)
             # the markers' size in this frame, for the two-marker fit
