@@ -7,6 +7,10 @@ each point's ray is followed back onto the surface. In steps:
 1. **Find the face.** The front view first (the face toward +z, +y up, the convention
    of glTF, ICT and MediaPipe's canonical model); when the detector finds no face
    there, the six axis directions x four in-plane turns, keeping the best-scored face.
+   The pictures are of the mesh wound consistently outward (`retarget.winding`): wound
+   inward (a converter, a mirror) or mixed, the back faces they paint dark were the
+   whole face, a dark silhouette in which no face was found; the points come back on
+   the mesh's own triangles, corners in its order.
 2. **Face it.** The 468 points on that view give a face frame (eye line, forehead to
    chin), and the mesh is pictured again looking straight at the face, zoomed on it;
    the landmark model runs twice there, the second time on the region its first points
@@ -158,7 +162,7 @@ lower.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -177,6 +181,7 @@ from retarget.layouts import Layout, get_layout
 from retarget.mesh import Mesh
 from retarget.operators import edge_graph
 from retarget.similarity import similarity_transform
+from retarget.winding import outward_faces
 
 __all__ = ["FACE_OVAL", "FaceOnMesh", "find_face_mesh", "layout_landmarks", "landmark_offsets"]
 
@@ -252,6 +257,8 @@ def find_face_mesh(mesh: Mesh, tracker: FaceMeshTracker | None = None, progress=
     when given, hears how far the work is (0..1)."""
     report = progress if progress is not None else (lambda fraction: None)
     tracker = FaceMeshTracker() if tracker is None else tracker
+    given = mesh
+    mesh = _wound_outward(mesh)
     normals = vertex_normals(mesh)
     texture = texture_rgb(mesh)
     report(0.05)
@@ -276,7 +283,7 @@ def find_face_mesh(mesh: Mesh, tracker: FaceMeshTracker | None = None, progress=
     points = _toward_canonical_shape(mesh, points, surface)
     confidence = _confidence(normals, points, view, snap, fitted, presence, textured=texture is not None)
     report(1.0)
-    return FaceOnMesh(points, confidence, view, presence)
+    return FaceOnMesh(_as_wound(points, mesh, given), confidence, view, presence)
 
 
 def layout_landmarks(found: FaceOnMesh, layout: Layout, mesh: Mesh, *,
@@ -529,8 +536,13 @@ def _straight_view(hits: np.ndarray, image: np.ndarray, seen_from: View) -> View
     inner[list(FACE_OVAL)] = False
     across = hits[EYE_CORNERS[1]] - hits[EYE_CORNERS[0]]           # toward the subject's left
     up = hits[FOREHEAD] - hits[CHIN]
+    up -= (up @ across) / max(across @ across, 1e-300) * across
+    if not (np.linalg.norm(across) > 0 and np.linalg.norm(up) > 0):
+        # the rays of the eyes, forehead and chin met no surface facing the view (only
+        # back faces: a shell seen from inside) and snapped onto one place
+        raise RetargetError("no face found on the mesh: the face seen has no surface under its eyes "
+                            "and chin; place the points by hand")
     across /= np.linalg.norm(across)
-    up -= (up @ across) * across
     up /= np.linalg.norm(up)
     facing = np.cross(across, up)
     # the face's extent from the model's points in the view they were found in
@@ -640,6 +652,32 @@ def _shape_pull() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lap = laplacian(adjacency)
     fill = -np.linalg.solve(lap[np.ix_(free, free)], lap[np.ix_(free, ~free)])
     return pull, free, fill
+
+
+def _wound_outward(mesh: Mesh) -> Mesh:
+    """`mesh` with its triangles wound consistently outward (`retarget.winding`), which
+    the pictures need to paint back faces dark (an inward or mixed winding, from a
+    converter or a mirror, reads as a dark silhouette that shows no face); `mesh` itself
+    when it already is."""
+    faces = outward_faces(mesh.vertices, mesh.faces)
+    if np.array_equal(faces, mesh.faces):
+        return mesh
+    faces.flags.writeable = False
+    return replace(mesh, faces=faces)
+
+
+def _as_wound(points: SurfacePoints, wound: Mesh, given: Mesh) -> SurfacePoints:
+    """`points`, whose triangles are `wound`'s, with each triangle's corners (and their
+    weights) in the order of the `given` mesh's same triangle (`_wound_outward` only swaps
+    corners 1 and 2 of some)."""
+    if wound is given:
+        return points
+    swapped = given.faces[:, 1] != wound.faces[:, 1]
+    rows = lambda tri: np.ascontiguousarray(tri, np.int64).view(np.dtype((np.void, 24))).ravel()   # noqa: E731
+    back = np.isin(rows(points.vertex_indices), rows(wound.faces[swapped]))
+    order = np.where(back[:, None], [0, 2, 1], [0, 1, 2])
+    return SurfacePoints(np.take_along_axis(points.vertex_indices, order, 1),
+                         np.take_along_axis(points.barycentric, order, 1), points.layout)
 
 
 def _surface(mesh: Mesh) -> trimesh.Trimesh:

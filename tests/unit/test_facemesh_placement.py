@@ -86,6 +86,22 @@ def test_any_orientation_finds_the_same_points(face, tracker):
     assert np.median(np.linalg.norm(back[inner] - upright[inner], axis=1)) * 10 < 1.5
 
 
+def test_a_face_wound_inward_or_mixed_gets_the_same_points(face, tracker):
+    # A converter or a mirror turns a mesh's winding inward, or mixes it; the pictures
+    # paint back faces dark, so the face read as a dark silhouette: no face found (inward:
+    # a crash on NaN). Wound outward for the pictures, it gets the very same points, each
+    # on a triangle of the mesh as given, its corners in the given order.
+    upright = find_face_mesh(mesh_from_arrays(face.vertices, face.faces), tracker).points.positions(face.vertices)
+    mixed = np.array(face.faces)
+    flip = np.random.default_rng(3).random(len(mixed)) < 0.15
+    mixed[flip] = mixed[flip][:, ::-1]
+    for faces in (np.array(face.faces)[:, ::-1], mixed):
+        points = find_face_mesh(mesh_from_arrays(face.vertices, faces), tracker).points
+        np.testing.assert_allclose(points.positions(face.vertices), upright, atol=1e-9)
+        rows = {tuple(row) for row in faces.tolist()}
+        assert all(tuple(tri) in rows for tri in points.vertex_indices.tolist())
+
+
 def test_a_mesh_without_a_face_is_refused_by_name(tracker):
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=9.0)
     with pytest.raises(RetargetError, match="no face found"):
