@@ -10,7 +10,8 @@ one speckled, where the face detector finds nothing.
 `outward_faces` re-winds the triangles (the same rows, two corners swapped where needed):
 
 1. **Consistent**: two triangles sharing an edge run it in opposite directions. Over each
-   connected patch (triangles joined by edges that exactly two triangles share), a
+   connected patch (triangles joined by edges that exactly two triangles share, corners
+   at one position counting as one vertex: a UV seam or an STL splits them), a
    breadth-first walk from one triangle flips each next one that runs the shared edge the
    same way as the one it was reached from.
 2. **Outward**: a patch whose area-weighted normals point, on the whole, toward the
@@ -36,9 +37,12 @@ def outward_faces(vertices, faces) -> np.ndarray:
     n = len(f)
     if n == 0:
         return f
-    # every directed edge (a -> b) of every triangle, keyed by its undirected edge
-    a = f.ravel()
-    b = f[:, [1, 2, 0]].ravel()
+    # every directed edge (a -> b) of every triangle, keyed by its undirected edge, on the
+    # vertices welded by position (a UV seam, or an STL's triangle soup, splits them)
+    _, welded = np.unique(v, axis=0, return_inverse=True)
+    w = welded.ravel()[f]
+    a = w.ravel()
+    b = w[:, [1, 2, 0]].ravel()
     owner = np.repeat(np.arange(n), 3)
     key = np.minimum(a, b) * len(v) + np.maximum(a, b)
     order = np.argsort(key, kind="stable")

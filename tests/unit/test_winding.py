@@ -29,6 +29,11 @@ def test_a_face_wound_inward_or_mixed_comes_back_outward():
         assert (np.sort(out, axis=1) == np.sort(given, axis=1)).all()
     # an outward face comes back as it was
     assert np.array_equal(outward_faces(face.vertices, f), f)
+    # a triangle soup (an STL's: each triangle its own corners) wound inward: corners at
+    # one place are one vertex, so the triangles still make one surface to turn
+    soup = np.asarray(face.vertices)[f].reshape(-1, 3)
+    own = np.arange(len(soup)).reshape(-1, 3)
+    assert same_turn(outward_faces(soup, own[:, ::-1]), own).all()
 
 
 def test_each_part_is_turned_outward_on_its_own():
