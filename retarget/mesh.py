@@ -223,7 +223,8 @@ def load_mesh(
       and `normals` are None when some vertex has none (trimesh drops them). Relative
       (negative) indices resolve only in faces without ``vt`` or ``vn`` indices.
     * STL stores each triangle on its own: F faces load as 3F vertices, face ``i``
-      being ``[3i, 3i + 1, 3i + 2]``; nothing is merged and there are no normals.
+      being ``[3i, 3i + 1, 3i + 2]``; nothing is merged and there are no normals (the
+      rig welds the corners at one position: `retarget.welding`).
     * PLY, OFF: polygons are triangulated; trimesh groups faces by polygon size, so
       with mixed triangles and quads the face order (not the vertex order) differs
       from the file.

@@ -25,6 +25,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
+from retarget.welding import welded
+
 __all__ = ["outward_faces"]
 
 
@@ -39,8 +41,7 @@ def outward_faces(vertices, faces) -> np.ndarray:
         return f
     # every directed edge (a -> b) of every triangle, keyed by its undirected edge, on the
     # vertices welded by position (a UV seam, or an STL's triangle soup, splits them)
-    _, welded = np.unique(v, axis=0, return_inverse=True)
-    w = welded.ravel()[f]
+    w = welded(v, f).index[f]
     a = w.ravel()
     b = w[:, [1, 2, 0]].ravel()
     owner = np.repeat(np.arange(n), 3)

@@ -16,7 +16,7 @@ import numpy as np
 
 from retarget.sample_face import DEMO_PERFORMER, sample_face
 
-__all__ = ["WeldedFace", "mouth_opened_to", "welded_lips_face"]
+__all__ = ["WeldedFace", "copies_of", "mouth_opened_to", "welded_lips_face"]
 
 _UPPER_INNER, _LOWER_INNER = (61, 62, 63), (65, 66, 67)
 
@@ -79,3 +79,11 @@ def mouth_opened_to(fraction: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
         gap = np.linalg.norm((neutral[62] + w * jaw[62]) - (neutral[66] + w * jaw[66]))
         lo, hi = (w, hi) if gap < fraction * width else (lo, w)
     return neutral, neutral + w * jaw
+
+
+def copies_of(copies: np.ndarray, originals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How a mouth cut's copies (K, 3) lie by the line's vertices (K, 3) they copy (a hair
+    below each: `retarget.lips.LIPS_APART`): (K,) each copy's nearest original, and (K,)
+    the distance to it (mesh units)."""
+    d = np.linalg.norm(np.asarray(copies, np.float64)[:, None] - np.asarray(originals, np.float64)[None], axis=2)
+    return d.argmin(1), d.min(1)

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 from retarget.errors import RetargetError
+from retarget.landmarks import SurfacePoints
 from retarget.skin import SkinWeights
 from retarget.weights.biharmonic import biharmonic_weights
 from retarget.weights.ellipsoid import ellipsoid_weights
@@ -21,6 +22,7 @@ from retarget.weights.geodesic import geodesic_weights
 from retarget.weights.laplacian import laplacian_weights
 from retarget.weights.rbf import rbf_weights
 from retarget.weights.region_rbf import region_rbf_weights
+from retarget.welding import welded
 
 METHODS = {
     "ellipsoid": ellipsoid_weights,
@@ -35,12 +37,21 @@ DEFAULT_METHOD = "biharmonic"
 
 def compute_weights(method: str, vertices, faces, points, layout=None, **options) -> SkinWeights:
     """Skin weights of `method` for a mesh ((V, 3) vertices, (F, 3) faces) and its
-    `SurfacePoints` features; options go to the method (k, damping, kernel, ...)."""
+    `SurfacePoints` features; options go to the method (k, damping, kernel, ...).
+
+    The method runs on the surface with its coincident vertices welded (`retarget.welding`:
+    a UV seam or an STL's triangle soup splits them) and every copy gets its welded
+    vertex's weights, so the rig never tears along a seam."""
     try:
         fn = METHODS[method]
     except KeyError:
         raise RetargetError(f"unknown weight method {method!r}; choose one of {', '.join(METHODS)}") from None
-    return fn(vertices, faces, points, layout, **options)
+    weld = welded(vertices, faces)
+    if not weld.any:
+        return fn(vertices, faces, points, layout, **options)
+    on_weld = SurfacePoints(weld.index[points.vertex_indices], points.barycentric, points.layout)
+    w = fn(weld.vertices, weld.faces, on_weld, layout, **options)
+    return SkinWeights(w.indices[weld.index], w.weights[weld.index], w.n_joints, w.method)
 
 
 __all__ = ["METHODS", "DEFAULT_METHOD", "SkinWeights", "compute_weights"]

@@ -17,7 +17,7 @@ import trimesh
 
 from retarget.landmarks import landmarks_from_json
 from retarget.mesh import mesh_from_arrays, save_mesh
-from retarget.testing.welded import mouth_opened_to, welded_lips_face
+from retarget.testing.welded import copies_of, mouth_opened_to, welded_lips_face
 from tests.e2e.conftest import open_project
 from tests.waits import wait_job
 from tests.waits import scaled_ms
@@ -148,7 +148,8 @@ def test_joined_lips_open_in_the_browser_and_undo(server, page, tmp_path):
     _wait_rigged(page, n + k)
     opened = np.array(page.evaluate("() => Array.from(window.app.face.mesh.geometry.attributes.position.array)"))
     np.testing.assert_array_equal(opened[: 3 * n], rest)
-    assert {tuple(p) for p in opened[3 * n:].reshape(k, 3)} == {tuple(p) for p in rest.reshape(n, 3)[face.welded]}
+    nearest, apart = copies_of(opened[3 * n:].reshape(k, 3), rest.reshape(n, 3)[face.welded])   # a hair below
+    assert sorted(nearest) == list(range(k)) and (apart > 0).all() and (apart < 0.02).all()
     stored = server.api("GET", f"/api/projects/{pid}")
     assert stored["mesh"]["n_vertices"] == n + k and stored["rig"]["method"] == "biharmonic"
     assert page.is_visible("#undo-open-mouth") and page.is_hidden("#open-mouth")
