@@ -11,7 +11,9 @@ one speckled, where the face detector finds nothing.
 
 1. **Consistent**: two triangles sharing an edge run it in opposite directions. Over each
    connected patch (triangles joined by edges that exactly two triangles share, corners
-   at one position counting as one vertex: a UV seam or an STL splits them), a
+   at one position counting as one vertex: a UV seam or an STL splits them, and a
+   triangle listed twice counting once: its copies would make every edge round it look
+   ambiguous and cut the surface into patches turned on their own), a
    breadth-first walk from one triangle flips each next one that runs the shared edge the
    same way as the one it was reached from.
 2. **Outward**: a patch whose area-weighted normals point, on the whole, toward the
@@ -34,16 +36,35 @@ def outward_faces(vertices, faces) -> np.ndarray:
     """(F, 3) int64 `faces` (F, 3) with each triangle's corners 1 and 2 swapped where its
     winding goes against its patch's outward one (module docstring); rows keep their order
     and a triangle's corners stay its own. vertices (V, 3), any units."""
-    v = np.asarray(vertices, dtype=np.float64)
     f = np.array(faces, dtype=np.int64)
-    n = len(f)
-    if n == 0:
+    if len(f) == 0:
         return f
-    # every directed edge (a -> b) of every triangle, keyed by its undirected edge, on the
-    # vertices welded by position (a UV seam, or an STL's triangle soup, splits them)
-    w = welded(v, f).index[f]
-    a = w.ravel()
-    b = w[:, [1, 2, 0]].ravel()
+    # corners at one position are one vertex (a UV seam, or an STL's triangle soup, splits
+    # them), and a triangle listed twice is one: turned as its first listing is
+    weld = welded(vertices, f)
+    w = weld.index[f]
+    _, first, listing = np.unique(np.sort(w, axis=1), axis=0, return_index=True, return_inverse=True)
+    listing = listing.ravel()
+    once = w[first]
+    flip = _flips(weld.vertices, once)[listing]
+    # a listing wound against its first one turns the other way
+    own = once[listing]
+    at = np.argmax(own == w[:, :1], axis=1)
+    flip ^= w[:, 1] != own[np.arange(len(w)), (at + 1) % 3]
+    out = f.copy()
+    out[flip] = out[flip][:, [0, 2, 1]]
+    return out
+
+
+def _flips(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: the triangles (F, 3) of distinct corners and vertex sets to turn over so
+    that the winding is consistent and outward on each patch (module docstring)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = faces
+    n = len(f)
+    # every directed edge (a -> b) of every triangle, keyed by its undirected edge
+    a = f.ravel()
+    b = f[:, [1, 2, 0]].ravel()
     owner = np.repeat(np.arange(n), 3)
     key = np.minimum(a, b) * len(v) + np.maximum(a, b)
     order = np.argsort(key, kind="stable")
@@ -55,7 +76,7 @@ def outward_faces(vertices, faces) -> np.ndarray:
     i, j = owner[pair], owner[pair + 1]
     # the same direction (both from the same corner) means one of the two must flip
     same = a[pair] == a[pair + 1]
-    keep = i != j
+    keep = i != j   # a sliver with two corners welded into one meets itself
     i, j, same = i[keep], j[keep], same[keep]
     graph = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
     graph = graph + graph.T
@@ -74,10 +95,10 @@ def outward_faces(vertices, faces) -> np.ndarray:
         for t, p, d in zip(reached.tolist(), pred[reached].tolist(), turn):
             flip[t] = flip[p] != d
     flip = np.array(flip, dtype=bool)
-    out = f.copy()
-    out[flip] = out[flip][:, [0, 2, 1]]
+    wound = f.copy()
+    wound[flip] = wound[flip][:, [0, 2, 1]]
     # outward: each patch's area-weighted normals against the way out of its centroid
-    corners = v[out]
+    corners = v[wound]
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])   # 2 x area
     centre = corners.mean(1)
     area = np.linalg.norm(normal, axis=1)
@@ -85,6 +106,4 @@ def outward_faces(vertices, faces) -> np.ndarray:
     centroid = np.stack([np.bincount(patch, area * centre[:, k], n_patches) for k in range(3)], 1)
     centroid /= np.maximum(weight, 1e-300)[:, None]
     outwardness = np.bincount(patch, np.einsum("fk,fk->f", normal, centre - centroid[patch]), n_patches)
-    inward = (outwardness < 0)[patch]
-    out[inward] = out[inward][:, [0, 2, 1]]
-    return out
+    return flip ^ (outwardness < 0)[patch]

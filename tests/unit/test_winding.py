@@ -36,6 +36,19 @@ def test_a_face_wound_inward_or_mixed_comes_back_outward():
     assert same_turn(outward_faces(soup, own[:, ::-1]), own).all()
 
 
+def test_a_triangle_listed_twice_does_not_cut_the_surface():
+    # 2000 triangles listed again (one of them wound the other way): every edge round
+    # them is shared by three or four triangles, which cut the face into patches, and the
+    # patches' own centroids turned 480 triangles inward
+    face = sample_face(1)
+    f = np.asarray(face.faces, np.int64)
+    again = f[:2000].copy()
+    again[0] = again[0, ::-1]
+    listed = np.vstack([f, again])
+    out = outward_faces(face.vertices, listed)
+    assert same_turn(out, np.vstack([f, f[:2000]])).all()
+
+
 def test_each_part_is_turned_outward_on_its_own():
     outer = trimesh.creation.icosphere(subdivisions=3, radius=5.0)
     inner = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
