@@ -20,6 +20,7 @@ from scipy.ndimage import distance_transform_edt
 
 from retarget.mesh import Mesh
 from retarget.raster import Raster, rasterise
+from retarget.welding import welded
 
 __all__ = ["AT_VIEWER", "View", "Picture", "look_from", "picture", "relit", "texture_rgb", "vertex_normals",
            "surface_hits"]
@@ -146,10 +147,13 @@ def texture_rgb(mesh: Mesh) -> np.ndarray | None:
 
 
 def vertex_normals(mesh: Mesh) -> np.ndarray:
-    """(V, 3) float64 area-weighted unit vertex normals (zero for unused vertices)."""
+    """(V, 3) float64 area-weighted unit vertex normals (zero for unused vertices), summed
+    over every triangle at the vertex's position (`retarget.welding`): a UV seam shows no
+    crease in the shading, and an STL's triangle soup is shaded smooth, not faceted."""
     v, f = mesh.vertices, mesh.faces
+    at = welded(v, f).index
     face_normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.stack([np.bincount(f.ravel(), np.repeat(face_normals[:, k], 3), len(v)) for k in range(3)], 1)
+    n = np.stack([np.bincount(at[f].ravel(), np.repeat(face_normals[:, k], 3), len(v)) for k in range(3)], 1)[at]
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
