@@ -21,6 +21,7 @@ from retarget.layouts import get_layout
 from retarget.mesh import mesh_from_arrays, save_mesh
 from retarget.sample_face import sample_face
 from server.jobs import JobBusy, JobRegistry
+from server.wire import weights_from_binary
 from tests.waits import wait_job
 
 
@@ -104,6 +105,30 @@ def test_points_found_on_the_sample_face_are_stored_with_their_confidence(client
     # a rig is computed from them as from points placed by hand
     rig = client.post(f"/api/projects/{pid}/rig", json={"method": "ellipsoid"})
     assert wait_job(client, rig.json()["id"], timeout_s=120)["state"] == "done"
+
+
+def test_an_stl_scan_is_found_and_rigged_as_one_surface(client, face, tmp_path):
+    # An STL stores each triangle's own three corners. Found and rigged on that soup, the
+    # rig gave 99.9 % of the corners no weight (each triangle a surface of its own): the
+    # face did not move. Now the corners at one position share their weights.
+    path = tmp_path / "scan.stl"
+    trimesh.Trimesh(face.vertices, face.faces, process=False).export(path)
+    pid = client.post("/api/projects", json={"name": "stl"}).json()["id"]
+    r = client.put(f"/api/projects/{pid}/mesh", files={"file": ("scan.stl", path.read_bytes())})
+    assert r.status_code == 200, r.text
+    assert r.json()["mesh"]["n_vertices"] == 3 * len(face.faces)
+    job = wait_job(client, _find(client, pid, layout="ibug68")["id"], timeout_s=120)
+    assert job["state"] == "done", job["detail"]
+    rig = client.post(f"/api/projects/{pid}/rig", json={"method": "biharmonic"})
+    assert wait_job(client, rig.json()["id"], timeout_s=120)["state"] == "done"
+    weights = weights_from_binary(client.get(f"/api/projects/{pid}/rig/weights").content).dense()
+    # the soup's corners are the indexed face's vertices, three per triangle
+    corners = np.asarray(face.faces).ravel()
+    at_vertex = np.zeros((len(face.vertices), weights.shape[1]))
+    at_vertex[corners] = weights
+    np.testing.assert_allclose(weights, at_vertex[corners], atol=1e-6)
+    # and the face moves: its weights reach as far as those of the indexed face
+    assert np.median(weights.sum(1)) > 0.1
 
 
 def test_a_mesh_with_no_face_fails_the_job_and_keeps_the_landmarks(client, sphere_obj):
