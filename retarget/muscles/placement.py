@@ -29,6 +29,7 @@ from retarget.muscles.model import Jaw, LinearMuscle, MuscleFace, SphincterMuscl
 from retarget.muscles.table import MUSCLE_TABLE
 from retarget.operators import edge_graph
 from retarget.similarity import similarity_transform
+from retarget.welding import welded
 
 __all__ = ["ibug68_points", "jaw_weights", "place_muscles"]
 
@@ -201,10 +202,12 @@ def jaw_weights(vertices: np.ndarray, faces: np.ndarray, p: np.ndarray, frame: n
         lower = np.unique(tree.query(p[[55, 56, 57, 58, 59, 65, 66, 67]])[1])
         lower = np.setdiff1d(lower, upper)
         if len(lower) and len(upper):
-            graph = edge_graph(v, faces)
+            # along the surface with its coincident vertices welded (a UV seam is no wall)
+            weld = welded(v, faces)
+            graph = edge_graph(weld.vertices, weld.faces)
             limit = 4.0 * half_width
-            du = dijkstra(graph, indices=upper, min_only=True, limit=limit)[near]
-            dl = dijkstra(graph, indices=lower, min_only=True, limit=limit)[near]
+            du = dijkstra(graph, indices=np.unique(weld.index[upper]), min_only=True, limit=limit)[weld.index[near]]
+            dl = dijkstra(graph, indices=np.unique(weld.index[lower]), min_only=True, limit=limit)[weld.index[near]]
             finite = np.isfinite(du) & np.isfinite(dl)
             share = np.where(finite, du / np.maximum(du + dl, 1e-300), np.where(np.isfinite(du), 1.0, 0.0))
             share = np.where(np.isfinite(du) | np.isfinite(dl), _smoothstep(share), w[near])

@@ -16,6 +16,7 @@ from retarget.muscles import (
     place_muscles,
 )
 from retarget.sample_face import sample_face
+from retarget.testing.seams import seam_split
 
 # iBUG 68: subject's left brow 22 (inner) .. 26, right 21 .. 17; eyes 42-47 / 36-41;
 # upper lids 43, 44 / 37, 38; lower lids 46, 47 / 40, 41; mouth corners 54 / 48
@@ -197,3 +198,14 @@ def test_linearised_fields_and_their_error(model):
     np.testing.assert_allclose(fields[:-1], (j0[:, :, :-1] * model.limits[:-1, 1]).transpose(2, 0, 1), atol=1e-5)
     err = linearisation_error(model, n_samples=8)
     assert 0.0 < err < 0.25
+
+
+def test_a_uv_seam_through_the_lips_leaves_the_jaw_weights_as_they_were(model, face):
+    # the lips' share of the jaw is found along the surface: a seam (glTF's copies of the
+    # vertices along a uv cut) was a wall there, and the weights past it fell back to the
+    # plain height rule
+    vertices, faces, seam, copies = seam_split(face.vertices, face.faces, x=0.3)
+    split = place_muscles(vertices, faces, vertices[face.landmarks68])
+    w = split.jaw.weights
+    np.testing.assert_allclose(w[: len(face.vertices)], model.jaw.weights, atol=1e-12)
+    np.testing.assert_array_equal(w[copies], w[seam])

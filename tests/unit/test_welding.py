@@ -12,6 +12,7 @@ from retarget.landmarks import from_vertex_indices
 from retarget.layouts import get_layout
 from retarget.mesh import load_mesh
 from retarget.sample_face import sample_face
+from retarget.testing.seams import seam_split
 from retarget.weights import compute_weights
 from retarget.welding import welded
 
@@ -22,19 +23,6 @@ IBUG = get_layout("ibug68")
 def face():
     f = sample_face(1)
     return np.asarray(f.vertices, np.float64), np.asarray(f.faces, np.int64), np.asarray(f.landmarks68)
-
-
-def seam_split(vertices, faces, x: float):
-    """The mesh with the triangles whose centre lies past `x` given their own copies of
-    the vertices they share with the others (a UV seam as glTF writes it); returns the
-    vertices, faces, and (S,) the seam's vertices and (S,) their copies."""
-    right = vertices[faces].mean(1)[:, 0] > x
-    seam = np.intersect1d(np.unique(faces[right]), np.unique(faces[~right]))
-    copy = np.full(len(vertices), -1)
-    copy[seam] = len(vertices) + np.arange(len(seam))
-    split = faces.copy()
-    split[right] = np.where(copy[faces[right]] >= 0, copy[faces[right]], faces[right])
-    return np.vstack([vertices, vertices[seam]]), split, seam, copy[seam]
 
 
 def test_a_soup_welds_back_into_the_indexed_mesh(face):
