@@ -22,7 +22,7 @@ along its border.
 `opened_mouth` keeps every original vertex first and in its order and appends the
 duplicates (with their uv and normals), so vertex landmarks, uv maps and anything indexed
 by vertex stay valid; lower-lip landmarks that lay on the cut move to the lower sheet.
-The duplicates lie `LIPS_APART` mouth widths below the originals: the rig welds the
+The duplicates lie `CUT_GAP` mouth widths below the originals: the rig welds the
 vertices at one exact position (`retarget.welding`, for UV seams and STL soups), which
 would join the lips again.
 """
@@ -51,7 +51,7 @@ _GUIDE_WIDTH = 0.06
 """Distance from the guide, as a share of the mouth width, at which an edge costs twice
 its length: narrow enough to stay on the crease, wide enough to follow a lip line that
 curves between the guide's vertices."""
-LIPS_APART = 1e-3
+CUT_GAP = 1e-3
 """Mouth widths (about 50 µm) the cut's lower copies lie below the upper lip's vertices:
 apart, so that a weld by position (the rig's) leaves the lips two sheets, and near enough
 to show none of it; at least several float32 steps for a face within 10^4 mouth widths of
@@ -196,7 +196,7 @@ def opened_mouth(mesh: Mesh, points: SurfacePoints, layout: Layout) -> OpenedMou
         if len(rows) else rows
     # the lower lip's copies a hair below the upper's: two sheets that touch, not one
     # surface (the rig welds exact copies of a position, `retarget.welding`)
-    below = LIPS_APART * np.linalg.norm(b - a) * up / np.linalg.norm(up)
+    below = CUT_GAP * np.linalg.norm(b - a) * up / np.linalg.norm(up)
     opened = mesh_from_arrays(
         np.vstack([vertices, vertices[cut] - below]), faces,
         uv=None if mesh.uv is None else np.vstack([mesh.uv, mesh.uv[cut]]),

@@ -83,7 +83,7 @@ def mouth_opened_to(fraction: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
 
 def copies_of(copies: np.ndarray, originals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How a mouth cut's copies (K, 3) lie by the line's vertices (K, 3) they copy (a hair
-    below each: `retarget.lips.LIPS_APART`): (K,) each copy's nearest original, and (K,)
+    below each: `retarget.lips.CUT_GAP`): (K,) each copy's nearest original, and (K,)
     the distance to it (mesh units)."""
     d = np.linalg.norm(np.asarray(copies, np.float64)[:, None] - np.asarray(originals, np.float64)[None], axis=2)
     return d.argmin(1), d.min(1)

@@ -51,7 +51,7 @@ def test_open_mouth_appends_the_cut_and_keeps_everything_else(welded, capsys):
     t0 = load_landmarks(folder / "t0.json", before.vertices, before.faces)
     cut = lip_crease(before.vertices, before.faces, t0, IBUG)[0][1:-1]
     assert set(cut.tolist()) == set(face.welded.tolist())
-    # a hair below (`LIPS_APART` mouth widths), so the rig's weld by position keeps them
+    # a hair below (`CUT_GAP` mouth widths), so the rig's weld by position keeps them
     below = np.linalg.norm(opened.vertices[v:] - before.vertices[cut], axis=1)
     assert (below > 0).all() and (below < 0.01 * np.ptp(before.vertices[:, 0])).all()
     np.testing.assert_array_equal(opened.uv[v:], before.uv[cut])

@@ -12,7 +12,7 @@ import trimesh
 from retarget.errors import RetargetError
 from retarget.landmarks import SurfacePoints, from_barycentric, from_vertex_indices
 from retarget.layouts import get_layout
-from retarget.lips import LIPS_APART, lip_crease, lips_joined, opened_mouth
+from retarget.lips import CUT_GAP, lip_crease, lips_joined, opened_mouth
 from retarget.mesh import mesh_from_arrays
 from retarget.pipeline import Retargeter
 from retarget.sample_face import sample_face
@@ -55,12 +55,12 @@ def test_opening_keeps_the_original_vertices_first_and_appends_the_cut(welded):
     assert k == len(face.welded) and opened.mesh.n_vertices == v + k
     np.testing.assert_array_equal(opened.duplicates, v + np.arange(k))
     np.testing.assert_array_equal(opened.mesh.vertices[:v], mesh.vertices)
-    # the copies lie a hair (LIPS_APART mouth widths) below the cut: apart, so the rig's
+    # the copies lie a hair (CUT_GAP mouth widths) below the cut: apart, so the rig's
     # weld by position keeps the lips two sheets
     width = np.linalg.norm(np.subtract(*points.positions(mesh.vertices)[[IBUG.ibug68.index(60), IBUG.ibug68.index(64)]]))
     below = mesh.vertices[opened.cut] - opened.mesh.vertices[v:]
     assert (below[:, 1] > 0).all()
-    np.testing.assert_allclose(np.linalg.norm(below, axis=1), LIPS_APART * width, rtol=0.5)
+    np.testing.assert_allclose(np.linalg.norm(below, axis=1), CUT_GAP * width, rtol=0.5)
     np.testing.assert_array_equal(opened.mesh.uv[v:], mesh.uv[opened.cut])
     np.testing.assert_array_equal(opened.mesh.normals[v:], normals[opened.cut])
     assert opened.mesh.n_faces == mesh.n_faces
@@ -72,7 +72,7 @@ def test_opening_keeps_the_original_vertices_first_and_appends_the_cut(welded):
     assert lower_lip[..., 1].mean() < upper_lip[..., 1].mean()
     # the landmarks are where they were (to the hair)
     np.testing.assert_allclose(opened.points.positions(opened.mesh.vertices), points.positions(mesh.vertices),
-                               atol=2 * LIPS_APART * width)
+                               atol=2 * CUT_GAP * width)
     assert not lips_joined(opened.mesh.vertices, opened.mesh.faces, opened.points, IBUG)
     with pytest.raises(RetargetError, match="already separate"):
         opened_mouth(opened.mesh, opened.points, IBUG)
