@@ -16,10 +16,14 @@ from __future__ import annotations
 import base64
 import re
 
+import httpx
 import numpy as np
 import pytest
 
+from retarget.mesh import mesh_from_arrays, save_mesh
+from retarget.sample_face import sample_face
 from retarget.skin import SkinWeights, skin_displacements
+from retarget.testing.seams import seam_split
 from tests.e2e.conftest import ARTIFACTS, _expected_error
 from tests.waits import scaled_ms, wait_job
 
@@ -197,13 +201,17 @@ def _displacements(n_joints: int, size: float, seed: int) -> np.ndarray:
     return (np.random.default_rng(seed).normal(size=(n_joints, 3)) * 0.03 * size).astype(np.float32)
 
 
-def _vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(V, 3) unit area-weighted vertex normals (three.js's computeVertexNormals)."""
+def _vertex_normals(positions: np.ndarray, faces: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
+    """(V, 3) unit area-weighted vertex normals (three.js's computeVertexNormals), over
+    every triangle at the vertex's `rest` position (default `positions`): the copies of a
+    vertex along a UV seam share their triangles."""
     p = positions.astype(np.float64)
+    at = np.unique(p if rest is None else rest, axis=0, return_inverse=True)[1].ravel()
     face_normals = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
     normals = np.zeros_like(p)
     for corner in range(3):
-        np.add.at(normals, faces[:, corner], face_normals)
+        np.add.at(normals, at[faces[:, corner]], face_normals)
+    normals = normals[at]
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
@@ -223,7 +231,7 @@ def _shader_error(page, server, project_id, rig: SkinWeights, seed: int,
 
     used = np.unique(faces)  # a vertex in no triangle has no normal to compare
     gpu_normals = np.frombuffer(base64.b64decode(page.evaluate("check.normals()")), np.float32).reshape(-1, 3)
-    cpu_normals = _vertex_normals(cpu, faces)
+    cpu_normals = _vertex_normals(cpu, faces, rest=positions)
     normal_error = float(np.abs(gpu_normals[used] - cpu_normals[used]).max())
     turned = float(np.abs(cpu_normals[used] - _vertex_normals(positions, faces)[used]).max())
     print(f"{rig.method} k={rig.n_influences}: max |GPU - CPU| = {error:.2e} x mesh size (moved up to "
@@ -266,6 +274,32 @@ def test_truncated_rig_matches_cpu(sample, server, k):
     page.evaluate("([n, k, i, w]) => check.setRig(n, k, i, w)",
                   [rig.n_joints, k, _b64(rig.indices.astype("<u2")), _b64(rig.weights.astype("<f4"))])
     assert _shader_error(page, server, project_id, rig, seed=3) < TOLERANCE
+
+
+def test_a_uv_seam_moves_as_one_and_shows_no_crease(server, page, tmp_path):
+    """A textured scan's glTF splits each vertex along its UV seams into copies at one
+    position. The rig moves the copies as one (retarget/welding.py) and the normal pass sums
+    every triangle at a position, so the seam shows no crease: before, each copy was lit by
+    its own side's triangles only."""
+    face = sample_face(1)
+    vertices, faces, seam, copies = seam_split(face.vertices, face.faces, x=0.3)   # through the lips
+    path = tmp_path / "seam.obj"
+    save_mesh(mesh_from_arrays(vertices, faces), path)
+    pid = server.api("POST", "/api/projects", {"name": "seam"})["id"]
+    reply = httpx.put(f"{server.url}/api/projects/{pid}/mesh", files={"file": ("seam.obj", path.read_bytes())},
+                      timeout=60)
+    assert reply.status_code == 200, reply.text
+    server.api("PUT", f"/api/projects/{pid}/landmarks",
+               {"vertex_indices": face.landmarks68.tolist(), "layout": "ibug68"})
+    _wait_for_rig(server, pid, "biharmonic")
+    assert page.evaluate("(id) => check.load(id)", pid) == len(vertices)
+    rig = _stored_rig(server, pid)
+    assert page.evaluate("(id) => check.setServerRig(id)", pid) == rig.n_influences
+    assert _shader_error(page, server, pid, rig, seed=4) < TOLERANCE
+    deformed = np.frombuffer(base64.b64decode(page.evaluate("check.deformed(null)")), np.float32).reshape(-1, 3)
+    normals = np.frombuffer(base64.b64decode(page.evaluate("check.normals()")), np.float32).reshape(-1, 3)
+    np.testing.assert_array_equal(deformed[copies], deformed[seam])
+    assert np.abs(normals[copies] - normals[seam]).max() < 1e-5
 
 
 def _pixels(page) -> np.ndarray:

@@ -3,9 +3,10 @@
 //
 // Rest normals would light an open jaw as if it were closed, so these are the normals of
 // the deformed mesh: a vertex's normal is the area-weighted sum of its triangles' normals
-// (three.js's computeVertexNormals, here on the skinned positions). incidenceTexture lists,
-// for each triangle of each vertex, the other two corners in winding order, at texels
-// incidence.x .. incidence.x + incidence.y - 1. Runs once per pose, not once per draw.
+// (three.js's computeVertexNormals, here on the skinned positions), over every triangle at
+// its position (the copies a UV seam or an STL makes share theirs: no crease along a seam).
+// incidenceTexture lists, for each such triangle, the other two corners in winding order,
+// at texels incidence.x .. incidence.x + incidence.y - 1. Runs once per pose, not per draw.
 
 #include "skinning.glsl"
 #include "vertex_texels.glsl"

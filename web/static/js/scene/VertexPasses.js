@@ -49,7 +49,7 @@ export class VertexPasses {
 		this.positionTarget = vertexTarget( size.value );
 		/** Deformed unit normals, one texel per vertex. */
 		this.normalTarget = vertexTarget( size.value );
-		const { ranges, texture } = incidences( faces, nVertices );
+		const { ranges, texture } = incidences( faces, geometry.getAttribute( 'position' ).array );
 		this._incidenceTexture = texture;
 		this._skin = pointsPass( shaders[ 'skin_pass.vert' ], shaders[ 'texel_pass.frag' ],
 			Object.assign( { passSize: size }, skinUniforms ), { position: geometry.getAttribute( 'position' ) } );
@@ -234,31 +234,55 @@ function pointsPass( vertexShader, fragmentShader, uniforms, attributes ) {
 
 /**
  * Each vertex's triangles for the deformed normals (web/shaders/normal_pass.vert): for every
- * corner of every triangle, the other two corners in winding order, grouped by vertex.
+ * corner of every triangle, the other two corners in winding order, grouped by position:
+ * the copies of a vertex at one place (a UV seam, which glTF splits; an STL's corners)
+ * share all their triangles, so the surface is shaded smooth across them, as the rig
+ * moves them as one (retarget/welding.py).
  * @param {Uint32Array} faces - (F*3) vertex indices.
- * @param {number} nVertices
+ * @param {Float32Array} positions - (V*3) rest positions.
  * @returns {{ranges: Uint32Array, texture: DataTexture}} ranges: (V*2) first texel and
- *   count per vertex; texture: RG32F, SKIN_TEXTURE_WIDTH wide, one corner pair a texel.
+ *   count per vertex (its position's); texture: RG32F, SKIN_TEXTURE_WIDTH wide, one corner
+ *   pair a texel.
  */
-function incidences( faces, nVertices ) {
+function incidences( faces, positions ) {
 
-	const ranges = new Uint32Array( 2 * nVertices );
-	for ( let i = 0; i < faces.length; i ++ ) ranges[ 2 * faces[ i ] + 1 ] ++;
-	for ( let v = 1; v < nVertices; v ++ ) ranges[ 2 * v ] = ranges[ 2 * v - 2 ] + ranges[ 2 * v - 1 ];
+	const nVertices = positions.length / 3;
+	const place = new Uint32Array( nVertices );
+	const places = new Map();
+	for ( let v = 0; v < nVertices; v ++ ) {
+
+		const key = `${ positions[ 3 * v ] },${ positions[ 3 * v + 1 ] },${ positions[ 3 * v + 2 ] }`;
+		let p = places.get( key );
+		if ( p === undefined ) places.set( key, p = places.size );
+		place[ v ] = p;
+
+	}
+
+	const spans = new Uint32Array( 2 * places.size );
+	for ( let i = 0; i < faces.length; i ++ ) spans[ 2 * place[ faces[ i ] ] + 1 ] ++;
+	for ( let p = 1; p < places.size; p ++ ) spans[ 2 * p ] = spans[ 2 * p - 2 ] + spans[ 2 * p - 1 ];
 
 	const height = Math.max( 1, Math.ceil( faces.length / SKIN_TEXTURE_WIDTH ) );
 	const corners = new Float32Array( 2 * SKIN_TEXTURE_WIDTH * height );
-	const filled = new Uint32Array( nVertices );
+	const filled = new Uint32Array( places.size );
 	for ( let f = 0; f < faces.length; f += 3 ) {
 
 		for ( let c = 0; c < 3; c ++ ) {
 
-			const vertex = faces[ f + c ];
-			const texel = ranges[ 2 * vertex ] + filled[ vertex ] ++;
+			const p = place[ faces[ f + c ] ];
+			const texel = spans[ 2 * p ] + filled[ p ] ++;
 			corners[ 2 * texel ] = faces[ f + ( c + 1 ) % 3 ];
 			corners[ 2 * texel + 1 ] = faces[ f + ( c + 2 ) % 3 ];
 
 		}
+
+	}
+
+	const ranges = new Uint32Array( 2 * nVertices );
+	for ( let v = 0; v < nVertices; v ++ ) {
+
+		ranges[ 2 * v ] = spans[ 2 * place[ v ] ];
+		ranges[ 2 * v + 1 ] = spans[ 2 * place[ v ] + 1 ];
 
 	}
 
