@@ -114,6 +114,22 @@ def test_an_stl_triangle_soup_gets_the_points_of_the_indexed_mesh(face, tracker,
     assert np.linalg.norm(found - indexed, axis=1).mean() * 10 < 0.1
 
 
+def test_a_face_speckled_with_holes_is_found_upright_or_refused(face, tracker):
+    # Through each missing triangle the front view shows the mask's dark inside. With 2 %
+    # missing the detector scored the speckled face 0.55 upright and 0.62 upside down,
+    # or 0.83 from behind (the mask's dark silhouette), and the points were taken from
+    # there, 7-13 cm off; now from the view where the landmark model sees a face, and a
+    # face too speckled for any view is refused by name, not placed anywhere.
+    upright = find_face_mesh(mesh_from_arrays(face.vertices, face.faces), tracker).points.positions(face.vertices)
+    faces = np.asarray(face.faces)
+    holes = np.random.default_rng(7).random(len(faces))
+    found = find_face_mesh(mesh_from_arrays(face.vertices, faces[holes > 0.02]), tracker)
+    assert found.presence > 0.9
+    assert np.linalg.norm(found.points.positions(face.vertices) - upright, axis=1).mean() * 10 < 4.0
+    with pytest.raises(RetargetError, match="no face found"):
+        find_face_mesh(mesh_from_arrays(face.vertices, faces[holes > 0.08]), tracker)
+
+
 def test_a_mesh_without_a_face_is_refused_by_name(tracker):
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=9.0)
     with pytest.raises(RetargetError, match="no face found"):
