@@ -5,8 +5,12 @@ The mesh is pictured (`retarget.facemesh.views`), the face mesh runs on the pict
 each point's ray is followed back onto the surface. In steps:
 
 1. **Find the face.** The front view first (the face toward +z, +y up, the convention
-   of glTF, ICT and MediaPipe's canonical model); when the detector finds no face
-   there, the six axis directions x four in-plane turns, keeping the best-scored face.
+   of glTF, ICT and MediaPipe's canonical model); when the detector is not sure of a
+   face there, the six axis directions x four in-plane turns, keeping the face the
+   landmark model is surest of (its presence; the detector's score was fooled by a
+   speckled face upside down). A detection whose box shows mostly back faces is none (a
+   mask seen from behind is its dark silhouette), and a face the landmark model does not
+   see (`MIN_PRESENCE`) is refused by name rather than placed anywhere.
    The pictures are of the mesh wound consistently outward (`retarget.winding`): wound
    inward (a converter, a mirror) or mixed, the back faces they paint dark were the
    whole face, a dark silhouette in which no face was found; the points come back on
