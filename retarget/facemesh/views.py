@@ -20,6 +20,7 @@ from scipy.ndimage import distance_transform_edt
 
 from retarget.mesh import Mesh
 from retarget.raster import Raster, rasterise
+from retarget.sampling import sampled
 from retarget.welding import welded
 
 __all__ = ["AT_VIEWER", "View", "Picture", "look_from", "picture", "relit", "texture_rgb", "vertex_normals",
@@ -121,8 +122,7 @@ def _shaded(view: View, raster: Raster, mesh: Mesh, normals: np.ndarray, texture
         h, w = texture.shape[:2]
         x = (np.mod(uv[:, 0], 1.0) * w - 0.5).astype(np.float32)
         y = ((1.0 - np.mod(uv[:, 1], 1.0)) * h - 0.5).astype(np.float32)  # OBJ's v runs up
-        albedo = cv2.remap(texture, x[:, None], y[:, None], cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_WRAP)[:, 0].astype(np.float64)
+        albedo = sampled(texture, x, y, border=cv2.BORDER_WRAP).astype(np.float64)
     else:
         albedo = np.full((len(n), 3), _ALBEDO)
     back = ~raster.front[seen]

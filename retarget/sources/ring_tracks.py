@@ -124,7 +124,7 @@ def ring_contrast(gray: np.ndarray, centres: np.ndarray, ring_radius: np.ndarray
     of eight points round its ring (at 0.8 x `ring_radius` (K,) px from centres (K, 2));
     positive all round only for a bright spot in a dark ring, not for an eye corner or a
     nostril's edge, which `ring_score` may still like."""
-    import cv2
+    from retarget.sampling import sampled
 
     g = _gray(gray)
     c = np.asarray(centres, dtype=np.float32).reshape(-1, 2)
@@ -134,8 +134,7 @@ def ring_contrast(gray: np.ndarray, centres: np.ndarray, ring_radius: np.ndarray
     ring = c[:, None] + 0.8 * np.asarray(ring_radius, np.float32).reshape(-1, 1, 1) * np.stack(
         [np.cos(angle), np.sin(angle)], 1)[None].astype(np.float32)
     where = np.concatenate([c[:, None], ring], 1)                       # (K, 9, 2)
-    values = cv2.remap(g.astype(np.float32), where[..., 0], where[..., 1], cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_REPLICATE)
+    values = sampled(g.astype(np.float32), where[..., 0], where[..., 1])
     return values[:, 0] - values[:, 1:].max(1)
 
 

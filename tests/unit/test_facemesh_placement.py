@@ -130,6 +130,20 @@ def test_a_face_speckled_with_holes_is_found_upright_or_refused(face, tracker):
         find_face_mesh(mesh_from_arrays(face.vertices, faces[holes > 0.08]), tracker)
 
 
+def test_a_textured_face_is_found(face, tracker):
+    # The straight view shows about 100,000 textured pixels; sampled as one column of
+    # cv2.remap's map (at most 32,767 rows) every textured face crashed the finder
+    upright = find_face_mesh(mesh_from_arrays(face.vertices, face.faces), tracker).points.positions(face.vertices)
+    texture = np.full((64, 64, 3), 190, np.uint8)
+    texture[::8] = 170   # faint stripes, skin-like in tone
+    uv = (face.vertices[:, :2] - face.vertices[:, :2].min(0)) / np.ptp(face.vertices[:, :2], axis=0)
+    mesh = mesh_from_arrays(face.vertices, face.faces, uv=uv,
+                            material=Material(base_color_texture=cv2.imencode(".png", texture)[1].tobytes()))
+    found = find_face_mesh(mesh, tracker)
+    assert found.presence > 0.9
+    assert np.linalg.norm(found.points.positions(face.vertices) - upright, axis=1).mean() * 10 < 1.5
+
+
 def test_a_mesh_without_a_face_is_refused_by_name(tracker):
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=9.0)
     with pytest.raises(RetargetError, match="no face found"):
