@@ -59,9 +59,11 @@ from retarget.weights import compute_weights  # noqa: E402
 IBUG = get_layout("ibug68")
 
 
-def defects(vertices: np.ndarray, faces: np.ndarray, rng: np.random.Generator, folder: Path):
-    """(name, vertices, faces, copies) per defect; copies: (S, 2) vertex pairs at one
-    position whose rig must not part, or None."""
+def defects(vertices: np.ndarray, faces: np.ndarray, landmarks: np.ndarray, rng: np.random.Generator,
+            folder: Path):
+    """(name, vertices, faces, rig) per defect; rig, for the defects that split vertices:
+    ((68,) the landmark vertices on the defect's mesh, (S, 2) vertex pairs at one position
+    whose rig must not part), else None."""
     yield "clean", vertices, faces, None
     yield "wound inward", vertices, faces[:, ::-1], None
     mixed = faces.copy()
@@ -73,9 +75,9 @@ def defects(vertices: np.ndarray, faces: np.ndarray, rng: np.random.Generator, f
     corner_of = np.full(len(vertices), -1)
     corner_of[faces.ravel()] = np.arange(faces.size)
     pairs = np.column_stack([corner_of[faces.ravel()], np.arange(faces.size)])
-    yield "STL triangle soup", soup.vertices, soup.faces, pairs[pairs[:, 0] != pairs[:, 1]]
-    split, split_faces, seam, copies = seam_split(vertices, faces, x=0.3)
-    yield "UV seam through the lips", split, split_faces, np.column_stack([seam, copies])
+    yield "STL triangle soup", soup.vertices, soup.faces, (corner_of[landmarks], pairs[pairs[:, 0] != pairs[:, 1]])
+    split, split_faces, seam, copies = seam_split(vertices, faces, x=0.3)   # the originals keep their index
+    yield "UV seam through the lips", split, split_faces, (landmarks, np.column_stack([seam, copies]))
     yield "2000 triangles listed twice", vertices, np.vstack([faces, faces[:2000]]), None
     for share in (0.005, 0.02, 0.05):
         yield f"{100 * share:g} % triangles missing", vertices, faces[rng.random(len(faces)) > share], None
@@ -102,7 +104,7 @@ def main(argv=None) -> int:
     clean = find_face_mesh(mesh_from_arrays(vertices, faces), tracker).points.positions(vertices)
     print(f"{'defect':30s}{'found':8s}{'mean / p95 / max mm':26s}{'s':6s}rig gap mm")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, v, f, copies in defects(vertices, faces, rng, Path(tmp)):
+        for name, v, f, rig in defects(vertices, faces, face.landmarks68, rng, Path(tmp)):
             t = time.perf_counter()
             try:
                 found = find_face_mesh(mesh_from_arrays(v, f), tracker).points.positions(v)
@@ -114,13 +116,7 @@ def main(argv=None) -> int:
             else:
                 d = np.linalg.norm(found - clean, axis=1) * 10.0
                 where = f"{d.mean():.2f} / {np.percentile(d, 95):.2f} / {d.max():.2f}"
-            # the soup's landmarks: the corners that copy the face's landmark vertices
-            if copies is not None:
-                on = {tuple(x): i for i, x in reversed(list(enumerate(np.round(v, 5).tolist())))}
-                landmarks = np.array([on[tuple(x)] for x in np.round(vertices[face.landmarks68], 5).tolist()])
-                gap = f"{rig_gap(v, f, landmarks, copies):.2f}"
-            else:
-                gap = "-"
+            gap = "-" if rig is None else f"{rig_gap(v, f, *rig):.2f}"
             print(f"{name:30s}{'yes' if found is not None else 'no':8s}{where:26s}{seconds:<6.1f}{gap}", flush=True)
     return 0
 
